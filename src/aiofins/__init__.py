@@ -1,0 +1,34 @@
+"""aiofins: async Omron FINS client, protocol codec and virtual PLC."""
+
+from .protocol.areas import MemoryAddress
+from .protocol.endcodes import EndCode
+from .protocol.errors import (
+    AddressError,
+    CommandError,
+    ConnectionLost,
+    DecodeError,
+    EndCodeError,
+    FinsError,
+    FinsTimeout,
+    FrameError,
+    RelayError,
+)
+from .protocol.header import FinsAddress
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AddressError",
+    "CommandError",
+    "ConnectionLost",
+    "DecodeError",
+    "EndCode",
+    "EndCodeError",
+    "FinsAddress",
+    "FinsError",
+    "FinsTimeout",
+    "FrameError",
+    "MemoryAddress",
+    "RelayError",
+    "__version__",
+]

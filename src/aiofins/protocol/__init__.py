@@ -1,0 +1,1 @@
+"""Sans-IO FINS protocol core: bytes in, values out. No sockets, no clocks, no anyio."""
