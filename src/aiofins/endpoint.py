@@ -1,0 +1,98 @@
+"""Endpoints: where a PLC is and how to reach it, parsed from a URL.
+
+* ``udp://host[:port]`` — FINS/UDP (default port 9600);
+* ``tcp://host[:port]`` — FINS/TCP (default port 9600);
+* ``serial://DEVICE?baudrate=115200&unit=0&bytesize=8&parity=N&stopbits=1`` — Host Link
+  FINS on a serial port (``serial:///dev/ttyUSB0`` or ``serial://COM3``).
+
+Query parameters on UDP/TCP URLs set node addressing: ``?dest=1.2.0`` (DNA.DA1.DA2),
+``?src=0.10.0`` and ``?node=N`` (the destination node, DA1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from urllib.parse import parse_qsl, urlsplit
+
+from .protocol.errors import CommandError
+from .protocol.header import FinsAddress
+
+DEFAULT_PORT = 9600
+
+_SERIAL_KEYS = {"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait", "timeout"}
+_NET_KEYS = {"dest", "src", "node", "timeout"}
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A parsed connection URL. ``key`` identifies it in a pool."""
+
+    scheme: str
+    host: str = ""
+    port: int = DEFAULT_PORT
+    device: str = ""
+    options: tuple[tuple[str, str], ...] = field(default=())
+
+    @property
+    def key(self) -> str:
+        if self.scheme == "serial":
+            return f"serial://{self.device}"
+        return f"{self.scheme}://{self.host}:{self.port}"
+
+    def option(self, name: str, default: str | None = None) -> str | None:
+        for key, value in self.options:
+            if key == name:
+                return value
+        return default
+
+    def __str__(self) -> str:
+        return self.key
+
+
+def parse_endpoint(url: str) -> Endpoint:
+    """Parse a connection URL; :class:`CommandError` names what is wrong."""
+    if "://" not in url:
+        raise CommandError(
+            f"{url!r} is not a connection URL; use udp://HOST[:PORT], tcp://HOST[:PORT] or "
+            "serial://DEVICE?baudrate=N"
+        )
+    parts = urlsplit(url)
+    scheme = parts.scheme.lower()
+    options = tuple(parse_qsl(parts.query, keep_blank_values=False))
+    if scheme == "serial":
+        device = (parts.netloc + parts.path) if parts.netloc else parts.path
+        if not device:
+            raise CommandError(f"{url!r}: serial URL needs a device, e.g. serial:///dev/ttyUSB0")
+        for key, _ in options:
+            if key not in _SERIAL_KEYS:
+                raise CommandError(
+                    f"{url!r}: unknown serial option {key!r}; known: "
+                    f"{', '.join(sorted(_SERIAL_KEYS))}"
+                )
+        return Endpoint("serial", device=device, options=options)
+    if scheme not in ("udp", "tcp"):
+        raise CommandError(f"{url!r}: unknown scheme {scheme!r}; use udp, tcp or serial")
+    host = parts.hostname or ""
+    if not host:
+        raise CommandError(f"{url!r}: missing host")
+    try:
+        port = parts.port or DEFAULT_PORT
+    except ValueError as exc:
+        raise CommandError(f"{url!r}: bad port") from exc
+    for key, value in options:
+        if key not in _NET_KEYS:
+            raise CommandError(
+                f"{url!r}: unknown option {key!r}; known: {', '.join(sorted(_NET_KEYS))}"
+            )
+        if key in ("dest", "src"):
+            FinsAddress.parse(value)
+    return Endpoint(scheme, host=host, port=port, options=options)
+
+
+def node_from_host(host: str) -> int | None:
+    """The FINS node number Omron derives from an IPv4 address: its last octet (1..254)."""
+    pieces = host.split(".")
+    if len(pieces) != 4 or not all(p.isdigit() for p in pieces):
+        return None
+    last = int(pieces[3])
+    return last if 1 <= last <= 254 else None
