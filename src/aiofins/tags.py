@@ -1,0 +1,240 @@
+"""Tag lists compiled into the fewest frames: 0101 runs of nearby words plus 0104 for the rest.
+
+A tag is ``"ADDRESS[:TYPE]"`` — ``"D100:float32"``, ``"CIO 0.01"`` (a bit), ``"D200:uint32"``,
+``"T5"`` (a timer PV), ``"H10:string:8"``. :func:`compile_tags` groups the words every tag needs
+by area, merges runs whose gap is at most ``max_gap`` words into MEMORY AREA READ (0101) frames
+under the route's word limit, and reads what is left — short isolated runs and flags that have
+no word view (timer/counter completion flags, task flags, clock pulses) — with MULTIPLE MEMORY
+AREA READ (0104), up to its element limit per frame, whenever that needs fewer frames.
+
+Bits of word areas (CIO, W, H, A, DM, EM) are read through their word, so ``CIO 0.01`` and
+``CIO 0.02`` and ``CIO 0`` cost one word. The :class:`ReadPlan` is immutable and reusable:
+compile once, execute every scan.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from .protocol.addresses import parse_address
+from .protocol.areas import MemoryAddress
+from .protocol.errors import CommandError, DecodeError
+from .protocol.values import Value, ValueType, parse_value_type
+
+#: Bit area code → the word area code holding the same bits (CS/CJ codes).
+BIT_TO_WORD_AREA: dict[int, int] = {
+    0x30: 0xB0,  # CIO
+    0x31: 0xB1,  # W
+    0x32: 0xB2,  # H
+    0x33: 0xB3,  # A
+    0x02: 0x82,  # DM
+    0x0A: 0x98,  # EM current bank
+    **{0x20 + bank: 0xA0 + bank for bank in range(16)},  # EM banks 0-F
+    **{0xE0 + bank: 0x60 + bank for bank in range(9)},  # EM banks 10-18
+}
+#: Word areas a 0101 read can span (2-byte elements).
+WORD_AREAS: frozenset[int] = frozenset(
+    {0xB0, 0xB1, 0xB2, 0xB3, 0x82, 0x98, 0x89, *range(0xA0, 0xB0), *range(0x60, 0x69)}
+)
+
+
+@dataclass(frozen=True)
+class Tag:
+    """One named value: where it lives and how to read its words."""
+
+    name: str
+    address: MemoryAddress
+    vtype: ValueType
+    text: str
+
+    @property
+    def word_area(self) -> int | None:
+        """The word area the tag is read from, or None if it has no word view."""
+        code = self.address.area_code
+        if self.vtype.kind == "bit" and code in BIT_TO_WORD_AREA:
+            return BIT_TO_WORD_AREA[code]
+        if code in WORD_AREAS and (self.vtype.kind != "bit" or self.address.bit == 0):
+            return code
+        return None
+
+
+def parse_tag(name: str, spec: str) -> Tag:
+    """``"D100:float32"`` → :class:`Tag`. Bits default to ``bit``, words to ``uint16``."""
+    text, _, type_text = spec.partition(":")
+    address = parse_address(text.strip())
+    size = address.element_size
+    if type_text:
+        vtype = parse_value_type(type_text)
+    elif size == 1:
+        vtype = parse_value_type("bit")
+    else:
+        vtype = parse_value_type("uint16")
+    if vtype.kind == "bit" and size != 1 and address.area_code not in WORD_AREAS:
+        raise CommandError(f"tag {name!r}: {text} is not a bit address")
+    if vtype.kind != "bit" and size == 1:
+        raise CommandError(f"tag {name!r}: {text} is a bit; drop the type or use ':bit'")
+    if vtype.kind != "bit" and address.area_code not in WORD_AREAS:
+        raise CommandError(f"tag {name!r}: {text} cannot hold a {vtype} (not a word area)")
+    return Tag(name, address, vtype, spec)
+
+
+@dataclass(frozen=True)
+class WordRun:
+    """One MEMORY AREA READ (0101): ``count`` words of ``area_code`` from ``word``."""
+
+    area_code: int
+    word: int
+    count: int
+
+    def __str__(self) -> str:
+        return f"0101 area {self.area_code:02X} words {self.word}..{self.word + self.count - 1}"
+
+
+@dataclass(frozen=True)
+class ReadPlan:
+    """The frames of one scan. ``runs`` are 0101 frames; ``multiple`` holds 0104 frames."""
+
+    tags: tuple[Tag, ...]
+    runs: tuple[WordRun, ...]
+    multiple: tuple[tuple[MemoryAddress, ...], ...]
+
+    @property
+    def frame_count(self) -> int:
+        return len(self.runs) + len(self.multiple)
+
+    def describe(self) -> list[str]:
+        lines = [str(run) for run in self.runs]
+        for frame in self.multiple:
+            lines.append("0104 " + ", ".join(f"{a.area_code:02X}:{a.word}.{a.bit}" for a in frame))
+        return lines
+
+    def decode(
+        self,
+        run_words: Sequence[Sequence[int]],
+        multiple_values: Sequence[Sequence[int]],
+    ) -> dict[str, Value]:
+        """Values by tag name from each frame's results, in plan order."""
+        if len(run_words) != len(self.runs) or len(multiple_values) != len(self.multiple):
+            raise DecodeError("results do not match the plan's frames")
+        words: dict[tuple[int, int], int] = {}
+        for run, values in zip(self.runs, run_words, strict=True):
+            if len(values) != run.count:
+                raise DecodeError(f"{run}: expected {run.count} words, got {len(values)}")
+            for i, v in enumerate(values):
+                words[(run.area_code, run.word + i)] = v
+        elements: dict[MemoryAddress, int] = {}
+        for frame, values in zip(self.multiple, multiple_values, strict=True):
+            if len(values) != len(frame):
+                raise DecodeError("0104 result has the wrong number of elements")
+            elements.update(zip(frame, values, strict=True))
+        out: dict[str, Value] = {}
+        for tag in self.tags:
+            area = tag.word_area
+            if area is None:
+                out[tag.name] = bool(elements[tag.address] & 1)
+                continue
+            if tag.vtype.kind == "bit":
+                word = _word_value(words, elements, area, tag.address.word)
+                out[tag.name] = bool((word >> tag.address.bit) & 1)
+                continue
+            span = [
+                _word_value(words, elements, area, tag.address.word + i)
+                for i in range(tag.vtype.words)
+            ]
+            out[tag.name] = tag.vtype.decode(span)
+        return out
+
+
+def _word_value(
+    words: dict[tuple[int, int], int],
+    elements: dict[MemoryAddress, int],
+    area: int,
+    word: int,
+) -> int:
+    got = words.get((area, word))
+    if got is None:
+        got = elements[MemoryAddress(area, word, 0)]
+    return got
+
+
+def compile_tags(
+    tags: Mapping[str, str] | Sequence[Tag],
+    *,
+    max_read_words: int = 999,
+    max_multiple_elements: int = 167,
+    max_gap: int = 8,
+) -> ReadPlan:
+    """Compile tags into the fewest frames under the given limits.
+
+    Runs of words closer than ``max_gap`` unused words are read together by 0101; then runs are
+    moved to 0104 (shortest first) while that lowers the frame count.
+    """
+    if max_read_words < 1 or max_multiple_elements < 1 or max_gap < 0:
+        raise CommandError("limits must be positive and max_gap not negative")
+    parsed = (
+        tuple(parse_tag(name, spec) for name, spec in tags.items())
+        if isinstance(tags, Mapping)
+        else tuple(tags)
+    )
+    names = [t.name for t in parsed]
+    if len(set(names)) != len(names):
+        raise CommandError("tag names must be unique")
+    needed: dict[int, set[int]] = {}
+    flags: list[MemoryAddress] = []
+    for tag in parsed:
+        area = tag.word_area
+        if area is None:
+            if tag.address not in flags:
+                flags.append(tag.address)
+            continue
+        width = 1 if tag.vtype.kind == "bit" else tag.vtype.words
+        if width > max_read_words:
+            raise CommandError(f"tag {tag.name!r} needs {width} words, over {max_read_words}")
+        needed.setdefault(area, set()).update(range(tag.address.word, tag.address.word + width))
+
+    runs: list[WordRun] = []
+    for area in sorted(needed):
+        runs.extend(_coalesce(area, sorted(needed[area]), max_read_words, max_gap))
+
+    # Move the shortest runs into 0104 frames while that saves frames.
+    runs.sort(key=lambda r: (r.count, r.area_code, r.word))
+    best_k, best_frames = 0, len(runs) + math.ceil(len(flags) / max_multiple_elements)
+    moved = len(flags)
+    for k, run in enumerate(runs, start=1):
+        moved += _used_words(run, needed)
+        frames = len(runs) - k + math.ceil(moved / max_multiple_elements)
+        if frames < best_frames:
+            best_k, best_frames = k, frames
+    elements = list(flags)
+    for run in runs[:best_k]:
+        elements.extend(
+            MemoryAddress(run.area_code, w, 0)
+            for w in range(run.word, run.word + run.count)
+            if w in needed[run.area_code]
+        )
+    kept = sorted(runs[best_k:], key=lambda r: (r.area_code, r.word))
+    multiple = tuple(
+        tuple(elements[i : i + max_multiple_elements])
+        for i in range(0, len(elements), max_multiple_elements)
+    )
+    return ReadPlan(parsed, tuple(kept), multiple)
+
+
+def _used_words(run: WordRun, needed: dict[int, set[int]]) -> int:
+    used = needed[run.area_code]
+    return sum(1 for w in range(run.word, run.word + run.count) if w in used)
+
+
+def _coalesce(area: int, words: list[int], max_words: int, max_gap: int) -> list[WordRun]:
+    runs: list[WordRun] = []
+    start = prev = words[0]
+    for w in words[1:]:
+        if w - prev - 1 <= max_gap and w - start + 1 <= max_words:
+            prev = w
+            continue
+        runs.append(WordRun(area, start, prev - start + 1))
+        start = prev = w
+    runs.append(WordRun(area, start, prev - start + 1))
+    return runs

@@ -1,0 +1,104 @@
+"""Tag lists compile into the fewest frames, and decode back into typed values."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from aiofins.protocol.areas import MemoryAddress
+from aiofins.protocol.errors import CommandError
+from aiofins.protocol.values import parse_value_type
+from aiofins.tags import WordRun, compile_tags
+
+
+def test_neighbouring_words_and_bits_share_one_frame() -> None:
+    plan = compile_tags(
+        {"temp": "D100:float32", "count": "D102:uint32", "flag": "D104.03", "raw": "D110"}
+    )
+    assert plan.runs == (WordRun(0x82, 100, 11),)
+    assert plan.multiple == ()
+    assert plan.frame_count == 1
+
+
+def test_bits_of_one_word_cost_one_word() -> None:
+    plan = compile_tags({"a": "CIO 0.00", "b": "CIO 0.01", "c": "CIO 0.15", "w": "CIO 0"})
+    assert plan.runs == (WordRun(0xB0, 0, 1),)
+
+
+def test_scattered_words_go_to_one_multiple_read() -> None:
+    tags = {f"t{i}": f"D{i * 1000}" for i in range(10)}
+    plan = compile_tags(tags)
+    assert plan.runs == ()
+    assert len(plan.multiple) == 1
+    assert plan.multiple[0] == tuple(MemoryAddress(0x82, i * 1000, 0) for i in range(10))
+
+
+def test_long_runs_stay_0101_and_isolated_words_join_0104() -> None:
+    tags = {"block": "D0:string:400", "x": "W5", "y": "H7", "z": "D5000"}
+    plan = compile_tags(tags)
+    assert plan.runs == (WordRun(0x82, 0, 200),)
+    assert sorted(a.area_code for a in plan.multiple[0]) == [0x82, 0xB1, 0xB2]
+    assert plan.frame_count == 2
+
+
+def test_gap_setting_and_route_limit() -> None:
+    tags = {"a": "D0", "b": "D20"}
+    assert compile_tags(tags, max_gap=19).runs == (WordRun(0x82, 0, 21),)
+    assert compile_tags(tags, max_gap=18).frame_count == 1  # both words in one 0104
+    wide = {"a": "D0", "b": "D300"}
+    plan = compile_tags(wide, max_gap=400, max_read_words=269)
+    assert plan.frame_count == 1  # 301 words would exceed 269: two single words in 0104
+
+
+def test_a_short_block_and_scattered_words_fit_one_multiple_read() -> None:
+    tags = {"block": "D0:string:200", "x": "W5", "y": "H7"}
+    assert compile_tags(tags).frame_count == 1
+
+
+def test_decode_gives_typed_values() -> None:
+    plan = compile_tags({"temp": "D100:float32", "flag": "D102.01", "n": "D103:int16"})
+    words = [0x0000, 0x3FC0, 0x0002, 0xFFFF]
+    assert plan.decode([words], []) == {"temp": 1.5, "flag": True, "n": -1}
+
+
+def test_bad_tags_are_refused() -> None:
+    with pytest.raises(CommandError):
+        compile_tags({"a": "CIO 0.01:float32"})
+    with pytest.raises(CommandError):
+        compile_tags({"a": "D0:nonsense"})
+
+
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 2000), st.sampled_from(["uint16", "int32", "float64", "bit"])),
+        min_size=1,
+        max_size=60,
+    ),
+    st.integers(0, 20),
+    st.sampled_from([(999, 167), (269, 89), (10, 3)]),
+)
+def test_plan_never_exceeds_limits_and_covers_every_tag(
+    items: list[tuple[int, str]], gap: int, limits: tuple[int, int]
+) -> None:
+    max_words, max_elements = limits
+    tags = {}
+    for i, (word, kind) in enumerate(items):
+        tags[f"t{i}"] = f"D{word}.{i % 16:02d}" if kind == "bit" else f"D{word}:{kind}"
+    plan = compile_tags(
+        tags, max_gap=gap, max_read_words=max_words, max_multiple_elements=max_elements
+    )
+    assert all(1 <= r.count <= max_words for r in plan.runs)
+    assert all(1 <= len(f) <= max_elements for f in plan.multiple)
+    covered = {(r.area_code, r.word + i) for r in plan.runs for i in range(r.count)}
+    elements = [(a.area_code, a.word) for f in plan.multiple for a in f]
+    assert len(elements) == len(set(elements))  # each element read once
+    assert not covered & set(elements)
+    for word, kind in items:
+        width = 1 if kind == "bit" else parse_value_type(kind).words
+        for w in range(word, word + width):
+            assert (0x82, w) in covered or (0x82, w) in set(elements)
+    # Decoding a plan's own frames works for every tag.
+    runs = [[0] * r.count for r in plan.runs]
+    multi = [[0] * len(f) for f in plan.multiple]
+    assert set(plan.decode(runs, multi)) == set(tags)
