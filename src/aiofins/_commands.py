@@ -1,0 +1,895 @@
+"""One coroutine per FINS operation of manual section 5 (mixed into :class:`~aiofins.Client`).
+
+Each method builds the operation's typed request, sends it and returns its typed result.
+Every method accepts the call options ``dest`` (a :class:`FinsAddress`), ``timeout`` (seconds)
+and ``retries``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import TYPE_CHECKING, TypeVar
+
+from .protocol.areas import MemoryAddress
+from .protocol.commands._file_transfer import (
+    CreateDeleteDirectory,
+    FileTransferResult,
+    MemoryAreaFileTransfer,
+    MemoryCassetteDataType,
+    MemoryCassetteTransfer,
+    ParameterAreaFileTransfer,
+    ProgramAreaFileTransfer,
+    ProgramAreaFileTransferResult,
+)
+from .protocol.commands.access import (
+    AccessRightAcquire,
+    AccessRightForcedAcquire,
+    AccessRightHolder,
+    AccessRightRelease,
+)
+from .protocol.commands.clock import ClockData, ClockRead, ClockWrite
+from .protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel, ForcedSetResetEntry
+from .protocol.commands.errorlog import (
+    ErrorClear,
+    ErrorLog,
+    ErrorLogClear,
+    ErrorLogRead,
+    FinsWriteAccessLog,
+    FinsWriteAccessLogClear,
+    FinsWriteAccessLogRead,
+)
+from .protocol.commands.file import (
+    FileCopy,
+    FileDelete,
+    FileDeleteResult,
+    FileMemoryFormat,
+    FileNameChange,
+    FileNameRead,
+    SingleFileRead,
+    SingleFileReadResult,
+    SingleFileWrite,
+)
+from .protocol.commands.gateway import (
+    CompowayFResponse,
+    ConvertToCompowayFCommand,
+    ConvertToModbusAsciiCommand,
+    ConvertToModbusRtuCommand,
+    ModbusAsciiResponse,
+    ModbusRtuResponse,
+)
+from .protocol.commands.machine import (
+    ConnectionData,
+    ConnectionDataRead,
+    CpuUnitData,
+    CpuUnitDataRead,
+)
+from .protocol.commands.memory import (
+    MemoryAreaFill,
+    MemoryAreaRead,
+    MemoryAreaReadResult,
+    MemoryAreaTransfer,
+    MemoryAreaWrite,
+    MultipleMemoryAreaRead,
+    MultipleMemoryAreaReadResult,
+)
+from .protocol.commands.message import (
+    FalFalsMessage,
+    FalFalsRead,
+    MessageClear,
+    MessageRead,
+    Messages,
+)
+from .protocol.commands.mode import Run, RunMode, Stop
+from .protocol.commands.parameter import (
+    ParameterAreaClear,
+    ParameterAreaRead,
+    ParameterAreaReadResult,
+    ParameterAreaWrite,
+)
+from .protocol.commands.program import (
+    ProgramAreaClear,
+    ProgramAreaRead,
+    ProgramAreaReadResult,
+    ProgramAreaWrite,
+    ProgramAreaWriteResult,
+    ProgramClearCode,
+)
+from .protocol.commands.status import (
+    CpuUnitStatus,
+    CpuUnitStatusRead,
+    CycleTime,
+    CycleTimeParameter,
+    CycleTimeRead,
+)
+from .protocol.files import (
+    CassetteArea,
+    CassetteOperation,
+    DirectoryOperation,
+    Disk,
+    FileNameReadResult,
+    FileTransferMode,
+    FileWriteMode,
+)
+from .protocol.header import FinsAddress
+
+if TYPE_CHECKING:
+    from .protocol.commands import Request
+
+R = TypeVar("R")
+
+
+class CommandMethods:
+    """The 47 operations as methods; :meth:`call` is provided by the client."""
+
+    async def call(
+        self,
+        request: Request[R],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> R:  # pragma: no cover - provided by Client
+        raise NotImplementedError
+
+    async def memory_area_read(
+        self,
+        address: MemoryAddress,
+        count: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> MemoryAreaReadResult:
+        """MEMORY AREA READ (01 01); see :class:`MemoryAreaRead`."""
+        return await self.call(
+            MemoryAreaRead(address=address, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def memory_area_write(
+        self,
+        address: MemoryAddress,
+        data: bytes,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """MEMORY AREA WRITE (01 02); see :class:`MemoryAreaWrite`."""
+        return await self.call(
+            MemoryAreaWrite(address=address, data=data), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def memory_area_fill(
+        self,
+        address: MemoryAddress,
+        count: int,
+        value: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """MEMORY AREA FILL (01 03); see :class:`MemoryAreaFill`."""
+        return await self.call(
+            MemoryAreaFill(address=address, count=count, value=value),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def multiple_memory_area_read(
+        self,
+        addresses: tuple[MemoryAddress, ...],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> MultipleMemoryAreaReadResult:
+        """MULTIPLE MEMORY AREA READ (01 04); see :class:`MultipleMemoryAreaRead`."""
+        return await self.call(
+            MultipleMemoryAreaRead(addresses=addresses), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def memory_area_transfer(
+        self,
+        source: MemoryAddress,
+        destination: MemoryAddress,
+        count: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """MEMORY AREA TRANSFER (01 05); see :class:`MemoryAreaTransfer`."""
+        return await self.call(
+            MemoryAreaTransfer(source=source, destination=destination, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def parameter_area_read(
+        self,
+        area_code: int,
+        begin_word: int,
+        count: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ParameterAreaReadResult:
+        """PARAMETER AREA READ (02 01); see :class:`ParameterAreaRead`."""
+        return await self.call(
+            ParameterAreaRead(area_code=area_code, begin_word=begin_word, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def parameter_area_write(
+        self,
+        area_code: int,
+        begin_word: int,
+        words: tuple[int, ...],
+        last: bool | None = None,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """PARAMETER AREA WRITE (02 02); see :class:`ParameterAreaWrite`."""
+        return await self.call(
+            ParameterAreaWrite(area_code=area_code, begin_word=begin_word, words=words, last=last),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def parameter_area_clear(
+        self,
+        area_code: int,
+        count: int | None = None,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """PARAMETER AREA CLEAR (02 03); see :class:`ParameterAreaClear`."""
+        return await self.call(
+            ParameterAreaClear(area_code=area_code, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def program_area_read(
+        self,
+        address: int,
+        byte_count: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ProgramAreaReadResult:
+        """PROGRAM AREA READ (03 06); see :class:`ProgramAreaRead`."""
+        return await self.call(
+            ProgramAreaRead(address=address, byte_count=byte_count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def program_area_write(
+        self,
+        address: int,
+        data: bytes,
+        last: bool = False,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ProgramAreaWriteResult:
+        """PROGRAM AREA WRITE (03 07); see :class:`ProgramAreaWrite`."""
+        return await self.call(
+            ProgramAreaWrite(address=address, data=data, last=last),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def program_area_clear(
+        self,
+        clear_code: int = ProgramClearCode.WITHOUT_INTERRUPT_TASKS,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """PROGRAM AREA CLEAR (03 08); see :class:`ProgramAreaClear`."""
+        return await self.call(
+            ProgramAreaClear(clear_code=clear_code), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def run(
+        self,
+        mode: int = RunMode.MONITOR,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """RUN (04 01); see :class:`Run`."""
+        return await self.call(Run(mode=mode), dest=dest, timeout=timeout, retries=retries)
+
+    async def stop(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """STOP (04 02); see :class:`Stop`."""
+        return await self.call(Stop(), dest=dest, timeout=timeout, retries=retries)
+
+    async def cpu_unit_data_read(
+        self,
+        data_type: int | None = None,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> CpuUnitData:
+        """CPU UNIT DATA READ (05 01); see :class:`CpuUnitDataRead`."""
+        return await self.call(
+            CpuUnitDataRead(data_type=data_type), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def connection_data_read(
+        self,
+        unit_address: int = 0,
+        count: int | None = None,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ConnectionData:
+        """CONNECTION DATA READ (05 02); see :class:`ConnectionDataRead`."""
+        return await self.call(
+            ConnectionDataRead(unit_address=unit_address, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def cpu_unit_status_read(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> CpuUnitStatus:
+        """CPU UNIT STATUS READ (06 01); see :class:`CpuUnitStatusRead`."""
+        return await self.call(CpuUnitStatusRead(), dest=dest, timeout=timeout, retries=retries)
+
+    async def cycle_time_read(
+        self,
+        parameter: CycleTimeParameter = CycleTimeParameter.READ,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> CycleTime | None:
+        """CYCLE TIME READ (06 20); see :class:`CycleTimeRead`."""
+        return await self.call(
+            CycleTimeRead(parameter=parameter), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def clock_read(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ClockData:
+        """CLOCK READ (07 01); see :class:`ClockRead`."""
+        return await self.call(ClockRead(), dest=dest, timeout=timeout, retries=retries)
+
+    async def clock_write(
+        self,
+        time: datetime,
+        day_of_week: int | None = None,
+        with_second: bool = True,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """CLOCK WRITE (07 02); see :class:`ClockWrite`."""
+        return await self.call(
+            ClockWrite(time=time, day_of_week=day_of_week, with_second=with_second),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def message_read(
+        self,
+        mask: int = 255,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> Messages:
+        """MESSAGE READ (09 20); see :class:`MessageRead`."""
+        return await self.call(MessageRead(mask=mask), dest=dest, timeout=timeout, retries=retries)
+
+    async def message_clear(
+        self,
+        mask: int = 255,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """MESSAGE CLEAR (09 20); see :class:`MessageClear`."""
+        return await self.call(MessageClear(mask=mask), dest=dest, timeout=timeout, retries=retries)
+
+    async def fal_fals_read(
+        self,
+        number: int,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FalFalsMessage:
+        """FAL/FALS READ (09 20); see :class:`FalFalsRead`."""
+        return await self.call(
+            FalFalsRead(number=number), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def access_right_acquire(
+        self,
+        program_number: int = 65535,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> AccessRightHolder | None:
+        """ACCESS RIGHT ACQUIRE (0C 01); see :class:`AccessRightAcquire`."""
+        return await self.call(
+            AccessRightAcquire(program_number=program_number),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def access_right_forced_acquire(
+        self,
+        program_number: int = 65535,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """ACCESS RIGHT FORCED ACQUIRE (0C 02); see :class:`AccessRightForcedAcquire`."""
+        return await self.call(
+            AccessRightForcedAcquire(program_number=program_number),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def access_right_release(
+        self,
+        program_number: int = 65535,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """ACCESS RIGHT RELEASE (0C 03); see :class:`AccessRightRelease`."""
+        return await self.call(
+            AccessRightRelease(program_number=program_number),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def error_clear(
+        self,
+        error_code: int = 65534,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """ERROR CLEAR (21 01); see :class:`ErrorClear`."""
+        return await self.call(
+            ErrorClear(error_code=error_code), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def error_log_read(
+        self,
+        beginning_record: int = 0,
+        count: int = 20,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ErrorLog:
+        """ERROR LOG READ (21 02); see :class:`ErrorLogRead`."""
+        return await self.call(
+            ErrorLogRead(beginning_record=beginning_record, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def error_log_clear(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """ERROR LOG CLEAR (21 03); see :class:`ErrorLogClear`."""
+        return await self.call(ErrorLogClear(), dest=dest, timeout=timeout, retries=retries)
+
+    async def fins_write_access_log_read(
+        self,
+        beginning_record: int = 0,
+        count: int = 20,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FinsWriteAccessLog:
+        """FINS WRITE ACCESS LOG READ (21 40); see :class:`FinsWriteAccessLogRead`."""
+        return await self.call(
+            FinsWriteAccessLogRead(beginning_record=beginning_record, count=count),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def fins_write_access_log_clear(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FINS WRITE ACCESS LOG CLEAR (21 41); see :class:`FinsWriteAccessLogClear`."""
+        return await self.call(
+            FinsWriteAccessLogClear(), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def file_name_read(
+        self,
+        disk: Disk,
+        first_file: int = 0,
+        count: int = 20,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FileNameReadResult:
+        """FILE NAME READ (22 01); see :class:`FileNameRead`."""
+        return await self.call(
+            FileNameRead(disk=disk, first_file=first_file, count=count, directory=directory),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def single_file_read(
+        self,
+        disk: Disk,
+        name: str,
+        position: int = 0,
+        length: int = 1988,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> SingleFileReadResult:
+        """SINGLE FILE READ (22 02); see :class:`SingleFileRead`."""
+        return await self.call(
+            SingleFileRead(
+                disk=disk, name=name, position=position, length=length, directory=directory
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def single_file_write(
+        self,
+        disk: Disk,
+        name: str,
+        data: bytes,
+        mode: FileWriteMode = FileWriteMode.NEW,
+        position: int = 0,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """SINGLE FILE WRITE (22 03); see :class:`SingleFileWrite`."""
+        return await self.call(
+            SingleFileWrite(
+                disk=disk, name=name, data=data, mode=mode, position=position, directory=directory
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def file_memory_format(
+        self,
+        disk: Disk,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FILE MEMORY FORMAT (22 04); see :class:`FileMemoryFormat`."""
+        return await self.call(
+            FileMemoryFormat(disk=disk), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def file_delete(
+        self,
+        disk: Disk,
+        names: tuple[str, ...],
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FileDeleteResult:
+        """FILE DELETE (22 05); see :class:`FileDelete`."""
+        return await self.call(
+            FileDelete(disk=disk, names=names, directory=directory),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def file_copy(
+        self,
+        source_disk: Disk,
+        source_name: str,
+        destination_disk: Disk,
+        destination_name: str,
+        source_directory: str = "",
+        destination_directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FILE COPY (22 07); see :class:`FileCopy`."""
+        return await self.call(
+            FileCopy(
+                source_disk=source_disk,
+                source_name=source_name,
+                destination_disk=destination_disk,
+                destination_name=destination_name,
+                source_directory=source_directory,
+                destination_directory=destination_directory,
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def file_name_change(
+        self,
+        disk: Disk,
+        old_name: str,
+        new_name: str,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FILE NAME CHANGE (22 08); see :class:`FileNameChange`."""
+        return await self.call(
+            FileNameChange(disk=disk, old_name=old_name, new_name=new_name, directory=directory),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def memory_area_file_transfer(
+        self,
+        mode: FileTransferMode,
+        address: MemoryAddress,
+        count: int,
+        disk: Disk,
+        name: str,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FileTransferResult:
+        """MEMORY AREA-FILE TRANSFER (22 0A); see :class:`MemoryAreaFileTransfer`."""
+        return await self.call(
+            MemoryAreaFileTransfer(
+                mode=mode, address=address, count=count, disk=disk, name=name, directory=directory
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def parameter_area_file_transfer(
+        self,
+        mode: FileTransferMode,
+        area_code: int,
+        disk: Disk,
+        name: str,
+        begin: int = 0,
+        count: int = 65535,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> FileTransferResult:
+        """PARAMETER AREA-FILE TRANSFER (22 0B); see :class:`ParameterAreaFileTransfer`."""
+        return await self.call(
+            ParameterAreaFileTransfer(
+                mode=mode,
+                area_code=area_code,
+                disk=disk,
+                name=name,
+                begin=begin,
+                count=count,
+                directory=directory,
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def program_area_file_transfer(
+        self,
+        mode: FileTransferMode,
+        disk: Disk,
+        name: str,
+        program_number: int = 65535,
+        begin_word: int = 0,
+        byte_count: int = 4294967295,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ProgramAreaFileTransferResult:
+        """PROGRAM AREA-FILE TRANSFER (22 0C); see :class:`ProgramAreaFileTransfer`."""
+        return await self.call(
+            ProgramAreaFileTransfer(
+                mode=mode,
+                disk=disk,
+                name=name,
+                program_number=program_number,
+                begin_word=begin_word,
+                byte_count=byte_count,
+                directory=directory,
+            ),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def create_delete_directory(
+        self,
+        disk: Disk,
+        operation: DirectoryOperation,
+        name: str,
+        directory: str = "",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """CREATE/DELETE DIRECTORY (22 15); see :class:`CreateDeleteDirectory`."""
+        return await self.call(
+            CreateDeleteDirectory(disk=disk, operation=operation, name=name, directory=directory),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def memory_cassette_transfer(
+        self,
+        operation: CassetteOperation,
+        areas: CassetteArea = CassetteArea(0),  # noqa: B008
+        disk: Disk = Disk.MEMORY_CASSETTE,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> MemoryCassetteDataType | None:
+        """MEMORY CASSETTE TRANSFER (22 20); see :class:`MemoryCassetteTransfer`."""
+        return await self.call(
+            MemoryCassetteTransfer(operation=operation, areas=areas, disk=disk),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
+
+    async def forced_set_reset(
+        self,
+        entries: tuple[ForcedSetResetEntry, ...],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FORCED SET/RESET (23 01); see :class:`ForcedSetReset`."""
+        return await self.call(
+            ForcedSetReset(entries=entries), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def forced_set_reset_cancel(
+        self,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        """FORCED SET/RESET CANCEL (23 02); see :class:`ForcedSetResetCancel`."""
+        return await self.call(ForcedSetResetCancel(), dest=dest, timeout=timeout, retries=retries)
+
+    async def convert_to_compoway_f_command(
+        self,
+        payload: bytes,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> CompowayFResponse:
+        """CONVERT TO COMPOWAY/F COMMAND (28 03); see :class:`ConvertToCompowayFCommand`."""
+        return await self.call(
+            ConvertToCompowayFCommand(payload=payload), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def convert_to_modbus_rtu_command(
+        self,
+        payload: bytes,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ModbusRtuResponse:
+        """CONVERT TO MODBUS-RTU COMMAND (28 04); see :class:`ConvertToModbusRtuCommand`."""
+        return await self.call(
+            ConvertToModbusRtuCommand(payload=payload), dest=dest, timeout=timeout, retries=retries
+        )
+
+    async def convert_to_modbus_ascii_command(
+        self,
+        payload: bytes,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> ModbusAsciiResponse:
+        """CONVERT TO MODBUS-ASCII COMMAND (28 05); see :class:`ConvertToModbusAsciiCommand`."""
+        return await self.call(
+            ConvertToModbusAsciiCommand(payload=payload),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )

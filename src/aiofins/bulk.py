@@ -1,0 +1,103 @@
+"""Bulk transfers with progress: program area and parameter area backup/restore, file memory.
+
+Every function takes an optional ``progress(done, total)`` callback (``total`` is ``None`` when
+the size is not known in advance, as for a program area read that ends at the PLC's
+last-block bit). Frames go one at a time: these transfers are ordered by the PLC.
+
+Restoring a program needs PROGRAM mode (the manual refuses 0307 otherwise); we check it before
+sending anything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .chunking import plan_parameter, plan_program
+from .client import Client
+from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
+from .protocol.commands.status import CpuMode
+from .protocol.errors import CommandError, DecodeError
+
+Progress = Callable[[int, "int | None"], None]
+
+
+def _report(progress: Progress | None, done: int, total: int | None) -> None:
+    if progress is not None:
+        progress(done, total)
+
+
+async def backup_program(client: Client, progress: Progress | None = None) -> bytes:
+    """Read the whole user program (0306 in blocks up to the last-block bit 15)."""
+    limit = client.limits.program_read_bytes - client.limits.program_read_bytes % 4
+    out = bytearray()
+    address = 0
+    while True:
+        result = await client.program_area_read(address, limit)
+        out += result.data
+        address += len(result.data)
+        _report(progress, len(out), len(out) if result.last else None)
+        if result.last:
+            return bytes(out)
+        if not result.data:
+            raise DecodeError("program area read returned no data and no last-block bit")
+
+
+async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:
+    """Write a program backup (0307, last block flagged); the PLC must be in PROGRAM mode."""
+    if len(program) % 4:
+        raise CommandError(f"program image must be a multiple of 4 bytes, got {len(program)}")
+    status = await client.cpu_unit_status_read()
+    if status.mode != CpuMode.PROGRAM:
+        raise CommandError(
+            f"the PLC is in {status.mode.name} mode; program area writes need PROGRAM mode "
+            "(send STOP first: client.stop())"
+        )
+    blocks = plan_program(0, len(program), client.limits.program_write_bytes)
+    for block in blocks:
+        data = program[block.start : block.start + block.size]
+        await client.program_area_write(block.start, data, last=block.last)
+        _report(progress, block.start + block.size, len(program))
+
+
+async def backup_parameters(
+    client: Client,
+    areas: tuple[int, ...] = (
+        ParameterArea.PLC_SETUP,
+        ParameterArea.IO_TABLE,
+        ParameterArea.ROUTING_TABLES,
+        ParameterArea.CPU_BUS_UNIT_SETUP,
+    ),
+    progress: Progress | None = None,
+) -> dict[int, tuple[int, ...]]:
+    """Read whole parameter areas (0201, 498 words a frame) → words by area code."""
+    total = sum(PARAMETER_AREA_WORDS[a] for a in areas)
+    done = 0
+    out: dict[int, tuple[int, ...]] = {}
+    for area in areas:
+        words: list[int] = []
+        for block in plan_parameter(
+            0, PARAMETER_AREA_WORDS[area], client.limits.parameter_read_words
+        ):
+            result = await client.parameter_area_read(area, block.start, block.size)
+            words.extend(result.words)
+            done += len(result.words)
+            _report(progress, done, total)
+        out[int(area)] = tuple(words)
+    return out
+
+
+async def restore_parameters(
+    client: Client, backup: dict[int, tuple[int, ...]], progress: Progress | None = None
+) -> None:
+    """Write parameter areas back (0202, 498 words a frame)."""
+    total = sum(len(w) for w in backup.values())
+    done = 0
+    for area, words in backup.items():
+        if len(words) != PARAMETER_AREA_WORDS.get(area, -1):
+            raise CommandError(f"parameter area {area:04X}: backup has {len(words)} words")
+        for block in plan_parameter(0, len(words), client.limits.parameter_write_words):
+            await client.parameter_area_write(
+                area, block.start, tuple(words[block.start : block.start + block.size])
+            )
+            done += block.size
+            _report(progress, done, total)

@@ -1,0 +1,83 @@
+"""``aiofins poll URL TAG... [--interval S] [--count N] [--changes-only] [--json]``.
+
+A tag is ``ADDRESS[:TYPE]`` or ``NAME=ADDRESS[:TYPE]`` (``temp=D100:float32``, ``CIO 0.01``).
+Each scan prints one line (or, with ``--json``, one JSON document per line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import anyio
+
+from ..poller import Poller, Snapshot
+from ..pool import Pool
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("poll", help="poll tags periodically and print each scan")
+    p.add_argument("url")
+    p.add_argument("tags", nargs="+", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
+    p.add_argument("--interval", type=float, default=1.0, help="seconds between scans")
+    p.add_argument("--count", type=int, default=0, help="stop after N scans (0: run until ^C)")
+    p.add_argument("--changes-only", action="store_true", help="print only changed tags")
+    p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
+    p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds per attempt")
+    p.add_argument("--json", action="store_true", help="one JSON document per scan")
+    p.set_defaults(func=run)
+
+
+def parse_tags(texts: list[str]) -> dict[str, str]:
+    tags: dict[str, str] = {}
+    for text in texts:
+        name, sep, spec = text.partition("=")
+        if not sep:
+            name, spec = text, text
+        tags[name.strip()] = spec.strip()
+    return tags
+
+
+def format_line(snap: Snapshot) -> str:
+    parts = []
+    for name, reading in snap.readings.items():
+        value = reading.value
+        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        mark = "" if reading.quality.value == "good" else f"({reading.quality.value})"
+        parts.append(f"{name}={text}{mark}")
+    return f"#{snap.scan} " + " ".join(parts)
+
+
+def to_json(snap: Snapshot) -> str:
+    return json.dumps(
+        {
+            "scan": snap.scan,
+            "timestamp": snap.timestamp,
+            "duration": snap.duration,
+            "error": snap.error,
+            "tags": {
+                name: {"value": r.value, "quality": r.quality.value, "timestamp": r.timestamp}
+                for name, r in snap.readings.items()
+            },
+        },
+        sort_keys=True,
+    )
+
+
+async def poll(args: argparse.Namespace) -> None:
+    tags = parse_tags(args.tags)
+    options = {"timeout": args.timeout, "dest": args.dest, "src": args.src}
+    async with Pool(**options) as pool, Poller(pool, changes_only=args.changes_only) as poller:
+        poller.add_group("cli", args.url, tags, interval=args.interval, timeout=args.timeout)
+        seen = 0
+        async for snap in poller:
+            print(to_json(snap) if args.json else format_line(snap), flush=True)
+            seen += 1
+            if args.count and seen >= args.count:
+                break
+
+
+def run(args: argparse.Namespace) -> int:
+    anyio.run(poll, args)
+    return 0

@@ -1,0 +1,272 @@
+"""The client: one coroutine per FINS command, plus word/bit/typed reads and writes of any size.
+
+``Client`` sits on a :class:`~aiofins.session.Session`. Every command method builds the
+operation's typed request (:mod:`aiofins.protocol.commands`), sends it through the session and
+parses the response into the operation's typed result. :meth:`Client.read` and
+:meth:`Client.write` take address text (``"D100"``, ``"CIO 0.01"``), split the transfer to the
+route's limits and send the chunks pipelined.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any, TypeVar
+
+import anyio
+
+from ._commands import CommandMethods
+from .chunking import plan_memory
+from .protocol.addresses import parse_address
+from .protocol.areas import MemoryAddress
+from .protocol.commands import Request
+from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite
+from .protocol.endcodes import EndCode
+from .protocol.errors import CommandError
+from .protocol.header import FinsAddress
+from .protocol.limits import RouteLimits, limits_for
+from .protocol.values import Value, ValueType, WordOrder, parse_value_type
+from .session import Response, Session
+from .tags import ReadPlan, compile_tags
+
+R = TypeVar("R")
+
+AddressLike = str | MemoryAddress
+
+
+class Client(CommandMethods):
+    """A FINS client for one PLC (``dest``), over one session.
+
+    Options: ``dest`` (the PLC's FINS address; per call too), ``limits`` (the route's
+    :class:`RouteLimits`, Ethernet by default), ``word_order`` for typed values (Omron's CDAB
+    by default). CPU error flags of the last response (end code bits 6/7) are in
+    :attr:`last_end_code`; they are not raised.
+    """
+
+    def __init__(
+        self,
+        session: Session,
+        *,
+        dest: FinsAddress | None = None,
+        limits: RouteLimits | None = None,
+        word_order: WordOrder | str = WordOrder.LOW_FIRST,
+    ) -> None:
+        self.session = session
+        self.dest = dest if dest is not None else session.dest
+        self.limits = limits if limits is not None else limits_for()
+        self.word_order = WordOrder.parse(word_order)
+        #: End code of the latest normal response (look here for the 0040/0080 flags).
+        self.last_end_code: EndCode | None = None
+
+    # -- raw and typed requests ---------------------------------------------------------
+
+    async def execute(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        idempotent: bool = False,
+    ) -> Response:
+        """Send a raw command (MRC, SRC, parameter bytes); returns the response frame.
+
+        Non-normal end codes raise :class:`~aiofins.EndCodeError` subclasses.
+        """
+        response = await self.session.request(
+            mrc,
+            src,
+            params,
+            dest=dest or self.dest,
+            timeout=timeout,
+            idempotent=idempotent,
+            retries=retries,
+        )
+        self.last_end_code = response.end_code
+        return response
+
+    async def call(
+        self,
+        request: Request[R],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> R:
+        """Send a typed request and parse its response into the operation's result."""
+        response = await self.execute(
+            request.MRC,
+            request.SRC,
+            request.encode(),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+            idempotent=request.IDEMPOTENT,
+        )
+        return request.decode_response(response.data)
+
+    # -- words and bits -----------------------------------------------------------------
+
+    async def read(
+        self,
+        address: AddressLike,
+        count: int = 1,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+    ) -> list[int]:
+        """Read ``count`` elements from ``address`` (words, or 0/1 for bits), any size.
+
+        Transfers over the route's limit go as several 0101 frames, sent pipelined and
+        reassembled in order.
+        """
+        start = _address(address)
+        if count < 0:
+            raise CommandError(f"count must not be negative, got {count}")
+        chunks = plan_memory(start, count, self.limits.memory_read_words)
+        if len(chunks) == 1:
+            result = await self.call(
+                MemoryAreaRead(chunks[0].address, chunks[0].count), dest=dest, timeout=timeout
+            )
+            return list(result.values)
+        parts: list[tuple[int, ...]] = [()] * len(chunks)
+
+        async def one(i: int) -> None:
+            chunk = chunks[i]
+            result = await self.call(
+                MemoryAreaRead(chunk.address, chunk.count), dest=dest, timeout=timeout
+            )
+            parts[i] = result.values
+
+        async with anyio.create_task_group() as tg:
+            for i in range(len(chunks)):
+                tg.start_soon(one, i)
+        return [v for part in parts for v in part]
+
+    async def write(
+        self,
+        address: AddressLike,
+        values: Sequence[int],
+        *,
+        allow_split: bool = False,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+    ) -> None:
+        """Write words (or 0/1 bits) from ``address``.
+
+        A write over the route's limit needs several frames and is therefore **not atomic**:
+        the PLC's program may run between them and see half-old, half-new data, and a failure
+        midway leaves a partial write. It is refused unless ``allow_split=True``.
+        """
+        start = _address(address)
+        size = start.element_size
+        chunks = plan_memory(start, len(values), self.limits.memory_write_words)
+        if len(chunks) > 1 and not allow_split:
+            raise CommandError(
+                f"writing {len(values)} elements needs {len(chunks)} frames on this route "
+                f"(limit {self.limits.memory_write_words}); such a write is not atomic — pass "
+                "allow_split=True to accept that"
+            )
+        if not chunks:  # count 0: a normal response that writes nothing (manual 5-3-3)
+            await self.call(MemoryAreaWrite(start, b""), dest=dest, timeout=timeout)
+        for chunk in chunks:
+            part = values[chunk.offset : chunk.offset + chunk.count]
+            await self.call(
+                MemoryAreaWrite(chunk.address, _element_bytes(part, size)),
+                dest=dest,
+                timeout=timeout,
+            )
+
+    async def read_bit(self, address: AddressLike, **kw: Any) -> bool:
+        """Read one bit (``"CIO 0.01"``) as a bool."""
+        return bool((await self.read(address, 1, **kw))[0] & 1)
+
+    # -- typed values -------------------------------------------------------------------
+
+    def _type(self, vtype: str | ValueType) -> ValueType:
+        if isinstance(vtype, ValueType):
+            return vtype
+        if ":" in vtype and vtype.split(":")[-1].isalpha() and len(vtype.split(":")[-1]) == 4:
+            return parse_value_type(vtype)
+        return parse_value_type(vtype, word_order=self.word_order)
+
+    async def read_value(
+        self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
+    ) -> Value:
+        """Read one typed value: ``await plc.read_value("D200", "float32")``."""
+        return (await self.read_values(address, vtype, 1, **kw))[0]
+
+    async def read_values(
+        self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
+    ) -> list[Value]:
+        """Read ``count`` consecutive typed values."""
+        t = self._type(vtype)
+        words = await self.read(address, t.words * count, **kw)
+        return [t.decode(words[i : i + t.words]) for i in range(0, len(words), t.words)]
+
+    async def write_value(
+        self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
+    ) -> None:
+        """Write one typed value: ``await plc.write_value("D200", 21.5, "float32")``."""
+        await self.write_values(address, [value], vtype, **kw)
+
+    async def write_values(
+        self, address: AddressLike, values: Sequence[Value], vtype: str | ValueType, **kw: Any
+    ) -> None:
+        """Write consecutive typed values."""
+        t = self._type(vtype)
+        words: list[int] = []
+        for v in values:
+            words.extend(t.encode(v))
+        await self.write(address, words, **kw)
+
+    # -- tag lists ----------------------------------------------------------------------
+
+    def compile_tags(self, tags: Mapping[str, str], *, max_gap: int = 8) -> ReadPlan:
+        """Compile a tag list for this client's route limits (inspect it, reuse it)."""
+        return compile_tags(
+            tags,
+            max_read_words=self.limits.memory_read_words,
+            max_multiple_elements=self.limits.multiple_read_elements,
+            max_gap=max_gap,
+        )
+
+    async def read_tags(
+        self, tags: Mapping[str, str] | ReadPlan, *, timeout: float | None = None
+    ) -> dict[str, Value]:
+        """Read a tag list (``{"temp": "D100:float32", "run": "CIO 0.01"}``) in few frames."""
+        plan = tags if isinstance(tags, ReadPlan) else self.compile_tags(tags)
+        run_words: list[Sequence[int]] = [()] * len(plan.runs)
+        multi: list[Sequence[int]] = [()] * len(plan.multiple)
+
+        async def run(i: int) -> None:
+            r = plan.runs[i]
+            result = await self.call(
+                MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count), timeout=timeout
+            )
+            run_words[i] = result.values
+
+        async def many(i: int) -> None:
+            result = await self.multiple_memory_area_read(plan.multiple[i], timeout=timeout)
+            multi[i] = [item.value for item in result.items]
+
+        async with anyio.create_task_group() as tg:
+            for i in range(len(plan.runs)):
+                tg.start_soon(run, i)
+            for i in range(len(plan.multiple)):
+                tg.start_soon(many, i)
+        return plan.decode(run_words, multi)
+
+
+def _address(address: AddressLike) -> MemoryAddress:
+    return address if isinstance(address, MemoryAddress) else parse_address(address)
+
+
+def _element_bytes(values: Sequence[int], size: int) -> bytes:
+    out = bytearray()
+    for v in values:
+        if not 0 <= v < (1 << (8 * size)):
+            raise CommandError(f"value {v} does not fit in a {size}-byte element")
+        out += v.to_bytes(size, "big")
+    return bytes(out)

@@ -1,0 +1,149 @@
+"""``aiofins.connect(url)``: build the transport, session and client for an endpoint.
+
+Node addressing defaults, all overridable:
+
+* UDP: the PLC's node (DA1) is the last octet of its IPv4 address (Omron's automatic
+  address conversion), our node (SA1) the last octet of the local address that routes to it;
+  ``dest=``/``src=`` (or ``?dest=``/``?src=``/``?node=`` in the URL) override them.
+* FINS/TCP: both nodes come from the handshake (we ask the PLC to assign ours).
+* Host Link: the CPU unit behind the serial port (``0.0.0``) from ``0.0.0``.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from .client import Client
+from .endpoint import Endpoint, node_from_host, parse_endpoint
+from .protocol.errors import CommandError
+from .protocol.header import FinsAddress
+from .protocol.limits import NetworkType, RouteLimits, limits_for
+from .protocol.values import WordOrder
+from .session import Session
+from .transport.base import Transport
+from .transport.serial import SerialTransport
+from .transport.tcp import TcpTransport
+from .transport.udp import UdpTransport
+
+
+def _address(value: FinsAddress | str | None) -> FinsAddress | None:
+    if value is None or isinstance(value, FinsAddress):
+        return value
+    return FinsAddress.parse(value)
+
+
+def local_node_towards(host: str, avoid: int | None = None) -> int:
+    """Last octet of the local IPv4 address that routes to ``host`` (no packet is sent)."""
+    node: int | None = None
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect((host, 9600))
+            node = node_from_host(probe.getsockname()[0])
+    except OSError:
+        node = None
+    if node is None or node == avoid:
+        node = 254 if avoid != 254 else 253
+    return node
+
+
+def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
+    """The transport for an endpoint (serial settings come from the URL or ``options``)."""
+    if endpoint.scheme == "udp":
+        return UdpTransport(endpoint.host, endpoint.port)
+    if endpoint.scheme == "tcp":
+        return TcpTransport(endpoint.host, endpoint.port, node=int(options.get("tcp_node", 0)))
+    settings: dict[str, Any] = {}
+    for key, value in endpoint.options:
+        settings[key] = value
+    settings.update({k: v for k, v in options.items() if k in _SERIAL_OPTIONS})
+    return SerialTransport(
+        endpoint.device,
+        baudrate=int(settings.get("baudrate", 9600)),
+        bytesize=int(settings.get("bytesize", 8)),
+        parity=str(settings.get("parity", "N")),
+        stopbits=float(settings.get("stopbits", 1)),
+        unit=int(settings.get("unit", 0)),
+        response_wait=int(settings.get("response_wait", 0)),
+    )
+
+
+_SERIAL_OPTIONS = {"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait"}
+
+
+def default_addresses(
+    endpoint: Endpoint,
+    dest: FinsAddress | str | None = None,
+    src: FinsAddress | str | None = None,
+) -> tuple[FinsAddress, FinsAddress]:
+    """(dest, source) for an endpoint, from arguments, URL options, or the defaults above."""
+    d = _address(dest) or _address(endpoint.option("dest"))
+    s = _address(src) or _address(endpoint.option("src"))
+    if endpoint.scheme == "serial":
+        return d or FinsAddress(0, 0, 0), s or FinsAddress(0, 0, 0)
+    if d is None:
+        node_text = endpoint.option("node")
+        node = int(node_text) if node_text else node_from_host(endpoint.host)
+        d = FinsAddress(0, node if node is not None else 1, 0)
+    if s is None:
+        if endpoint.scheme == "tcp":
+            s = FinsAddress(0, 0, 0)  # assigned by the handshake
+        else:
+            s = FinsAddress(0, local_node_towards(endpoint.host, avoid=d.node), 0)
+    return d, s
+
+
+@asynccontextmanager
+async def connect(
+    url: str,
+    *,
+    dest: FinsAddress | str | None = None,
+    src: FinsAddress | str | None = None,
+    timeout: float = 2.0,
+    retries: int = 2,
+    max_in_flight: int | None = None,
+    gct: int = 2,
+    networks: tuple[NetworkType, ...] = (),
+    limits: RouteLimits | None = None,
+    word_order: WordOrder | str = WordOrder.LOW_FIRST,
+    **transport_options: Any,
+) -> AsyncIterator[Client]:
+    """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
+
+    ``networks`` names the networks a routed request crosses (their smallest limits apply);
+    ``limits`` overrides them altogether. ``max_in_flight`` caps concurrent requests to the
+    PLC (default 5; serial lines carry one at a time). Serial settings (``baudrate``,
+    ``bytesize``, ``parity``, ``stopbits``, ``unit``, ``response_wait``) come from the URL
+    query or keyword arguments.
+    """
+    endpoint = parse_endpoint(url)
+    unknown = set(transport_options) - _SERIAL_OPTIONS - {"tcp_node"}
+    if unknown:
+        raise CommandError(f"unknown option(s): {', '.join(sorted(unknown))}")
+    d, s = default_addresses(endpoint, dest, src)
+    route = limits or limits_for(
+        *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
+    )
+    timeout_text = endpoint.option("timeout")
+    transport = make_transport(endpoint, **transport_options)
+    session = Session(
+        transport,
+        source=s,
+        dest=d,
+        gct=gct,
+        max_in_flight=max_in_flight or 5,
+        timeout=float(timeout_text) if timeout_text else timeout,
+        retries=retries,
+    )
+    async with session:
+        if (
+            endpoint.scheme == "tcp"
+            and transport.remote_node is not None
+            and dest is None
+            and endpoint.option("dest") is None
+            and endpoint.option("node") is None
+        ):
+            session.dest = FinsAddress(0, transport.remote_node, 0)
+        yield Client(session, limits=route, word_order=word_order)

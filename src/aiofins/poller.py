@@ -1,0 +1,224 @@
+"""A polling engine: scan groups over one or many PLCs, delivered as timestamped snapshots.
+
+Each scan group reads its tag list (compiled once into the fewest frames, see
+:mod:`aiofins.tags`) from one endpoint every ``interval`` seconds, in its own task, through a
+:class:`~aiofins.pool.Pool`, so a slow or dead PLC never delays the others. Scans are
+deadline-driven: a scan that overruns makes the group skip the scan times it missed (counted in
+:attr:`ScanGroup.missed`), never queue them up. Snapshots go through a bounded buffer; when the
+consumer is slower than the scans, groups wait for room (backpressure) and the scans they miss
+meanwhile are counted the same way.
+
+Every tag of a snapshot carries a quality: ``GOOD`` (read in this scan), ``STALE`` (this scan
+failed; the value is the last good one, with its timestamp) or ``ERROR`` (never read, or the
+tag's address is refused).
+
+::
+
+    async with aiofins.Pool() as pool, Poller(pool) as poller:
+        poller.add_group("line1", "udp://10.0.0.5", {"temp": "D100:float32"}, interval=0.5)
+        async for snap in poller:
+            print(snap.group, snap["temp"].value, snap["temp"].quality)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import AsyncIterator, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from types import TracebackType
+from typing import TYPE_CHECKING
+
+import anyio
+from anyio.abc import TaskGroup
+from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
+
+from .protocol.errors import CommandError, FinsError
+from .protocol.values import Value
+from .tags import ReadPlan
+
+if TYPE_CHECKING:
+    from .pool import Pool
+
+
+class Quality(Enum):
+    GOOD = "good"
+    STALE = "stale"
+    ERROR = "error"
+
+
+@dataclass(frozen=True)
+class TagReading:
+    """One tag in a snapshot: value, quality, when the value was read, why it is not good."""
+
+    value: Value | None
+    quality: Quality
+    timestamp: float | None
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The result of one scan of one group."""
+
+    group: str
+    endpoint: str
+    scan: int
+    timestamp: float
+    duration: float
+    readings: Mapping[str, TagReading]
+    changed: frozenset[str]
+    error: str | None = None
+
+    def __getitem__(self, tag: str) -> TagReading:
+        return self.readings[tag]
+
+    @property
+    def values(self) -> dict[str, Value | None]:
+        return {name: r.value for name, r in self.readings.items()}
+
+
+@dataclass
+class ScanGroup:
+    """A tag list read from one endpoint every ``interval`` seconds, with its counters."""
+
+    name: str
+    url: str
+    tags: Mapping[str, str]
+    interval: float
+    timeout: float | None = None
+    scans: int = 0
+    errors: int = 0
+    missed: int = 0
+    last_duration: float = 0.0
+    plan: ReadPlan | None = None
+    _last: dict[str, TagReading] = field(default_factory=dict)
+
+
+class Poller:
+    """Runs scan groups; iterate it for snapshots (``async for snap in poller``).
+
+    ``changes_only`` delivers only the tags whose value or quality changed (and skips
+    snapshots with no change); ``buffer`` is how many snapshots may wait for the consumer.
+    """
+
+    def __init__(self, pool: Pool, *, buffer: int = 64, changes_only: bool = False) -> None:
+        self.pool = pool
+        self.changes_only = changes_only
+        self.groups: dict[str, ScanGroup] = {}
+        send, receive = anyio.create_memory_object_stream[Snapshot](buffer)
+        self._send: MemoryObjectSendStream[Snapshot] = send
+        self._receive: MemoryObjectReceiveStream[Snapshot] = receive
+        self._tg: TaskGroup | None = None
+
+    def add_group(
+        self,
+        name: str,
+        url: str,
+        tags: Mapping[str, str],
+        *,
+        interval: float = 1.0,
+        timeout: float | None = None,
+    ) -> ScanGroup:
+        """Add a scan group; starts at once if the poller is running."""
+        if name in self.groups:
+            raise CommandError(f"scan group {name!r} exists already")
+        if not interval > 0 or not math.isfinite(interval):
+            raise CommandError(f"interval must be a positive number of seconds, got {interval}")
+        if not tags:
+            raise CommandError(f"scan group {name!r} has no tags")
+        group = ScanGroup(name, url, dict(tags), interval, timeout)
+        self.groups[name] = group
+        if self._tg is not None:
+            self._tg.start_soon(self._run_group, group)
+        return group
+
+    async def __aenter__(self) -> Poller:
+        self._tg = anyio.create_task_group()
+        await self._tg.__aenter__()
+        for group in self.groups.values():
+            self._tg.start_soon(self._run_group, group)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        assert self._tg is not None
+        self._tg.cancel_scope.cancel()
+        try:
+            return await self._tg.__aexit__(exc_type, exc, tb)
+        finally:
+            self._tg = None
+            self._send.close()
+            self._receive.close()
+
+    def __aiter__(self) -> AsyncIterator[Snapshot]:
+        return self._receive.__aiter__()
+
+    async def _run_group(self, group: ScanGroup) -> None:
+        next_at = anyio.current_time()
+        while True:
+            now = anyio.current_time()
+            if now < next_at:
+                await anyio.sleep(next_at - now)
+            snapshot = await self.scan_once(group)
+            if snapshot is not None:
+                await self._send.send(snapshot)
+            next_at += group.interval
+            now = anyio.current_time()
+            if now > next_at:
+                skipped = math.floor((now - next_at) / group.interval) + 1
+                group.missed += skipped
+                next_at += skipped * group.interval
+
+    async def scan_once(self, group: ScanGroup) -> Snapshot | None:
+        """Run one scan of ``group`` now; the snapshot (``None`` if nothing to deliver)."""
+        started = anyio.current_time()
+        stamp = time.time()
+        group.scans += 1
+        error: str | None = None
+        values: dict[str, Value] = {}
+        try:
+            async with self.pool.client(group.url) as client:
+                if group.plan is None:
+                    group.plan = client.compile_tags(group.tags)
+                values = await client.read_tags(group.plan, timeout=group.timeout)
+        except FinsError as exc:
+            group.errors += 1
+            error = f"{type(exc).__name__}: {exc}"
+        group.last_duration = anyio.current_time() - started
+        readings: dict[str, TagReading] = {}
+        changed: set[str] = set()
+        for name in group.tags:
+            previous = group._last.get(name)
+            if error is None:
+                reading = TagReading(values[name], Quality.GOOD, stamp)
+            elif previous is not None and previous.value is not None:
+                reading = TagReading(previous.value, Quality.STALE, previous.timestamp, error)
+            else:
+                reading = TagReading(None, Quality.ERROR, None, error)
+            if previous is None or (previous.value, previous.quality) != (
+                reading.value,
+                reading.quality,
+            ):
+                changed.add(name)
+            readings[name] = reading
+        group._last = readings
+        if self.changes_only:
+            if not changed:
+                return None
+            readings = {name: readings[name] for name in changed}
+        return Snapshot(
+            group.name,
+            group.url,
+            group.scans,
+            stamp,
+            group.last_duration,
+            readings,
+            frozenset(changed),
+            error,
+        )

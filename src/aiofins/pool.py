@@ -1,0 +1,264 @@
+"""A connection pool keyed by endpoint: share sessions among tasks, keep them healthy.
+
+``pool.client(url)`` lends a :class:`~aiofins.client.Client` for the endpoint. One session
+multiplexes any number of concurrent tasks, so the default is one session per endpoint
+(``max_per_endpoint=1``); with more, each extra session is opened when all existing ones are
+busy and gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port it
+saw for a node, so two sockets sharing SA1 would steal each other's replies. FINS/TCP PLCs
+accept few connections (each holds one of the unit's node slots): keep ``max_per_endpoint``
+within that.
+
+A maintenance task checks idle sessions every ``health_interval`` seconds with CPU UNIT STATUS
+READ (0601) and closes those that fail or stayed unused for ``idle_timeout`` seconds. An
+endpoint whose connection failed is not retried until its backoff (doubling from
+``backoff_min`` to ``backoff_max``) has passed; calls in the meantime fail fast with
+:class:`~aiofins.ConnectionLost`.
+
+Safe to open in a FastAPI lifespan::
+
+    @asynccontextmanager
+    async def lifespan(app):
+        async with aiofins.Pool() as pool:
+            app.state.plcs = pool
+            yield
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any
+
+import anyio
+from anyio.abc import TaskGroup
+
+from .client import Client
+from .connection import connect, default_addresses
+from .endpoint import parse_endpoint
+from .protocol.errors import CommandError, ConnectionLost, FinsError
+from .protocol.header import FinsAddress
+
+
+@dataclass(eq=False)
+class _Entry:
+    key: str
+    url: str
+    src: FinsAddress | None
+    client: Client | None = None
+    error: BaseException | None = None
+    users: int = 0
+    last_used: float = 0.0
+    ready: anyio.Event = field(default_factory=anyio.Event)
+    closing: anyio.Event = field(default_factory=anyio.Event)
+    done: anyio.Event = field(default_factory=anyio.Event)
+
+
+@dataclass
+class EndpointStats:
+    """Counters summed over an endpoint's sessions (see ``SessionStats`` for each)."""
+
+    sessions: int = 0
+    in_use: int = 0
+    in_flight: int = 0
+    completed: int = 0
+    timeouts: int = 0
+    late_replies: int = 0
+    retries: int = 0
+    connects: int = 0
+    connect_failures: int = 0
+    health_failures: int = 0
+    latency_mean: float = 0.0
+    latency_p99: float = 0.0
+
+
+class Pool:
+    """Clients keyed by endpoint URL; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        max_per_endpoint: int = 1,
+        idle_timeout: float = 300.0,
+        health_interval: float = 30.0,
+        backoff_min: float = 0.5,
+        backoff_max: float = 30.0,
+        **connect_options: Any,
+    ) -> None:
+        if max_per_endpoint < 1:
+            raise CommandError("max_per_endpoint must be at least 1")
+        self.max_per_endpoint = max_per_endpoint
+        self.idle_timeout = idle_timeout
+        self.health_interval = health_interval
+        self.backoff_min = backoff_min
+        self.backoff_max = backoff_max
+        self.connect_options = connect_options
+        self._entries: dict[str, list[_Entry]] = {}
+        self._failures: dict[str, tuple[float, float]] = {}  # key -> (retry_at, backoff)
+        self._stats: dict[str, EndpointStats] = {}
+        self._tg: TaskGroup | None = None
+        self._lock = anyio.Lock()
+
+    async def __aenter__(self) -> Pool:
+        self._tg = anyio.create_task_group()
+        await self._tg.__aenter__()
+        self._tg.start_soon(self._maintain)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        await self.aclose()
+        assert self._tg is not None
+        tg, self._tg = self._tg, None
+        tg.cancel_scope.cancel()
+        return await tg.__aexit__(exc_type, exc, tb)
+
+    async def aclose(self) -> None:
+        """Close every session (in-flight calls fail with ``ConnectionLost``)."""
+        entries = [e for lst in self._entries.values() for e in lst]
+        self._entries.clear()
+        for entry in entries:
+            entry.closing.set()
+        with anyio.CancelScope(shield=True):
+            for entry in entries:
+                await entry.done.wait()
+
+    # -- lending ------------------------------------------------------------------------
+
+    @asynccontextmanager
+    async def client(self, url: str) -> AsyncIterator[Client]:
+        """Lend the client of ``url``'s endpoint for the ``async with`` block."""
+        entry = await self._acquire(url)
+        try:
+            assert entry.client is not None
+            yield entry.client
+        finally:
+            entry.users -= 1
+            entry.last_used = anyio.current_time()
+
+    def stats(self, url: str | None = None) -> dict[str, EndpointStats]:
+        """Per-endpoint counters (all endpoints, or the one of ``url``)."""
+        keys = [parse_endpoint(url).key] if url else list(self._stats)
+        out: dict[str, EndpointStats] = {}
+        for key in keys:
+            base = self._stats.get(key, EndpointStats())
+            agg = EndpointStats(
+                connect_failures=base.connect_failures,
+                health_failures=base.health_failures,
+            )
+            for entry in self._entries.get(key, []):
+                if entry.client is None:
+                    continue
+                s = entry.client.session.stats
+                agg.sessions += 1
+                agg.in_use += entry.users
+                agg.in_flight += s.in_flight
+                agg.completed += s.completed
+                agg.timeouts += s.timeouts
+                agg.late_replies += s.late_replies
+                agg.retries += s.retries
+                agg.connects += s.connects
+                agg.latency_mean = max(agg.latency_mean, s.latency_mean)
+                agg.latency_p99 = max(agg.latency_p99, s.latency_p99)
+            out[key] = agg
+        return out
+
+    async def _acquire(self, url: str) -> _Entry:
+        if self._tg is None:
+            raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
+        endpoint = parse_endpoint(url)
+        key = endpoint.key
+        async with self._lock:
+            entries = [e for e in self._entries.get(key, []) if not e.closing.is_set()]
+            ready = [e for e in entries if e.error is None]
+            idle = min(ready, key=lambda e: e.users, default=None)
+            if idle is None or (idle.users and len(entries) < self.max_per_endpoint):
+                now = anyio.current_time()
+                retry_at, _ = self._failures.get(key, (0.0, 0.0))
+                if now < retry_at and idle is None:
+                    raise ConnectionLost(
+                        f"{key}: last connection attempt failed; retrying in {retry_at - now:.1f} s"
+                    )
+                src = None
+                if endpoint.scheme == "udp" and entries:
+                    dest, first_src = default_addresses(
+                        endpoint, self.connect_options.get("dest"), self.connect_options.get("src")
+                    )
+                    used = {e.src.node for e in entries if e.src is not None} | {
+                        first_src.node,
+                        dest.node,
+                    }
+                    node = next(n for n in range(254, 0, -1) if n not in used)
+                    src = FinsAddress(first_src.network, node, first_src.unit)
+                entry = _Entry(key, url, src)
+                self._entries.setdefault(key, []).append(entry)
+                self._stats.setdefault(key, EndpointStats())
+                assert self._tg is not None
+                self._tg.start_soon(self._serve, entry)
+            else:
+                entry = idle
+            entry.users += 1
+        await entry.ready.wait()
+        if entry.error is not None:
+            entry.users -= 1
+            err = entry.error
+            if isinstance(err, FinsError):
+                raise err
+            raise ConnectionLost(f"{key}: {err}") from err
+        return entry
+
+    async def _serve(self, entry: _Entry) -> None:
+        options = dict(self.connect_options)
+        if entry.src is not None:
+            options["src"] = entry.src
+        try:
+            async with connect(entry.url, **options) as client:
+                entry.client = client
+                entry.last_used = anyio.current_time()
+                self._failures.pop(entry.key, None)
+                entry.ready.set()
+                await entry.closing.wait()
+        except (OSError, FinsError) as exc:
+            entry.error = exc
+            self._stats[entry.key].connect_failures += 1
+            _, backoff = self._failures.get(entry.key, (0.0, 0.0))
+            backoff = min(self.backoff_max, max(self.backoff_min, backoff * 2))
+            self._failures[entry.key] = (anyio.current_time() + backoff, backoff)
+        finally:
+            entry.closing.set()
+            entry.ready.set()
+            entry.done.set()
+            lst = self._entries.get(entry.key)
+            if lst and entry in lst:
+                lst.remove(entry)
+
+    # -- maintenance ----------------------------------------------------------------------
+
+    async def _maintain(self) -> None:
+        while True:
+            await anyio.sleep(min(self.health_interval, self.idle_timeout))
+            now = anyio.current_time()
+            for entries in list(self._entries.values()):
+                for entry in list(entries):
+                    if entry.client is None or entry.users or entry.closing.is_set():
+                        continue
+                    if now - entry.last_used >= self.idle_timeout:
+                        entry.closing.set()
+                        continue
+                    if now - entry.last_used >= self.health_interval:
+                        await self._health_check(entry)
+
+    async def _health_check(self, entry: _Entry) -> None:
+        assert entry.client is not None
+        try:
+            await entry.client.cpu_unit_status_read(timeout=entry.client.session.timeout)
+        except FinsError:
+            self._stats[entry.key].health_failures += 1
+            entry.closing.set()
+        else:
+            entry.last_used = anyio.current_time()

@@ -1,0 +1,115 @@
+"""The client against the virtual PLC over real loopback UDP and FINS/TCP (asyncio and trio)."""
+
+from __future__ import annotations
+
+import anyio
+import pytest
+
+import aiofins
+from aiofins.connection import connect
+from aiofins.protocol.commands.status import CpuMode
+from aiofins.protocol.errors import CommandError, FinsTimeout, WriteNotPossibleError
+from aiofins.protocol.header import FinsAddress
+from aiofins.protocol.limits import NetworkType
+from aiofins.simulator.faults import FaultRule
+from aiofins.simulator.runner import Simulator
+
+pytestmark = pytest.mark.anyio
+
+
+async def test_words_bits_and_typed_values(url: str) -> None:
+    async with connect(url, timeout=1) as plc:
+        await plc.write("D100", [1, 2, 0xFFFF])
+        assert await plc.read("D100", 3) == [1, 2, 0xFFFF]
+        await plc.write("CIO 10.14", [1, 1, 0])
+        assert await plc.read("CIO 10.14", 3) == [1, 1, 0]
+        assert await plc.read("CIO 10", 2) == [0xC000, 0]  # bits 14 and 15; CIO 11.00 off
+        assert await plc.read_bit("CIO 10.15") is True
+        await plc.write_value("D200", -2.5, "float32")
+        assert await plc.read("D200", 2) == [0x0000, 0xC020]  # CDAB: low word first
+        assert await plc.read_value("D200", "float32") == -2.5
+        await plc.write_values("D300", [-1, 70000], "int32")
+        assert await plc.read_values("D300", "int32", 2) == [-1, 70000]
+        await plc.write_value("D400", "HELLO", "string:6")
+        assert await plc.read_value("D400", "string:6") == "HELLO"
+
+
+async def test_read_and_write_of_count_zero(url: str) -> None:
+    async with connect(url, timeout=1) as plc:
+        assert await plc.read("D0", 0) == []
+        await plc.write("D0", [])
+
+
+async def test_full_dm_round_trip_in_expected_frames(sim: Simulator, url: str) -> None:
+    data = [(i * 7) & 0xFFFF for i in range(32768)]
+    async with connect(url, timeout=2) as plc:
+        with pytest.raises(CommandError, match="not atomic"):
+            await plc.write("D0", data)
+        await plc.write("D0", data, allow_split=True)
+        before = sim.counters.requests
+        assert await plc.read("D0", 32768) == data
+        assert sim.counters.requests - before == 33  # ceil(32768 / 999)
+    async with connect(url, timeout=2, networks=(NetworkType.SYSMAC_LINK,)) as plc:
+        before = sim.counters.requests
+        assert await plc.read("D0", 32768) == data
+        assert sim.counters.requests - before == 122  # ceil(32768 / 269)
+
+
+async def test_thousand_concurrent_reads_each_get_their_own_value(url: str) -> None:
+    async with connect(url, timeout=5) as plc:
+        await plc.write("D0", list(range(1000)), allow_split=True)
+        results: dict[int, list[int]] = {}
+
+        async def one(i: int) -> None:
+            results[i] = await plc.read(f"D{i}", 1)
+
+        async with anyio.create_task_group() as tg:
+            for i in range(1000):
+                tg.start_soon(one, i)
+        assert results == {i: [i] for i in range(1000)}
+        assert plc.session.stats.completed >= 1001
+
+
+async def test_end_codes_raise_typed_errors_with_meaning(url: str) -> None:
+    async with connect(url, timeout=1) as plc:
+        with pytest.raises(WriteNotPossibleError) as info:
+            await plc.write("A0", [1])  # A0-A447 are read-only
+        assert info.value.end_code.code == 0x2101
+        assert "read-only" in str(info.value).lower() or info.value.end_code.name
+
+
+async def test_status_clock_mode_and_commands(url: str) -> None:
+    async with connect(url, timeout=1) as plc:
+        status = await plc.cpu_unit_status_read()
+        assert status.mode == CpuMode.PROGRAM
+        await plc.run()
+        assert (await plc.cpu_unit_status_read()).mode == CpuMode.MONITOR
+        await plc.stop()
+        assert (await plc.cpu_unit_status_read()).mode == CpuMode.PROGRAM
+        clock = await plc.clock_read()
+        assert clock.time.year >= 2024
+
+
+async def test_cpu_error_flags_ride_on_the_result(sim: Simulator, url: str) -> None:
+    sim.plan.rule = FaultRule(flags=0x40)
+    async with connect(url, timeout=1) as plc:
+        assert await plc.read("D0", 1) == [0]
+        assert plc.last_end_code is not None
+        assert plc.last_end_code.non_fatal_cpu_error
+        assert plc.last_end_code.is_normal
+
+
+async def test_relay_error_names_the_failing_node(sim: Simulator, url: str) -> None:
+    async with connect(url, timeout=1) as plc:
+        with pytest.raises(aiofins.RelayError) as info:
+            await plc.read("D0", 1, dest=FinsAddress(5, 9, 0))
+        assert info.value.end_code.relay_error
+
+
+async def test_timeout_is_raised_and_the_next_call_works(sim: Simulator, url: str) -> None:
+    sim.plan.per_command[0x0601] = FaultRule(drop_request=1.0)
+    async with connect(url, timeout=0.2, retries=0) as plc:
+        with pytest.raises(FinsTimeout):
+            await plc.cpu_unit_status_read()
+        assert await plc.read("D0", 1) == [0]
+        assert plc.session.stats.timeouts == 1
