@@ -1,0 +1,145 @@
+"""Per-network and per-command size limits, as data.
+
+A command that crosses several networks is bound by the smallest limit along its route
+(manual 5-2-2: "If more than one network is passed through to read or write data, the value
+for the network with the smallest limit will apply"). :func:`limits_for` computes that
+minimum; :class:`RouteLimits` fields can be overridden with :func:`dataclasses.replace` for
+units whose limits differ (e.g. an older Ethernet unit, or a test that wants tiny chunks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from enum import Enum
+
+from .errors import CommandError
+
+#: Largest FINS frame on Ethernet and Controller Link: 10-byte header + 2-byte command code +
+#: 2,000 parameter bytes (W421 §7; wire-format §1.2 and §7).
+MAX_FRAME = 2012
+
+#: Host Link FINS frames (W342 §3-5; wire-format §4): whole command line in characters.
+HOST_LINK_MAX_COMMAND_CHARS = 1114
+#: Whole response line in characters.
+HOST_LINK_MAX_RESPONSE_CHARS = 1115
+#: Parameter bytes after the command code of one Host Link command (1,080 characters).
+HOST_LINK_MAX_PARAMETER_BYTES = 540
+#: Data bytes after the end code of one Host Link response (1,076 characters).
+HOST_LINK_MAX_RESPONSE_DATA_BYTES = 538
+
+
+class NetworkType(Enum):
+    """A network a FINS command can travel over (manual 5-2-2 and 5-3-5 name these)."""
+
+    ETHERNET = "ethernet"
+    CONTROLLER_LINK = "controller_link"
+    SYSMAC_LINK = "sysmac_link"
+    DEVICENET = "devicenet"
+    SYSWAY = "sysway"
+    HOST_LINK = "host_link"
+
+
+@dataclass(frozen=True, slots=True)
+class RouteLimits:
+    """How much one command may carry on a route.
+
+    Counts are in the unit the command counts in: words for 0101/0102/0201/0202, elements
+    for 0104, bytes for 0306/0307 and for the frame sizes.
+    """
+
+    #: 0101 MEMORY AREA READ, words per command.
+    memory_read_words: int
+    #: 0102 MEMORY AREA WRITE, words per command.
+    memory_write_words: int
+    #: 0104 MULTIPLE MEMORY AREA READ, elements per command.
+    multiple_read_elements: int
+    #: 0201 PARAMETER AREA READ, words per command.
+    parameter_read_words: int = 498
+    #: 0202 PARAMETER AREA WRITE, words per command.
+    parameter_write_words: int = 498
+    #: 0306 PROGRAM AREA READ, bytes per command (a multiple of 4).
+    program_read_bytes: int = 992
+    #: 0307 PROGRAM AREA WRITE, bytes per command (a multiple of 4).
+    program_write_bytes: int = 996
+    #: Parameter bytes after the command code of one command frame.
+    max_parameter_bytes: int = MAX_FRAME - 12
+    #: Data bytes after the end code of one response frame.
+    max_response_data_bytes: int = MAX_FRAME - 14
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, int) or value < 1:
+                raise CommandError(
+                    f"route limit {f.name} must be a positive integer, not {value!r}"
+                )
+
+    def tightest(self, other: RouteLimits) -> RouteLimits:
+        """The field-by-field minimum of two limits (a route through both networks)."""
+        return RouteLimits(
+            **{f.name: min(getattr(self, f.name), getattr(other, f.name)) for f in fields(self)}
+        )
+
+
+# Manual 5-2-2 "Number of Elements for I/O MEMORY AREA READ (0101) and I/O MEMORY AREA WRITE
+# (0102)": 999/997 words on Ethernet and Controller Link, 269/267 on SYSWAY, SYSMAC LINK and
+# DeviceNet. Manual 5-3-5 (0104) Comments: 167 elements on Controller Link/Ethernet, 89 on
+# SYSMAC LINK/DeviceNet. Manual 5-3-7/5-3-8: 498 words per 0201/0202 on every network.
+# Manual 5-3-10/5-3-11: 992 bytes per 0306, 996 bytes per 0307.
+_LARGE_FRAME = RouteLimits(
+    memory_read_words=999,
+    memory_write_words=997,
+    multiple_read_elements=167,
+)
+# SYSMAC LINK, DeviceNet (and SYSWAY, Host Link) carry 540 parameter bytes after the command
+# code and 538 response data bytes (W227 p.6; wire-format §7): 269 words = 538 bytes read,
+# 267 words = 534 + 6 bytes written. The 498-word and 992/996-byte program limits do not fit
+# such a frame, so they are cut to what does: 0201 answers 6 bytes of header + 2n data
+# (n <= 266), 0202 sends 6 + 2n (n <= 267); 0306 answers 8 + n (n <= 530, a multiple of 4:
+# 528), 0307 sends 8 + n (n <= 532). These four are inferred from frame arithmetic (the
+# manual states no per-network value for them); override them if a unit documents more.
+_SMALL_FRAME = RouteLimits(
+    memory_read_words=269,
+    memory_write_words=267,
+    multiple_read_elements=89,
+    parameter_read_words=266,
+    parameter_write_words=267,
+    program_read_bytes=528,
+    program_write_bytes=532,
+    max_parameter_bytes=HOST_LINK_MAX_PARAMETER_BYTES,
+    max_response_data_bytes=HOST_LINK_MAX_RESPONSE_DATA_BYTES,
+)
+
+#: The limits of each network type on its own.
+NETWORK_LIMITS: dict[NetworkType, RouteLimits] = {
+    NetworkType.ETHERNET: _LARGE_FRAME,
+    NetworkType.CONTROLLER_LINK: _LARGE_FRAME,
+    NetworkType.SYSMAC_LINK: _SMALL_FRAME,
+    NetworkType.DEVICENET: _SMALL_FRAME,
+    # SYSWAY: 269/267 per manual 5-2-2; 0104 is not listed for it in 5-3-5, we assume the
+    # 540-byte networks' 89.
+    NetworkType.SYSWAY: _SMALL_FRAME,
+    # Host Link: 269/267 follow from its 540/538-byte limit (W342 §3-5, wire-format §4.2);
+    # 0104 not listed in 5-3-5, we assume 89 like the other 540-byte networks.
+    NetworkType.HOST_LINK: _SMALL_FRAME,
+}
+
+
+def limits_for(*network_types: NetworkType, **overrides: int) -> RouteLimits:
+    """The limits of a route through ``network_types``: the smallest of each along the way.
+
+    With no network type the route is a single Ethernet hop. Keyword arguments override single
+    fields of the result, e.g. ``limits_for(NetworkType.ETHERNET, memory_read_words=500)``.
+    """
+    result = NETWORK_LIMITS[NetworkType.ETHERNET]
+    for network in network_types:
+        result = result.tightest(NETWORK_LIMITS[NetworkType(network)])
+    if overrides:
+        names = {f.name for f in fields(RouteLimits)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise CommandError(f"unknown route limit(s): {', '.join(unknown)}")
+        values = {name: getattr(result, name) for name in names}
+        values.update(overrides)
+        result = RouteLimits(**values)
+    return result

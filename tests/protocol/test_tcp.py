@@ -1,0 +1,187 @@
+"""FINS/TCP framing (W421 §7, wire-format §3 and §8.2) and the incremental stream decoder."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from aiofins.protocol import tcp
+from aiofins.protocol.errors import DecodeError, FinsTcpError, FrameError
+from aiofins.protocol.header import CommandFrame, ResponseFrame
+from aiofins.protocol.tcp import TcpCommand, TcpDecoder, TcpErrorCode, TcpMessage
+
+# Wire-format 8.2, byte for byte.
+HELLO = bytes.fromhex("46494E53 0000000C 00000000 00000000 00000000")
+WELCOME = bytes.fromhex("46494E53 00000010 00000001 00000000 000000EF 0000000A")
+READ = bytes.fromhex("46494E53 0000001A 00000002 00000000 800002000A0000EF0002 0101 82006400000A")
+READ_REPLY = bytes.fromhex(
+    "46494E53 0000002A 00000002 00000000 C0000200EF00000A0002 0101 0000"
+    "0001 0002 0003 0004 0005 0006 0007 0008 0009 000A"
+)
+REFUSED = bytes.fromhex("46494E53 00000010 00000001 00000020 00000000 00000000")
+
+
+def test_worked_example_sizes() -> None:
+    assert (len(HELLO), len(WELCOME), len(READ), len(READ_REPLY)) == (20, 24, 34, 50)
+
+
+def test_handshake_bytes() -> None:
+    assert tcp.encode_node_request(0) == HELLO
+    assert tcp.encode_node_response(0xEF, 0x0A) == WELCOME
+    hello, welcome = TcpDecoder().feed(HELLO + WELCOME)
+    assert hello == TcpMessage(TcpCommand.NODE_ADDRESS_REQUEST, 0, bytes(4))
+    assert tcp.parse_node_request(hello) == 0
+    assert tcp.parse_node_response(welcome) == (0xEF, 0x0A)
+    assert tcp.encode_node_request(0x22)[-4:] == bytes.fromhex("00000022")
+
+
+def test_frame_bytes() -> None:
+    fins = READ[16:]
+    assert tcp.encode_frame(fins) == READ
+    assert TcpMessage(TcpCommand.FRAME, 0, fins).encode() == READ
+    (message,) = TcpDecoder().feed(READ)
+    assert message.command == TcpCommand.FRAME and message.error_code == 0
+    command = CommandFrame.decode(message.payload)
+    assert command.header.source.node == 0xEF and command.header.destination.node == 0x0A
+    assert command.header.sid == 2
+    reply = ResponseFrame.reply_to(command, 0, b"".join(n.to_bytes(2, "big") for n in range(1, 11)))
+    assert tcp.encode_frame(reply.encode()) == READ_REPLY
+
+
+def test_refusal_raises_fins_tcp_error() -> None:
+    (message,) = TcpDecoder().feed(REFUSED)
+    with pytest.raises(FinsTcpError, match="all connections are in use") as info:
+        tcp.parse_node_response(message)
+    assert info.value.tcp_error_code == TcpErrorCode.ALL_CONNECTIONS_IN_USE
+    assert int(TcpErrorCode.ALL_CONNECTIONS_IN_USE) == 0x20
+
+
+def test_error_notification_and_connection_confirmation() -> None:
+    notice = tcp.encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED)
+    assert notice == bytes.fromhex("46494E53 00000008 00000003 00000003")
+    confirm = tcp.encode_message(TcpCommand.CONNECTION_CONFIRMATION)
+    assert confirm == bytes.fromhex("46494E53 00000008 00000006 00000000")
+    first, second = TcpDecoder().feed(notice + confirm)
+    assert (first.command, first.error_code, first.payload) == (3, 3, b"")
+    assert (second.command, second.error_code) == (6, 0)
+
+
+def test_tcp_error_meanings() -> None:
+    for code in TcpErrorCode:
+        assert tcp.tcp_error_meaning(code)
+    assert tcp.tcp_error_meaning(0x99) == "unknown FINS/TCP error code 0x99"
+
+
+def test_handshake_parse_errors() -> None:
+    with pytest.raises(FrameError):
+        tcp.parse_node_request(TcpMessage(TcpCommand.FRAME, 0, bytes(4)))
+    with pytest.raises(FrameError):
+        tcp.parse_node_request(TcpMessage(TcpCommand.NODE_ADDRESS_REQUEST, 0, bytes(3)))
+    with pytest.raises(FrameError, match="expected FINS/TCP command 1"):
+        tcp.parse_node_response(TcpMessage(TcpCommand.FRAME, 0, bytes(8)))
+    with pytest.raises(FrameError, match="payload bytes"):
+        tcp.parse_node_response(TcpMessage(TcpCommand.NODE_ADDRESS_RESPONSE, 0, bytes(4)))
+    with pytest.raises(FrameError):
+        tcp.encode_node_request(0xFF)
+
+
+STREAM = HELLO + WELCOME + READ + READ_REPLY + REFUSED
+EXPECTED = [TcpDecoder().feed(part)[0] for part in (HELLO, WELCOME, READ, READ_REPLY, REFUSED)]
+
+
+@pytest.mark.parametrize("cut", range(1, len(STREAM)))
+def test_split_at_every_byte_boundary(cut: int) -> None:
+    decoder = TcpDecoder()
+    messages = decoder.feed(STREAM[:cut]) + decoder.feed(STREAM[cut:])
+    assert messages == EXPECTED
+    assert decoder.buffered == 0
+
+
+def test_one_byte_at_a_time() -> None:
+    decoder = TcpDecoder()
+    messages: list[TcpMessage] = []
+    for i in range(len(STREAM)):
+        messages += decoder.feed(STREAM[i : i + 1])
+    assert messages == EXPECTED
+
+
+messages_st = st.lists(
+    st.builds(
+        TcpMessage,
+        st.sampled_from([0, 1, 2, 3, 6]),
+        st.integers(0, 0xFFFFFFFF),
+        st.binary(max_size=300),
+    ),
+    max_size=8,
+)
+
+
+@given(messages_st, st.data())
+def test_any_split_and_merge(messages: list[TcpMessage], data: st.DataObject) -> None:
+    stream = b"".join(m.encode() for m in messages)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=10)))
+    decoder = TcpDecoder()
+    out: list[TcpMessage] = []
+    start = 0
+    for cut in [*cuts, len(stream)]:
+        out += decoder.feed(stream[start:cut])
+        start = cut
+    assert out == messages
+    assert decoder.buffered == 0
+
+
+def test_largest_frame_and_one_byte_more() -> None:
+    biggest = tcp.encode_frame(bytes(2012))
+    assert biggest[4:8] == (2020).to_bytes(4, "big")  # 0x7E4
+    assert TcpDecoder().feed(biggest)[0].payload == bytes(2012)
+    with pytest.raises(FinsTcpError, match="length 2021") as info:
+        TcpDecoder().feed(tcp.encode_frame(bytes(2013)))
+    assert info.value.tcp_error_code == TcpErrorCode.DATA_TOO_LONG
+
+
+def test_bad_magic() -> None:
+    decoder = TcpDecoder()
+    assert decoder.feed(HELLO) != []
+    with pytest.raises(FinsTcpError, match="not 'FINS'") as info:
+        decoder.feed(b"HTTP/1.1 200 OK\r\n")
+    assert info.value.tcp_error_code == TcpErrorCode.BAD_HEADER
+
+
+def test_short_length_field() -> None:
+    with pytest.raises(FinsTcpError):
+        TcpDecoder().feed(b"FINS\x00\x00\x00\x07" + bytes(8))
+
+
+def test_waits_for_the_rest() -> None:
+    decoder = TcpDecoder()
+    assert decoder.feed(READ[:7]) == []  # not even the length yet
+    assert decoder.feed(READ[7:20]) == []
+    assert decoder.buffered == 20
+    assert len(decoder.feed(READ[20:])) == 1
+
+
+@given(st.binary(max_size=200), st.integers(1, 50))
+def test_arbitrary_bytes_raise_only_aiofins_errors(raw: bytes, chunk: int) -> None:
+    decoder = TcpDecoder()
+    try:
+        for i in range(0, len(raw), chunk):
+            for message in decoder.feed(raw[i : i + chunk]):
+                if message.command == TcpCommand.NODE_ADDRESS_RESPONSE:
+                    tcp.parse_node_response(message)
+                elif message.command == TcpCommand.FRAME:
+                    ResponseFrame.decode(message.payload)
+    except DecodeError:
+        pass
+
+
+@given(st.binary(max_size=64))
+def test_arbitrary_payload_after_valid_envelope(payload: bytes) -> None:
+    (message,) = TcpDecoder().feed(tcp.encode_frame(payload))
+    assert message.payload == payload
+    for parse in (tcp.parse_node_request, tcp.parse_node_response):
+        try:
+            parse(TcpMessage(0, 0, payload))
+            parse(TcpMessage(1, 0, payload))
+        except DecodeError:
+            pass
