@@ -1,9 +1,472 @@
-"""Placeholder: being written."""
+"""I/O memory area access, 01 01 .. 01 05 (manual 5-3-2 .. 5-3-6).
+
+Addresses are :class:`~aiofins.protocol.areas.MemoryAddress` values; the element size of the
+area code decides the data layout (bit 1 byte ``00``/``01``, word 2 bytes, word with forced
+status / IR 4 bytes). Limits are those of a 2012-byte frame (Ethernet, Controller Link); slower
+networks (SYSMAC LINK, DeviceNet, Host Link: 269 / 267 words, 89 elements for 01 04) are the
+chunking layer's business.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar
 
-from ._base import Request
+from ..areas import MemoryAddress, element_size
+from ..codec import Reader
+from ..errors import AddressError, CommandError, DecodeError
+from ._base import Request, expect_no_data
 
-OPERATIONS: tuple[type[Request[Any]], ...] = ()
+T = TypeVar("T")
+
+#: 01 01: elements per command on a 2012-byte frame (manual 5-2-2 table, Ethernet/CLK).
+MAX_READ_ELEMENTS = 999
+#: 01 02: elements per command on a 2012-byte frame.
+MAX_WRITE_ELEMENTS = 997
+#: 01 04: elements per command on Ethernet / Controller Link (89 on SYSMAC LINK, DeviceNet).
+MAX_MULTIPLE_READ_ELEMENTS = 167
+#: Response data bytes after the end code in a 2012-byte frame.
+MAX_RESPONSE_DATA = 1998
+#: Command parameter bytes after MRC/SRC in a 2012-byte frame.
+MAX_COMMAND_PARAMS = 2000
+
+# Area codes 01 02 cannot write (manual 5-3-3 table): forced-status views, completion flags,
+# task flags, clock pulses / condition flags (CS/CJ and CV codes).
+_NOT_WRITABLE = frozenset(
+    (0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x09, 0x49, 0x06, 0x46, 0x07, 0x40, 0xC0, 0x01, 0x41)
+)
+# One-byte codes whose bit byte is always 00 (manual 5-2-1: completion flags; 5-2-2: task
+# flags, clock pulses / condition flags are addressed by word with bit 00).
+_BIT_ALWAYS_ZERO = frozenset({0x09, 0x49, 0x01, 0x41, 0x06, 0x46, 0x07})
+# Two-byte codes that are not plain word areas (EM current bank no. / DR), refused by
+# 01 03 and 01 05 (manual 5-3-4, 5-3-6 tables).
+_NOT_WORD_AREA = frozenset({0xBC, 0x9C})
+
+
+class _Rejected(CommandError):
+    """A :class:`CommandError` that also names the end code a PLC answers for it."""
+
+    def __init__(self, message: str, end_code: int) -> None:
+        super().__init__(message)
+        self.end_code = end_code
+
+
+class _RejectedAddress(AddressError):
+    """An :class:`AddressError` that also names the end code a PLC answers for it."""
+
+    def __init__(self, message: str, end_code: int) -> None:
+        super().__init__(message)
+        self.end_code = end_code
+
+
+def _decoded(op: type[Request[Any]], build: Callable[[], T], end_code: int = 0x110C) -> T:
+    """Run a builder on decoded fields; argument errors become :class:`DecodeError`."""
+    try:
+        return build()
+    except (CommandError, AddressError) as exc:
+        code = getattr(exc, "end_code", end_code)
+        raise DecodeError(f"{op.NAME}: {exc}", end_code=code) from exc
+
+
+def _size_of(address: MemoryAddress) -> int:
+    try:
+        return element_size(address.area_code)
+    except AddressError as exc:
+        raise _RejectedAddress(str(exc), 0x1101) from None
+
+
+def _check_address(address: MemoryAddress, what: str = "address") -> int:
+    """Check the area code is known and the bit fits its element type; return the size."""
+    if not isinstance(address, MemoryAddress):
+        raise CommandError(f"{what} must be a MemoryAddress, got {type(address).__name__}")
+    size = _size_of(address)
+    if size == 1 and address.bit > 0x0F:
+        raise _RejectedAddress(
+            f"{what} {address}: bit number {address.bit} out of range 0..15", 0x1103
+        )
+    if (size != 1 or address.area_code in _BIT_ALWAYS_ZERO) and address.bit != 0:
+        raise _RejectedAddress(
+            f"{what} {address}: bit number must be 0 for area code {address.area_code:02X} "
+            f"(got {address.bit})",
+            0x1103,
+        )
+    return size
+
+
+def _check_writable(address: MemoryAddress, what: str = "address") -> int:
+    size = _check_address(address, what)
+    if address.area_code in _NOT_WRITABLE:
+        raise _RejectedAddress(
+            f"{what} {address}: memory area code {address.area_code:02X} cannot be written",
+            0x1101,
+        )
+    return size
+
+
+def _check_word_area(address: MemoryAddress, what: str) -> None:
+    size = _check_writable(address, what)
+    if size != 2 or address.area_code in _NOT_WORD_AREA:
+        raise _RejectedAddress(
+            f"{what} {address}: memory area code {address.area_code:02X} is not a word area",
+            0x1101,
+        )
+
+
+def _check_count(name: str, value: int, high: int, end_code: int) -> None:
+    if not isinstance(value, int) or not 0 <= value <= high:
+        raise _Rejected(f"{name} {value} out of range 0..{high}", end_code)
+
+
+def _element_values(data: bytes, size: int) -> tuple[int, ...]:
+    return tuple(int.from_bytes(data[i : i + size], "big") for i in range(0, len(data), size))
+
+
+def _element_bytes(values: Iterable[int], size: int, what: str) -> bytes:
+    out = bytearray()
+    limit = (1 << (8 * size)) - 1
+    for value in values:
+        if not isinstance(value, int) or not 0 <= value <= limit:
+            raise CommandError(f"{what} value {value!r} out of range 0..{limit}")
+        out += value.to_bytes(size, "big")
+    return bytes(out)
+
+
+def _check_bit_data(address: MemoryAddress, data: bytes, size: int) -> None:
+    """Bit data (1-byte elements of a writable area) must be 00 or 01."""
+    if size == 1:
+        for index, byte in enumerate(data):
+            if byte > 1:
+                raise _Rejected(
+                    f"bit value {byte} at element {index} of {address} out of range 0..1",
+                    0x110C,
+                )
+
+
+@dataclass(frozen=True, slots=True)
+class MemoryAreaReadResult:
+    """Data of 01 01: ``count`` elements of ``element_size`` bytes each."""
+
+    data: bytes
+    element_size: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "data", bytes(self.data))
+        if self.element_size not in (1, 2, 4):
+            raise CommandError(f"element size {self.element_size} not one of 1, 2, 4")
+        if len(self.data) % self.element_size:
+            raise CommandError(
+                f"{len(self.data)} data bytes are not a multiple of the element size "
+                f"{self.element_size}"
+            )
+
+    @classmethod
+    def from_values(cls, values: Iterable[int], element_size: int) -> MemoryAreaReadResult:
+        """Build from element values (bits 0/1, words 0..FFFF, 4-byte elements 0..FFFFFFFF)."""
+        return cls(_element_bytes(values, element_size, "element"), element_size)
+
+    @property
+    def count(self) -> int:
+        return len(self.data) // self.element_size
+
+    @property
+    def values(self) -> tuple[int, ...]:
+        """One unsigned big-endian integer per element.
+
+        For a word with forced status (4 bytes) the high 16 bits are the forced mask and the
+        low 16 bits the value; a bit with forced status has the value in bit 0, forced in bit 1.
+        """
+        return _element_values(self.data, self.element_size)
+
+    def encode(self) -> bytes:
+        return self.data
+
+
+@dataclass(frozen=True)
+class MemoryAreaRead(Request[MemoryAreaReadResult]):
+    """01 01: read ``count`` consecutive elements starting at ``address``."""
+
+    MRC: ClassVar[int] = 0x01
+    SRC: ClassVar[int] = 0x01
+    NAME: ClassVar[str] = "MEMORY AREA READ"
+    METHOD: ClassVar[str] = "memory_area_read"
+    IDEMPOTENT: ClassVar[bool] = True
+
+    address: MemoryAddress
+    count: int
+
+    def __post_init__(self) -> None:
+        size = _check_address(self.address)
+        _check_count("number of elements", self.count, MAX_READ_ELEMENTS, 0x110B)
+        if self.count * size > MAX_RESPONSE_DATA:
+            raise _Rejected(
+                f"{self.count} elements of {size} bytes exceed the {MAX_RESPONSE_DATA}-byte "
+                f"response: number of elements out of range 0..{MAX_RESPONSE_DATA // size}",
+                0x110B,
+            )
+
+    @property
+    def element_size(self) -> int:
+        return element_size(self.address.area_code)
+
+    def encode(self) -> bytes:
+        return self.address.encode() + self.count.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryAreaRead:
+        r = Reader(params, cls.NAME)
+        address = MemoryAddress.decode(r.take(4))
+        count = r.u16()
+        r.end()
+        return _decoded(cls, lambda: cls(address, count))
+
+    def decode_response(self, data: bytes) -> MemoryAreaReadResult:
+        size = self.element_size
+        if len(data) != self.count * size:
+            raise DecodeError(
+                f"{self.NAME}: expected {self.count} x {size} = {self.count * size} data "
+                f"bytes, got {len(data)}"
+            )
+        return MemoryAreaReadResult(data, size)
+
+
+@dataclass(frozen=True)
+class MemoryAreaWrite(Request[None]):
+    """01 02: write ``data`` (whole elements of the area's size) starting at ``address``.
+
+    Bit areas take one byte per bit, ``00`` or ``01``. The number of elements is derived from
+    the data length.
+    """
+
+    MRC: ClassVar[int] = 0x01
+    SRC: ClassVar[int] = 0x02
+    NAME: ClassVar[str] = "MEMORY AREA WRITE"
+    METHOD: ClassVar[str] = "memory_area_write"
+
+    address: MemoryAddress
+    data: bytes
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.data, (bytes, bytearray, memoryview)):
+            raise CommandError(f"data must be bytes, got {type(self.data).__name__}")
+        object.__setattr__(self, "data", bytes(self.data))
+        size = _check_writable(self.address)
+        if len(self.data) % size:
+            raise _Rejected(
+                f"{len(self.data)} data bytes are not a multiple of the element size {size} "
+                f"of area {self.address.area_code:02X}",
+                0x1003,
+            )
+        count = len(self.data) // size
+        high = min(MAX_WRITE_ELEMENTS, (MAX_COMMAND_PARAMS - 6) // size)
+        _check_count("number of elements", count, high, 0x1001)
+        _check_bit_data(self.address, self.data, size)
+
+    @classmethod
+    def from_values(cls, address: MemoryAddress, values: Iterable[int]) -> MemoryAreaWrite:
+        """Build from element values: bits 0/1, words 0..FFFF, 4-byte elements 0..FFFFFFFF."""
+        size = _check_writable(address)
+        return cls(address, _element_bytes(values, size, "element"))
+
+    @property
+    def element_size(self) -> int:
+        return element_size(self.address.area_code)
+
+    @property
+    def count(self) -> int:
+        return len(self.data) // self.element_size
+
+    @property
+    def values(self) -> tuple[int, ...]:
+        return _element_values(self.data, self.element_size)
+
+    def encode(self) -> bytes:
+        return self.address.encode() + self.count.to_bytes(2, "big") + self.data
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryAreaWrite:
+        r = Reader(params, cls.NAME)
+        address = MemoryAddress.decode(r.take(4))
+        count = r.u16()
+        data = r.rest()
+        size = _decoded(cls, lambda: _check_writable(address))
+        if count * size != len(data):
+            raise DecodeError(
+                f"{cls.NAME}: {count} elements of {size} bytes need {count * size} data "
+                f"bytes, got {len(data)}",
+                end_code=0x1003,
+            )
+        return _decoded(cls, lambda: cls(address, data))
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+@dataclass(frozen=True)
+class MemoryAreaFill(Request[None]):
+    """01 03: write ``value`` to ``count`` consecutive words starting at ``address``."""
+
+    MRC: ClassVar[int] = 0x01
+    SRC: ClassVar[int] = 0x03
+    NAME: ClassVar[str] = "MEMORY AREA FILL"
+    METHOD: ClassVar[str] = "memory_area_fill"
+
+    address: MemoryAddress
+    count: int
+    value: int
+
+    def __post_init__(self) -> None:
+        _check_word_area(self.address, "address")
+        _check_count("number of elements", self.count, 0xFFFF, 0x110C)
+        _check_count("fill value", self.value, 0xFFFF, 0x110C)
+
+    def encode(self) -> bytes:
+        return self.address.encode() + self.count.to_bytes(2, "big") + self.value.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryAreaFill:
+        r = Reader(params, cls.NAME)
+        address = MemoryAddress.decode(r.take(4))
+        count = r.u16()
+        value = r.u16()
+        r.end()
+        return _decoded(cls, lambda: cls(address, count, value))
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+@dataclass(frozen=True, slots=True)
+class MultipleMemoryAreaReadItem:
+    """One element of a 01 04 response: the echoed area code and the element's value."""
+
+    area_code: int
+    value: int
+
+    def __post_init__(self) -> None:
+        size = element_size(self.area_code)  # AddressError for an unknown code
+        limit = (1 << (8 * size)) - 1
+        if not isinstance(self.value, int) or not 0 <= self.value <= limit:
+            raise CommandError(
+                f"value {self.value!r} of area {self.area_code:02X} out of range 0..{limit}"
+            )
+
+    @property
+    def element_size(self) -> int:
+        return element_size(self.area_code)
+
+    def encode(self) -> bytes:
+        return bytes((self.area_code,)) + self.value.to_bytes(self.element_size, "big")
+
+
+@dataclass(frozen=True, slots=True)
+class MultipleMemoryAreaReadResult:
+    """Data of 01 04: one item per requested address, in request order."""
+
+    items: tuple[MultipleMemoryAreaReadItem, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "items", tuple(self.items))
+
+    @property
+    def values(self) -> tuple[int, ...]:
+        return tuple(item.value for item in self.items)
+
+    def encode(self) -> bytes:
+        return b"".join(item.encode() for item in self.items)
+
+
+@dataclass(frozen=True)
+class MultipleMemoryAreaRead(Request[MultipleMemoryAreaReadResult]):
+    """01 04: read single elements at up to 167 non-consecutive addresses.
+
+    The manual's limit is 167 elements on Ethernet / Controller Link and 89 on SYSMAC LINK /
+    DeviceNet; the codec enforces 167. No addresses at all is a valid no-op command.
+    """
+
+    MRC: ClassVar[int] = 0x01
+    SRC: ClassVar[int] = 0x04
+    NAME: ClassVar[str] = "MULTIPLE MEMORY AREA READ"
+    METHOD: ClassVar[str] = "multiple_memory_area_read"
+    IDEMPOTENT: ClassVar[bool] = True
+
+    addresses: tuple[MemoryAddress, ...]
+
+    def __post_init__(self) -> None:
+        if isinstance(self.addresses, MemoryAddress):
+            raise CommandError("addresses must be a sequence of MemoryAddress, got one address")
+        object.__setattr__(self, "addresses", tuple(self.addresses))
+        _check_count("number of elements", len(self.addresses), MAX_MULTIPLE_READ_ELEMENTS, 0x1001)
+        for index, address in enumerate(self.addresses):
+            _check_address(address, f"address {index}")
+
+    def encode(self) -> bytes:
+        return b"".join(address.encode() for address in self.addresses)
+
+    @classmethod
+    def decode(cls, params: bytes) -> MultipleMemoryAreaRead:
+        r = Reader(params, cls.NAME)
+        addresses: list[MemoryAddress] = []
+        while r.remaining:
+            addresses.append(MemoryAddress.decode(r.take(min(4, r.remaining))))
+        return _decoded(cls, lambda: cls(tuple(addresses)))
+
+    def decode_response(self, data: bytes) -> MultipleMemoryAreaReadResult:
+        r = Reader(data, f"{self.NAME} response")
+        items: list[MultipleMemoryAreaReadItem] = []
+        while r.remaining:
+            code = r.u8()
+            try:
+                size = element_size(code)
+            except AddressError as exc:
+                raise DecodeError(f"{self.NAME}: response item {len(items)}: {exc}") from None
+            value = int.from_bytes(r.take(size), "big")
+            items.append(MultipleMemoryAreaReadItem(code, value))
+        if len(items) != len(self.addresses):
+            raise DecodeError(
+                f"{self.NAME}: expected {len(self.addresses)} items, got {len(items)}"
+            )
+        return MultipleMemoryAreaReadResult(tuple(items))
+
+
+@dataclass(frozen=True)
+class MemoryAreaTransfer(Request[None]):
+    """01 05: copy ``count`` words from ``source`` to ``destination``."""
+
+    MRC: ClassVar[int] = 0x01
+    SRC: ClassVar[int] = 0x05
+    NAME: ClassVar[str] = "MEMORY AREA TRANSFER"
+    METHOD: ClassVar[str] = "memory_area_transfer"
+
+    source: MemoryAddress
+    destination: MemoryAddress
+    count: int
+
+    def __post_init__(self) -> None:
+        _check_word_area(self.source, "source")
+        _check_word_area(self.destination, "destination")
+        _check_count("number of elements", self.count, 0xFFFF, 0x110C)
+
+    def encode(self) -> bytes:
+        return self.source.encode() + self.destination.encode() + self.count.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryAreaTransfer:
+        r = Reader(params, cls.NAME)
+        source = MemoryAddress.decode(r.take(4))
+        destination = MemoryAddress.decode(r.take(4))
+        count = r.u16()
+        r.end()
+        return _decoded(cls, lambda: cls(source, destination, count))
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+OPERATIONS: tuple[type[Request[Any]], ...] = (
+    MemoryAreaRead,
+    MemoryAreaWrite,
+    MemoryAreaFill,
+    MultipleMemoryAreaRead,
+    MemoryAreaTransfer,
+)

@@ -1,9 +1,97 @@
-"""Placeholder: being written."""
+"""Operating mode changes, 04 01 RUN and 04 02 STOP (manual 5-3-13, 5-3-14).
+
+Both carry the program number ``FFFF``; the manual lets a sender omit it (and RUN's mode
+byte), so the server side accepts the short forms: RUN alone means MONITOR mode.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any, ClassVar
 
-from ._base import Request
+from ..codec import Reader
+from ..errors import DecodeError
+from ._base import Request, expect_no_data
+from .memory import _decoded, _Rejected
 
-OPERATIONS: tuple[type[Request[Any]], ...] = ()
+#: The only program number of CS/CJ/CP/NSJ CPU Units.
+PROGRAM_NUMBER = 0xFFFF
+
+
+# manual wins: CV's 01 DEBUG mode (wire-format notes) is not a CS/CJ mode (manual 5-3-13).
+class RunMode(IntEnum):
+    """The mode byte of 04 01 RUN."""
+
+    MONITOR = 0x02
+    RUN = 0x04
+
+
+def _program_number(r: Reader, name: str) -> None:
+    """Read the optional program number (absent, or exactly ``FFFF``)."""
+    if not r.remaining:
+        return
+    number = r.u16()
+    if number != PROGRAM_NUMBER:
+        raise DecodeError(f"{name}: program number {number:04X} is not FFFF", end_code=0x1106)
+
+
+@dataclass(frozen=True)
+class Run(Request[None]):
+    """04 01: change to MONITOR (the manual's default) or RUN mode."""
+
+    MRC: ClassVar[int] = 0x04
+    SRC: ClassVar[int] = 0x01
+    NAME: ClassVar[str] = "RUN"
+    METHOD: ClassVar[str] = "run"
+
+    mode: int = RunMode.MONITOR
+
+    def __post_init__(self) -> None:
+        try:
+            mode = RunMode(self.mode)
+        except ValueError:
+            raise _Rejected(
+                f"mode {self.mode!r} not one of 02 (MONITOR), 04 (RUN)", 0x110C
+            ) from None
+        object.__setattr__(self, "mode", mode)
+
+    def encode(self) -> bytes:
+        return PROGRAM_NUMBER.to_bytes(2, "big") + bytes((self.mode,))
+
+    @classmethod
+    def decode(cls, params: bytes) -> Run:
+        r = Reader(params, cls.NAME)
+        _program_number(r, cls.NAME)
+        mode = r.u8() if r.remaining else RunMode.MONITOR
+        r.end()
+        return _decoded(cls, lambda: cls(mode))
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+@dataclass(frozen=True)
+class Stop(Request[None]):
+    """04 02: change to PROGRAM mode."""
+
+    MRC: ClassVar[int] = 0x04
+    SRC: ClassVar[int] = 0x02
+    NAME: ClassVar[str] = "STOP"
+    METHOD: ClassVar[str] = "stop"
+
+    def encode(self) -> bytes:
+        return PROGRAM_NUMBER.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> Stop:
+        r = Reader(params, cls.NAME)
+        _program_number(r, cls.NAME)
+        r.end()
+        return cls()
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+OPERATIONS: tuple[type[Request[Any]], ...] = (Run, Stop)
