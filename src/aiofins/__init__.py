@@ -1,5 +1,9 @@
 """aiofins: async Omron FINS client, protocol codec and virtual PLC."""
 
+from .client import Client
+from .connection import connect
+from .poller import Poller, Quality, Snapshot
+from .pool import Pool
 from .protocol.areas import MemoryAddress
 from .protocol.endcodes import EndCode
 from .protocol.errors import (
@@ -19,6 +23,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AddressError",
+    "Client",
     "CommandError",
     "ConnectionLost",
     "DecodeError",
@@ -29,6 +34,11 @@ __all__ = [
     "FinsTimeout",
     "FrameError",
     "MemoryAddress",
+    "Poller",
+    "Pool",
+    "Quality",
     "RelayError",
+    "Snapshot",
     "__version__",
+    "connect",
 ]

@@ -11,8 +11,14 @@ from datetime import datetime
 from typing import TYPE_CHECKING, TypeVar
 
 from .protocol.areas import MemoryAddress
-from .protocol.commands._file_transfer import (
+from .protocol.commands._file_manage import (
     CreateDeleteDirectory,
+    FileCopy,
+    FileDelete,
+    FileDeleteResult,
+    FileNameChange,
+)
+from .protocol.commands._file_transfer import (
     FileTransferResult,
     MemoryAreaFileTransfer,
     MemoryCassetteDataType,
@@ -39,11 +45,7 @@ from .protocol.commands.errorlog import (
     FinsWriteAccessLogRead,
 )
 from .protocol.commands.file import (
-    FileCopy,
-    FileDelete,
-    FileDeleteResult,
     FileMemoryFormat,
-    FileNameChange,
     FileNameRead,
     SingleFileRead,
     SingleFileReadResult,
@@ -428,7 +430,7 @@ class CommandMethods:
 
     async def message_clear(
         self,
-        mask: int = 255,
+        mask: int,
         *,
         dest: FinsAddress | None = None,
         timeout: float | None = None,

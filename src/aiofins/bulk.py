@@ -14,9 +14,11 @@ from collections.abc import Callable
 
 from .chunking import plan_parameter, plan_program
 from .client import Client
+from .protocol.commands.file import MAX_FILE_NAMES, MAX_FILE_READ, MAX_FILE_WRITE
 from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
 from .protocol.commands.status import CpuMode
 from .protocol.errors import CommandError, DecodeError
+from .protocol.files import Disk, FileEntry, FileWriteMode
 
 Progress = Callable[[int, "int | None"], None]
 
@@ -101,3 +103,66 @@ async def restore_parameters(
             )
             done += block.size
             _report(progress, done, total)
+
+
+# -- file memory ---------------------------------------------------------------------------
+
+#: Parameter bytes of 2203 besides the file data and the directory path (manual 5-3-27).
+_FILE_WRITE_OVERHEAD = 24
+#: Response bytes of 2202 besides the file data.
+_FILE_READ_OVERHEAD = 10
+
+
+async def list_files(client: Client, disk: Disk, directory: str = "") -> list[FileEntry]:
+    """Every file entry of a directory (2201, 20 names a frame)."""
+    entries: list[FileEntry] = []
+    while True:
+        result = await client.file_name_read(disk, len(entries), MAX_FILE_NAMES, directory)
+        entries.extend(result.files)
+        if result.last or not result.files:
+            return entries
+
+
+async def download_file(
+    client: Client,
+    disk: Disk,
+    name: str,
+    directory: str = "",
+    progress: Progress | None = None,
+) -> bytes:
+    """A whole file from file memory (2202 in blocks as large as the route allows)."""
+    limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - _FILE_READ_OVERHEAD)
+    out = bytearray()
+    while True:
+        result = await client.single_file_read(disk, name, len(out), limit, directory)
+        out += result.data
+        _report(progress, len(out), result.file_capacity)
+        if result.last or not result.data or len(out) >= result.file_capacity:
+            return bytes(out)
+
+
+async def upload_file(
+    client: Client,
+    disk: Disk,
+    name: str,
+    data: bytes,
+    directory: str = "",
+    progress: Progress | None = None,
+    *,
+    overwrite: bool = True,
+) -> None:
+    """Write a whole file (2203: a new file, then appends), replacing it if ``overwrite``."""
+    room = client.limits.max_parameter_bytes - _FILE_WRITE_OVERHEAD - len(directory)
+    limit = min(MAX_FILE_WRITE - len(directory), room)
+    if limit < 1:
+        raise CommandError(f"directory {directory!r} leaves no room for file data")
+    first_mode = FileWriteMode.NEW_OVERWRITE if overwrite else FileWriteMode.NEW
+    offset = 0
+    while True:
+        block = data[offset : offset + limit]
+        mode = first_mode if offset == 0 else FileWriteMode.APPEND
+        await client.single_file_write(disk, name, block, mode, 0, directory)
+        offset += len(block)
+        _report(progress, offset, len(data))
+        if offset >= len(data):
+            return

@@ -9,7 +9,7 @@ route's limits and send the chunks pipelined.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import anyio
@@ -139,9 +139,7 @@ class Client(CommandMethods):
             )
             parts[i] = result.values
 
-        async with anyio.create_task_group() as tg:
-            for i in range(len(chunks)):
-                tg.start_soon(one, i)
+        await _all(one, len(chunks))
         return [v for part in parts for v in part]
 
     async def write(
@@ -251,12 +249,36 @@ class Client(CommandMethods):
             result = await self.multiple_memory_area_read(plan.multiple[i], timeout=timeout)
             multi[i] = [item.value for item in result.items]
 
-        async with anyio.create_task_group() as tg:
-            for i in range(len(plan.runs)):
-                tg.start_soon(run, i)
-            for i in range(len(plan.multiple)):
-                tg.start_soon(many, i)
+        n_runs = len(plan.runs)
+
+        async def frame(i: int) -> None:
+            await (run(i) if i < n_runs else many(i - n_runs))
+
+        await _all(frame, n_runs + len(plan.multiple))
         return plan.decode(run_words, multi)
+
+
+async def _all(job: Callable[[int], Awaitable[None]], count: int) -> None:
+    """Run ``job(0..count-1)`` concurrently (the session paces them); the first error wins.
+
+    The first failure cancels the others and is raised as itself, not inside an exception
+    group, so callers see the same :class:`FinsError` as for a single frame.
+    """
+    errors: list[Exception] = []
+
+    async def guarded(i: int, scope: anyio.CancelScope) -> None:
+        try:
+            await job(i)
+        except Exception as exc:
+            if not errors:
+                errors.append(exc)
+            scope.cancel()
+
+    async with anyio.create_task_group() as tg:
+        for i in range(count):
+            tg.start_soon(guarded, i, tg.cancel_scope)
+    if errors:
+        raise errors[0]
 
 
 def _address(address: AddressLike) -> MemoryAddress:

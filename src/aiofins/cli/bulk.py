@@ -1,0 +1,177 @@
+"""``aiofins backup|restore URL FILE`` and ``aiofins files URL ...``, with a progress bar.
+
+* ``backup URL FILE [--what program|parameters]``: the program area as raw bytes, or the
+  parameter areas as JSON (``{"8010": [words...], ...}``).
+* ``restore URL FILE [--what program|parameters] [--stop]``: the program needs PROGRAM mode;
+  ``--stop`` switches to it first.
+* ``files URL list|get|put|delete``: file memory (``--disk card|em``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import anyio
+
+from ..bulk import (
+    backup_parameters,
+    backup_program,
+    download_file,
+    list_files,
+    restore_parameters,
+    restore_program,
+    upload_file,
+)
+from ..client import Client
+from ..connection import connect
+from ..protocol.files import Disk
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr (silent when stderr is not a terminal)."""
+
+    def __init__(self, label: str, unit: str = "bytes") -> None:
+        self.label = label
+        self.unit = unit
+        self.live = sys.stderr.isatty()
+
+    def __call__(self, done: int, total: int | None) -> None:
+        if not self.live:
+            return
+        if total:
+            filled = int(30 * done / total)
+            bar = "#" * filled + "." * (30 - filled)
+            text = f"\r{self.label} [{bar}] {100 * done // total:3d}% {done}/{total} {self.unit}"
+        else:
+            text = f"\r{self.label} {done} {self.unit}"
+        sys.stderr.write(text)
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.live:
+            sys.stderr.write("\n")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("url")
+    p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
+    p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds per frame")
+
+
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("backup", help="back up the program area or the parameter areas")
+    _common(p)
+    p.add_argument("file", type=Path)
+    p.add_argument("--what", choices=("program", "parameters"), default="program")
+    p.set_defaults(func=_sync(_backup))
+
+    p = sub.add_parser("restore", help="restore a program or parameter backup")
+    _common(p)
+    p.add_argument("file", type=Path)
+    p.add_argument("--what", choices=("program", "parameters"), default="program")
+    p.add_argument("--stop", action="store_true", help="switch to PROGRAM mode first")
+    p.set_defaults(func=_sync(_restore))
+
+    p = sub.add_parser("files", help="file memory: list, get, put, delete")
+    _common(p)
+    p.add_argument("action", choices=("list", "get", "put", "delete"))
+    p.add_argument("name", nargs="?", help="file name (8.3) on the PLC")
+    p.add_argument("local", nargs="?", type=Path, help="local file for get/put")
+    p.add_argument("--disk", choices=("card", "em"), default="card")
+    p.add_argument("--directory", default="", help="directory on the PLC (\\ separated)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_sync(_files))
+
+
+def _sync(handler: Any) -> Any:
+    def run(args: argparse.Namespace) -> int:
+        return int(anyio.run(_with_client, handler, args))
+
+    return run
+
+
+async def _with_client(handler: Any, args: argparse.Namespace) -> int:
+    async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
+        return int(await handler(plc, args))
+
+
+async def _backup(plc: Client, args: argparse.Namespace) -> int:
+    bar = ProgressBar(f"backup {args.what}", "bytes" if args.what == "program" else "words")
+    try:
+        if args.what == "program":
+            image = await backup_program(plc, progress=bar)
+            args.file.write_bytes(image)
+            size = len(image)
+        else:
+            areas = await backup_parameters(plc, progress=bar)
+            args.file.write_text(json.dumps({f"{k:04X}": list(v) for k, v in areas.items()}))
+            size = sum(len(v) for v in areas.values())
+    finally:
+        bar.close()
+    print(f"{args.what}: {size} {bar.unit} written to {args.file}")
+    return 0
+
+
+async def _restore(plc: Client, args: argparse.Namespace) -> int:
+    bar = ProgressBar(f"restore {args.what}", "bytes" if args.what == "program" else "words")
+    try:
+        if args.stop:
+            await plc.stop()
+        if args.what == "program":
+            image = args.file.read_bytes()
+            await restore_program(plc, image, progress=bar)
+            size = len(image)
+        else:
+            raw = json.loads(args.file.read_text())
+            backup = {int(k, 16): tuple(int(w) for w in v) for k, v in raw.items()}
+            await restore_parameters(plc, backup, progress=bar)
+            size = sum(len(v) for v in backup.values())
+    finally:
+        bar.close()
+    print(f"{args.what}: {size} {bar.unit} restored from {args.file}")
+    return 0
+
+
+async def _files(plc: Client, args: argparse.Namespace) -> int:
+    disk = Disk.MEMORY_CARD if args.disk == "card" else Disk.EM_FILE_MEMORY
+    if args.action == "list":
+        entries = await list_files(plc, disk, args.directory)
+        if args.json:
+            print(
+                json.dumps(
+                    [
+                        {
+                            "name": e.name,
+                            "size": e.size,
+                            "date": str(e.date.to_datetime()),
+                            "attributes": int(e.attributes),
+                        }
+                        for e in entries
+                    ]
+                )
+            )
+        else:
+            for e in entries:
+                print(f"{e.name:<12} {e.size:>10}  {e.date.to_datetime()}")
+        return 0
+    if not args.name:
+        print("aiofins: files get/put/delete need a file name", file=sys.stderr)
+        return 2
+    if args.action == "delete":
+        await plc.file_delete(disk, (args.name,), args.directory)
+        return 0
+    local: Path = args.local or Path(args.name)
+    bar = ProgressBar(f"{args.action} {args.name}")
+    try:
+        if args.action == "get":
+            local.write_bytes(await download_file(plc, disk, args.name, args.directory, bar))
+        else:
+            await upload_file(plc, disk, args.name, local.read_bytes(), args.directory, bar)
+    finally:
+        bar.close()
+    return 0

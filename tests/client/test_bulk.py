@@ -1,0 +1,69 @@
+"""Bulk transfers against the virtual PLC: program, parameters and file memory."""
+
+from __future__ import annotations
+
+import pytest
+
+from aiofins.bulk import (
+    backup_parameters,
+    backup_program,
+    download_file,
+    list_files,
+    restore_parameters,
+    restore_program,
+    upload_file,
+)
+from aiofins.connection import connect
+from aiofins.protocol.errors import CommandError
+from aiofins.protocol.files import Disk
+from aiofins.protocol.limits import NetworkType
+
+pytestmark = pytest.mark.anyio
+
+
+async def test_program_backup_clear_restore_gives_identical_bytes(url: str) -> None:
+    async with connect(url, timeout=2) as plc:
+        await plc.stop()
+        image = bytes((i * 13) & 0xFF for i in range(5000 * 4))
+        await restore_program(plc, image)
+        steps: list[tuple[int, int | None]] = []
+        backup = await backup_program(plc, progress=lambda d, t: steps.append((d, t)))
+        assert backup[: len(image)] == image
+        assert steps[-1][1] == len(backup)
+        await plc.program_area_clear()
+        assert await backup_program(plc) != backup
+        await restore_program(plc, backup)
+        assert await backup_program(plc) == backup
+
+
+async def test_program_restore_refuses_run_mode_before_sending(url: str) -> None:
+    async with connect(url, timeout=2) as plc:
+        await plc.run()
+        with pytest.raises(CommandError, match="PROGRAM mode"):
+            await restore_program(plc, b"\0" * 8)
+
+
+async def test_parameter_backup_and_restore(url: str) -> None:
+    async with connect(url, timeout=2) as plc:
+        await plc.stop()
+        backup = await backup_parameters(plc)
+        assert {k: len(v) for k, v in backup.items()} == {
+            0x8010: 512, 0x8012: 1280, 0x8013: 512, 0x8002: 5184}
+        changed = dict(backup)
+        changed[0x8010] = tuple((i * 3) & 0xFFFF for i in range(512))
+        await restore_parameters(plc, changed)
+        assert (await backup_parameters(plc))[0x8010] == changed[0x8010]
+
+
+@pytest.mark.parametrize("networks", [(), (NetworkType.SYSMAC_LINK,)])
+async def test_file_upload_list_download(url: str, networks: tuple[NetworkType, ...]) -> None:
+    data = bytes(range(256)) * 40
+    async with connect(url, timeout=2, networks=networks) as plc:
+        await upload_file(plc, Disk.MEMORY_CARD, "DATA.BIN", data)
+        names = [e.name for e in await list_files(plc, Disk.MEMORY_CARD)]
+        assert "DATA.BIN" in names
+        seen: list[int] = []
+        got = await download_file(plc, Disk.MEMORY_CARD, "DATA.BIN",
+                                  progress=lambda d, t: seen.append(d))
+        assert got == data
+        assert len(seen) == (6 if not networks else 20)

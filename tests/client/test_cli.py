@@ -1,0 +1,102 @@
+"""The command line against a simulator started with ``aiofins simulate`` (a real process)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import anyio
+import pytest
+
+from aiofins.cli import main
+from aiofins.cli.demo import demo
+
+
+@pytest.fixture(scope="module")
+def sim_url() -> Iterator[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aiofins.cli", "simulate", "--udp", "127.0.0.1:0", "--tcp",
+         "127.0.0.1:0", "--mode", "program"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    url = ""
+    for line in proc.stdout:
+        if line.startswith("listening on udp://"):
+            url = line.split()[-1]
+            break
+    assert url, "simulator did not report its UDP address"
+    try:
+        yield url
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_write_then_read_json(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "write", sim_url, "D10", "1", "0x10", "65535")[0] == 0
+    code, out, _ = run(capsys, "read", sim_url, "D10", "3", "--json")
+    assert code == 0
+    assert json.loads(out) == {"address": "D10", "type": "raw", "values": [1, 16, 65535]}
+
+
+def test_typed_read_and_write(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(capsys, "write", sim_url, "D20", "-1.25", "--type", "float32")[0] == 0
+    code, out, _ = run(capsys, "read", sim_url, "D20", "--type", "float32", "--json")
+    assert json.loads(out)["values"] == [-1.25]
+    code, out, _ = run(capsys, "read", sim_url, "D20", "2", "--json")
+    assert json.loads(out)["values"] == [0x0000, 0xBFA0]
+
+
+def test_status_info_clock_ping(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "status", sim_url, "--json")
+    assert code == 0 and json.loads(out)["mode"] == "PROGRAM"
+    code, out, _ = run(capsys, "info", sim_url, "--json")
+    assert code == 0 and "CJ2M" in out
+    code, out, _ = run(capsys, "clock", sim_url, "--json")
+    assert code == 0 and json.loads(out)["time"][:2] == "20"
+    code, out, _ = run(capsys, "ping", sim_url, "--count", "2", "--json")
+    assert code == 0 and json.loads(out)["count"] == 2
+
+
+def test_errors_go_to_stderr_with_nonzero_exit(
+    sim_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = run(capsys, "write", sim_url, "A0", "1")
+    assert code != 0 and out == ""
+    assert "2101" in err
+    code, out, err = run(capsys, "read", sim_url, "D40000")
+    assert code != 0 and "D" in err and out == ""
+    code, out, err = run(capsys, "read", "udp://127.0.0.1:1", "D0", "--timeout", "0.2")
+    assert code != 0 and out == ""
+
+
+def test_poll_prints_scans(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    run(capsys, "write", sim_url, "D50", "42")
+    code, out, _ = run(capsys, "poll", sim_url, "x=D50", "CIO 0.01", "--interval", "0.05",
+                       "--count", "2", "--json")
+    lines = [json.loads(line) for line in out.splitlines()]
+    assert code == 0 and len(lines) == 2
+    assert lines[0]["tags"]["x"] == {"value": 42, "quality": "good",
+                                     "timestamp": lines[0]["tags"]["x"]["timestamp"]}
+    assert lines[0]["tags"]["CIO 0.01"]["value"] is False
+
+
+def test_demo_shows_good_values(tmp_path: object) -> None:
+    import io
+
+    out = io.StringIO()
+    shown = anyio.run(demo, 1.2, 0.2, out)
+    text = out.getvalue()
+    assert shown >= 2
+    assert "temperature" in text and "LOT-0042" in text
+    assert "error" not in text and "stale" not in text

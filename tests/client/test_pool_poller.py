@@ -1,0 +1,129 @@
+"""Pool and poller against virtual PLCs over loopback UDP/TCP."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+
+import anyio
+import pytest
+
+from aiofins.poller import Poller, Quality
+from aiofins.pool import Pool
+from aiofins.protocol.errors import ConnectionLost
+from aiofins.simulator.faults import FaultPlan, FaultRule
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator, run_simulator
+
+pytestmark = pytest.mark.anyio
+
+
+async def test_pool_shares_one_session_among_tasks(url: str) -> None:
+    async with Pool() as pool:
+        seen = set()
+
+        async def user(i: int) -> None:
+            async with pool.client(url) as plc:
+                seen.add(id(plc.session))
+                await plc.write(f"D{i}", [i])
+                assert await plc.read(f"D{i}") == [i]
+
+        async with anyio.create_task_group() as tg:
+            for i in range(20):
+                tg.start_soon(user, i)
+        assert len(seen) == 1
+        (stats,) = pool.stats(url).values()
+        assert stats.sessions == 1
+        assert stats.completed == 40
+        assert stats.in_use == 0
+
+
+async def test_extra_udp_sessions_get_their_own_source_node(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(max_per_endpoint=3) as pool:
+        sources = set()
+        release = anyio.Event()
+
+        async def hold() -> None:
+            async with pool.client(url) as plc:
+                sources.add(plc.session.source.node)
+                assert await plc.read("D0") == [0]
+                await release.wait()
+
+        async with anyio.create_task_group() as tg:
+            for _ in range(3):
+                tg.start_soon(hold)
+            while len(sources) < 3:
+                await anyio.sleep(0.01)
+            release.set()
+        assert len(sources) == 3
+        assert pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 3
+
+
+async def test_unreachable_endpoint_fails_fast_with_backoff(anyio_backend: str) -> None:
+    async with Pool(backoff_min=5.0) as pool:
+        for _ in range(2):
+            with pytest.raises(ConnectionLost):
+                async with pool.client("tcp://127.0.0.1:1") as plc:
+                    await plc.read("D0")
+        (stats,) = pool.stats("tcp://127.0.0.1:1").values()
+        assert stats.connect_failures == 1  # the second call did not try again
+
+
+@pytest.fixture
+async def two_plcs(anyio_backend: str) -> AsyncIterator[tuple[Simulator, Simulator]]:
+    slow_plan = FaultPlan(seed=3)
+    async with (
+        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as fast,
+        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=slow_plan) as slow,
+    ):
+        yield fast, slow
+
+
+async def test_poller_keeps_healthy_plcs_on_schedule_and_marks_quality(
+    two_plcs: tuple[Simulator, Simulator],
+) -> None:
+    fast, slow = two_plcs
+    fast_url = f"udp://127.0.0.1:{fast.udp_port}"
+    slow_url = f"udp://127.0.0.1:{slow.udp_port}"
+    async with Pool(timeout=0.3, retries=0) as pool:
+        async with pool.client(fast_url) as plc:
+            await plc.write_value("D10", 12.5, "float32")
+        async with pool.client(slow_url) as plc:
+            await plc.write("D0", [7])
+        slow.plan.rule = FaultRule(drop_request=1.0)  # the slow PLC stops answering
+        scans: dict[str, list[Quality]] = {"fast": [], "slow": []}
+        async with Poller(pool) as poller:
+            poller.add_group("fast", fast_url, {"t": "D10:float32"}, interval=0.05)
+            poller.add_group("slow", slow_url, {"n": "D0"}, interval=0.05, timeout=0.3)
+            with anyio.fail_after(10):
+                async for snap in poller:
+                    scans[snap.group].append(snap["t" if snap.group == "fast" else "n"].quality)
+                    if snap.group == "fast":
+                        assert snap["t"].value == 12.5
+                    if len(scans["slow"]) >= 2:
+                        break
+        # While each slow scan waited 0.3 s for a timeout, the fast PLC kept being scanned.
+        assert len(scans["fast"]) >= 6
+        assert set(scans["fast"]) == {Quality.GOOD}
+        assert scans["slow"][:2] == [Quality.ERROR, Quality.ERROR]
+        assert poller.groups["slow"].missed >= 1
+
+
+async def test_poller_stale_quality_and_changes_only(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(timeout=0.2, retries=0) as pool:
+        poller = Poller(pool, changes_only=True)
+        group = poller.add_group("g", url, {"a": "D0", "b": "D1"}, interval=1)
+        first = await poller.scan_once(group)
+        assert first is not None and first.changed == {"a", "b"}
+        assert await poller.scan_once(group) is None  # nothing changed
+        async with pool.client(url) as plc:
+            await plc.write("D1", [5])
+        third = await poller.scan_once(group)
+        assert third is not None and set(third.readings) == {"b"}
+        assert third["b"].value == 5
+        sim.plan.rule = FaultRule(drop_request=1.0)
+        fourth = await poller.scan_once(group)
+        assert fourth is not None
+        assert fourth["a"].quality is Quality.STALE and fourth["a"].value == 0
+        assert fourth.error is not None and "FinsTimeout" in fourth.error
