@@ -48,7 +48,11 @@ async def test_parameter_backup_and_restore(url: str) -> None:
         await plc.stop()
         backup = await backup_parameters(plc)
         assert {k: len(v) for k, v in backup.items()} == {
-            0x8010: 512, 0x8012: 1280, 0x8013: 512, 0x8002: 5184}
+            0x8010: 512,
+            0x8012: 1280,
+            0x8013: 512,
+            0x8002: 5184,
+        }
         changed = dict(backup)
         changed[0x8010] = tuple((i * 3) & 0xFFFF for i in range(512))
         await restore_parameters(plc, changed)
@@ -63,7 +67,8 @@ async def test_file_upload_list_download(url: str, networks: tuple[NetworkType, 
         names = [e.name for e in await list_files(plc, Disk.MEMORY_CARD)]
         assert "DATA.BIN" in names
         seen: list[int] = []
-        got = await download_file(plc, Disk.MEMORY_CARD, "DATA.BIN",
-                                  progress=lambda d, t: seen.append(d))
+        got = await download_file(
+            plc, Disk.MEMORY_CARD, "DATA.BIN", progress=lambda d, t: seen.append(d)
+        )
         assert got == data
         assert len(seen) == (6 if not networks else 20)

@@ -17,8 +17,18 @@ from aiofins.cli.demo import demo
 @pytest.fixture(scope="module")
 def sim_url() -> Iterator[str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aiofins.cli", "simulate", "--udp", "127.0.0.1:0", "--tcp",
-         "127.0.0.1:0", "--mode", "program"],
+        [
+            sys.executable,
+            "-m",
+            "aiofins.cli",
+            "simulate",
+            "--udp",
+            "127.0.0.1:0",
+            "--tcp",
+            "127.0.0.1:0",
+            "--mode",
+            "program",
+        ],
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -52,8 +62,9 @@ def test_write_then_read_json(sim_url: str, capsys: pytest.CaptureFixture[str]) 
 def test_typed_read_and_write(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert run(capsys, "write", sim_url, "D20", "-1.25", "--type", "float32")[0] == 0
     code, out, _ = run(capsys, "read", sim_url, "D20", "--type", "float32", "--json")
-    assert json.loads(out)["values"] == [-1.25]
+    assert code == 0 and json.loads(out)["values"] == [-1.25]
     code, out, _ = run(capsys, "read", sim_url, "D20", "2", "--json")
+    assert code == 0
     assert json.loads(out)["values"] == [0x0000, 0xBFA0]
 
 
@@ -82,12 +93,16 @@ def test_errors_go_to_stderr_with_nonzero_exit(
 
 def test_poll_prints_scans(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
     run(capsys, "write", sim_url, "D50", "42")
-    code, out, _ = run(capsys, "poll", sim_url, "x=D50", "CIO 0.01", "--interval", "0.05",
-                       "--count", "2", "--json")
+    code, out, _ = run(
+        capsys, "poll", sim_url, "x=D50", "CIO 0.01", "--interval", "0.05", "--count", "2", "--json"
+    )
     lines = [json.loads(line) for line in out.splitlines()]
     assert code == 0 and len(lines) == 2
-    assert lines[0]["tags"]["x"] == {"value": 42, "quality": "good",
-                                     "timestamp": lines[0]["tags"]["x"]["timestamp"]}
+    assert lines[0]["tags"]["x"] == {
+        "value": 42,
+        "quality": "good",
+        "timestamp": lines[0]["tags"]["x"]["timestamp"],
+    }
     assert lines[0]["tags"]["CIO 0.01"]["value"] is False
 
 

@@ -1,0 +1,43 @@
+"""The examples run: the polling daemon (always) and the FastAPI app (when FastAPI is here)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_polling_daemon_prints_changes_of_two_plcs() -> None:
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "polling_daemon.py"), "--duration=1.0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert {line["plc"] for line in lines} == {"plc0", "plc1"}
+    assert lines[0]["changed"]["temperature"] == [0.0, "good"]
+
+
+def test_fastapi_app_serves_reads_and_writes() -> None:
+    pytest.importorskip("fastapi", reason="FastAPI is optional (pip install fastapi httpx)")
+    pytest.importorskip("httpx", reason="the FastAPI test client needs httpx")
+    from fastapi.testclient import TestClient
+
+    sys.path.insert(0, str(ROOT))
+    try:
+        from examples.fastapi_app import app
+    finally:
+        sys.path.remove(str(ROOT))
+    with TestClient(app) as http:
+        assert http.put("/plc/D100", json=[1, 2, 3]).json() == {"written": 3}
+        assert http.get("/plc/D100", params={"count": 3}).json()["values"] == [1, 2, 3]
+        assert http.get("/plc/D40000").status_code == 400
+        assert http.get("/status").json()["mode"] == "PROGRAM"
+        assert http.get("/plc/D100/value", params={"type": "uint32"}).json()["value"] == 0x20001
