@@ -1,0 +1,383 @@
+"""File memory commands 220A, 220B, 220C and 2220 (manual 5-3-39..5-3-41, 5-3-43): area ↔
+file transfers and the CP-series Memory Cassette. Exported through :mod:`.file`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from ..areas import MemoryAddress
+from ..codec import Reader
+from ..errors import AddressError, CommandError, DecodeError
+from ..files import (
+    ALL_CASSETTE_AREAS,
+    CASSETTE_AREA_BITS,
+    CassetteArea,
+    CassetteContents,
+    CassetteOperation,
+    Disk,
+    FileTransferMode,
+    check_directory,
+    check_disk,
+    check_file_name,
+    check_u,
+    coerce_enum,
+    decoding,
+    encode_directory,
+    encode_file_name,
+    read_directory,
+    read_disk,
+    read_file_name,
+)
+from ._base import Request, expect_no_data
+
+#: Memory area codes 220A accepts (word data only): CIO/W/H/A, T/C PV, DM, EM banks 0..18
+#: (A0..AF; 50..5F on CJ2; 60..68), current EM bank.
+FILE_TRANSFER_AREA_CODES: frozenset[int] = frozenset(
+    {0xB0, 0xB1, 0xB2, 0xB3, 0x89, 0x82, 0x98}
+    | set(range(0xA0, 0xB0))
+    | set(range(0x50, 0x60))
+    | set(range(0x60, 0x69))
+)
+#: Parameter area codes 220B accepts: whole area, CPU Bus Unit setup, PLC Setup,
+#: I/O table registration, routing tables.
+FILE_TRANSFER_PARAMETER_AREAS: frozenset[int] = frozenset({0x8000, 0x8002, 0x8010, 0x8012, 0x8013})
+#: The only program number the CPU accepts (end code 1106 otherwise).
+PROGRAM_NUMBER = 0xFFFF
+
+
+def _set(obj: object, name: str, value: object) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _u16(value: int) -> bytes:
+    return value.to_bytes(2, "big")
+
+
+def _u32(value: int) -> bytes:
+    return value.to_bytes(4, "big")
+
+
+def _read_mode(r: Reader) -> FileTransferMode:
+    value = r.u16()
+    with decoding("parameter code"):
+        return coerce_enum(FileTransferMode, value, "transfer parameter code")
+
+
+@dataclass(frozen=True, slots=True)
+class FileTransferResult:
+    """220A/220B response: items (words) transferred, or compared without a mismatch."""
+
+    count: int
+
+    def __post_init__(self) -> None:
+        check_u("number of items", self.count, 16)
+
+    def encode(self) -> bytes:
+        return _u16(self.count)
+
+    @classmethod
+    def decode(cls, data: bytes, what: str = "transfer response") -> FileTransferResult:
+        r = Reader(data, what)
+        count = r.u16()
+        r.end()
+        return cls(count)
+
+
+@dataclass(frozen=True, slots=True)
+class ProgramAreaFileTransferResult:
+    """220C response: bytes transferred, or compared without a mismatch."""
+
+    length: int
+
+    def __post_init__(self) -> None:
+        check_u("data length", self.length, 32)
+
+    def encode(self) -> bytes:
+        return _u32(self.length)
+
+    @classmethod
+    def decode(cls, data: bytes) -> ProgramAreaFileTransferResult:
+        r = Reader(data, "PROGRAM AREA-FILE TRANSFER response")
+        length = r.u32()
+        r.end()
+        return cls(length)
+
+
+# --------------------------------------------------------------------------- 220A
+
+
+@dataclass(frozen=True)
+class MemoryAreaFileTransfer(Request[FileTransferResult]):
+    """220A: transfer ``count`` words from ``address`` to a file, back, or compare them."""
+
+    MRC: ClassVar[int] = 0x22
+    SRC: ClassVar[int] = 0x0A
+    NAME: ClassVar[str] = "MEMORY AREA-FILE TRANSFER"
+    METHOD: ClassVar[str] = "memory_area_file_transfer"
+
+    mode: FileTransferMode
+    address: MemoryAddress
+    count: int
+    disk: Disk
+    name: str
+    directory: str = ""
+
+    def __post_init__(self) -> None:
+        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+        if self.address.area_code not in FILE_TRANSFER_AREA_CODES:
+            raise AddressError(
+                f"memory area code {self.address.area_code:02X} cannot be transferred to a file "
+                "(word areas CIO/W/H/A, T/C PV, DM and EM only)"
+            )
+        if self.address.bit:
+            raise AddressError(f"bit number {self.address.bit} must be 0 (word transfer)")
+        check_u("number of items", self.count, 16, low=1)
+        _set(self, "disk", check_disk(self.disk))
+        check_file_name(self.name)
+        _set(self, "directory", check_directory(self.directory))
+
+    def encode(self) -> bytes:
+        return (
+            _u16(self.mode)
+            + self.address.encode()
+            + _u16(self.count)
+            + _u16(self.disk)
+            + encode_file_name(self.name)
+            + encode_directory(self.directory)
+        )
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryAreaFileTransfer:
+        r = Reader(params, cls.NAME)
+        mode = _read_mode(r)
+        address = MemoryAddress.decode(r.take(4))
+        if address.area_code not in FILE_TRANSFER_AREA_CODES:
+            raise DecodeError(f"memory area code {address.area_code:02X}", end_code=0x1101)
+        if address.bit:
+            raise DecodeError(f"bit number {address.bit} in a word transfer", end_code=0x1103)
+        count = r.u16()
+        disk = read_disk(r)
+        name = read_file_name(r)
+        directory = read_directory(r)
+        r.end()
+        with decoding(cls.NAME):
+            return cls(mode, address, count, disk, name, directory)
+
+    def decode_response(self, data: bytes) -> FileTransferResult:
+        return FileTransferResult.decode(data, f"{self.NAME} response")
+
+
+# --------------------------------------------------------------------------- 220B
+
+
+@dataclass(frozen=True)
+class ParameterAreaFileTransfer(Request[FileTransferResult]):
+    """220B: transfer a parameter area to a file, back, or compare them.
+
+    The manual specifies ``begin`` 0000 and ``count`` FFFF (the whole area).
+    """
+
+    MRC: ClassVar[int] = 0x22
+    SRC: ClassVar[int] = 0x0B
+    NAME: ClassVar[str] = "PARAMETER AREA-FILE TRANSFER"
+    METHOD: ClassVar[str] = "parameter_area_file_transfer"
+
+    mode: FileTransferMode
+    area_code: int
+    disk: Disk
+    name: str
+    begin: int = 0
+    count: int = 0xFFFF
+    directory: str = ""
+
+    def __post_init__(self) -> None:
+        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+        if self.area_code not in FILE_TRANSFER_PARAMETER_AREAS:
+            codes = ", ".join(f"{c:04X}" for c in sorted(FILE_TRANSFER_PARAMETER_AREAS))
+            raise CommandError(f"parameter area code {self.area_code!r} is not one of {codes}")
+        check_u("beginning word", self.begin, 16)
+        check_u("number of words", self.count, 16)
+        _set(self, "disk", check_disk(self.disk))
+        check_file_name(self.name)
+        _set(self, "directory", check_directory(self.directory))
+
+    def encode(self) -> bytes:
+        return (
+            _u16(self.mode)
+            + _u16(self.area_code)
+            + _u16(self.begin)
+            + _u16(self.count)
+            + _u16(self.disk)
+            + encode_file_name(self.name)
+            + encode_directory(self.directory)
+        )
+
+    @classmethod
+    def decode(cls, params: bytes) -> ParameterAreaFileTransfer:
+        r = Reader(params, cls.NAME)
+        mode = _read_mode(r)
+        area_code = r.u16()
+        if area_code not in FILE_TRANSFER_PARAMETER_AREAS:
+            raise DecodeError(f"parameter area code {area_code:04X}", end_code=0x1101)
+        begin, count = r.u16(), r.u16()
+        disk = read_disk(r)
+        name = read_file_name(r)
+        directory = read_directory(r)
+        r.end()
+        with decoding(cls.NAME):
+            return cls(mode, area_code, disk, name, begin, count, directory)
+
+    def decode_response(self, data: bytes) -> FileTransferResult:
+        return FileTransferResult.decode(data, f"{self.NAME} response")
+
+
+# --------------------------------------------------------------------------- 220C
+
+
+@dataclass(frozen=True)
+class ProgramAreaFileTransfer(Request[ProgramAreaFileTransferResult]):
+    """220C: transfer the user program to a file, back (PROGRAM mode), or compare them.
+
+    The manual fixes program number FFFF, beginning word 00000000, bytes FFFFFFFF.
+    """
+
+    MRC: ClassVar[int] = 0x22
+    SRC: ClassVar[int] = 0x0C
+    NAME: ClassVar[str] = "PROGRAM AREA-FILE TRANSFER"
+    METHOD: ClassVar[str] = "program_area_file_transfer"
+
+    mode: FileTransferMode
+    disk: Disk
+    name: str
+    program_number: int = PROGRAM_NUMBER
+    begin_word: int = 0
+    byte_count: int = 0xFFFFFFFF
+    directory: str = ""
+
+    def __post_init__(self) -> None:
+        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+        if self.program_number != PROGRAM_NUMBER:
+            raise CommandError(f"program number {self.program_number!r} must be FFFF hex")
+        check_u("beginning word", self.begin_word, 32)
+        check_u("number of bytes", self.byte_count, 32)
+        _set(self, "disk", check_disk(self.disk))
+        check_file_name(self.name)
+        _set(self, "directory", check_directory(self.directory))
+
+    def encode(self) -> bytes:
+        # The manual's text labels the directory "(response)" for 220C; it names the file's
+        # location, so it travels in the command like in every other 22xx command.
+        return (
+            _u16(self.mode)
+            + _u16(self.program_number)
+            + _u32(self.begin_word)
+            + _u32(self.byte_count)
+            + _u16(self.disk)
+            + encode_file_name(self.name)
+            + encode_directory(self.directory)
+        )
+
+    @classmethod
+    def decode(cls, params: bytes) -> ProgramAreaFileTransfer:
+        r = Reader(params, cls.NAME)
+        mode = _read_mode(r)
+        program_number = r.u16()
+        if program_number != PROGRAM_NUMBER:
+            raise DecodeError(f"program number {program_number:04X}", end_code=0x1106)
+        begin_word, byte_count = r.u32(), r.u32()
+        disk = read_disk(r)
+        name = read_file_name(r)
+        directory = read_directory(r)
+        r.end()
+        with decoding(cls.NAME):
+            return cls(mode, disk, name, program_number, begin_word, byte_count, directory)
+
+    def decode_response(self, data: bytes) -> ProgramAreaFileTransferResult:
+        return ProgramAreaFileTransferResult.decode(data)
+
+
+# --------------------------------------------------------------------------- 2220
+
+
+@dataclass(frozen=True, slots=True)
+class MemoryCassetteDataType:
+    """2220 READ_DATA_TYPE response: which data the Memory Cassette holds."""
+
+    contents: CassetteContents
+
+    def __post_init__(self) -> None:
+        check_u("stored data type", int(self.contents), 16)
+        object.__setattr__(self, "contents", CassetteContents(self.contents))
+
+    def encode(self) -> bytes:
+        return _u16(int(self.contents))
+
+    @classmethod
+    def decode(cls, data: bytes) -> MemoryCassetteDataType:
+        r = Reader(data, "MEMORY CASSETTE TRANSFER response")
+        value = r.u16()
+        r.end()
+        return cls(CassetteContents(value))
+
+
+@dataclass(frozen=True)
+class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
+    """2220 (CP1H/CP1L): transfer, verify or initialise the Memory Cassette, or read which
+    data it holds (:attr:`CassetteOperation.READ_DATA_TYPE`, the only one with a result).
+
+    ``areas`` 0 means all areas; ``INDIVIDUAL | DATA_MEMORY | ...`` selects some. Layout
+    (from the manual's parameter list; its diagrams are not in our copy): disk 8003,
+    parameter, then the data type designation except for READ_DATA_TYPE.
+    """
+
+    MRC: ClassVar[int] = 0x22
+    SRC: ClassVar[int] = 0x20
+    NAME: ClassVar[str] = "MEMORY CASSETTE TRANSFER"
+    METHOD: ClassVar[str] = "memory_cassette_transfer"
+
+    operation: CassetteOperation
+    areas: CassetteArea = ALL_CASSETTE_AREAS
+    disk: Disk = Disk.MEMORY_CASSETTE
+
+    def __post_init__(self) -> None:
+        op = coerce_enum(CassetteOperation, self.operation, "memory cassette parameter")
+        _set(self, "operation", op)
+        _set(self, "disk", check_disk(self.disk, frozenset({Disk.MEMORY_CASSETTE})))
+        value = int(self.areas)
+        check_u("data type designation", value, 16)
+        if value & ~(CASSETTE_AREA_BITS | CassetteArea.INDIVIDUAL):
+            raise CommandError(f"data type designation {value:04X} sets reserved bits")
+        individual = bool(value & CassetteArea.INDIVIDUAL)
+        if individual != bool(value & CASSETTE_AREA_BITS):
+            raise CommandError(
+                f"data type designation {value:04X}: set INDIVIDUAL together with the "
+                "areas to transfer, or nothing for all areas"
+            )
+        if op is CassetteOperation.READ_DATA_TYPE and value:
+            raise CommandError("READ_DATA_TYPE takes no data type designation")
+        _set(self, "areas", CassetteArea(value))
+
+    def encode(self) -> bytes:
+        out = _u16(self.disk) + _u16(self.operation)
+        if self.operation is not CassetteOperation.READ_DATA_TYPE:
+            out += _u16(int(self.areas))
+        return out
+
+    @classmethod
+    def decode(cls, params: bytes) -> MemoryCassetteTransfer:
+        r = Reader(params, cls.NAME)
+        disk_value, op_value = r.u16(), r.u16()
+        with decoding(cls.NAME):
+            disk = check_disk(disk_value, frozenset({Disk.MEMORY_CASSETTE}))
+            operation = coerce_enum(CassetteOperation, op_value, "memory cassette parameter")
+        areas = 0 if operation is CassetteOperation.READ_DATA_TYPE else r.u16()
+        r.end()
+        with decoding(cls.NAME):
+            return cls(operation, CassetteArea(areas), disk)
+
+    def decode_response(self, data: bytes) -> MemoryCassetteDataType | None:
+        if self.operation is CassetteOperation.READ_DATA_TYPE:
+            return MemoryCassetteDataType.decode(data)
+        expect_no_data(self, data)
+        return None
