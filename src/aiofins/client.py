@@ -264,6 +264,9 @@ async def _all(job: Callable[[int], Awaitable[None]], count: int) -> None:
     The first failure cancels the others and is raised as itself, not inside an exception
     group, so callers see the same :class:`FinsError` as for a single frame.
     """
+    if count == 1:
+        await job(0)
+        return
     errors: list[Exception] = []
 
     async def guarded(i: int, scope: anyio.CancelScope) -> None:

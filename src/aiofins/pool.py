@@ -95,6 +95,8 @@ class Pool:
         self.backoff_max = backoff_max
         self.connect_options = connect_options
         self._entries: dict[str, list[_Entry]] = {}
+        #: The same lists as ``_entries``, by the URL text callers use (no parsing per call).
+        self._by_url: dict[str, list[_Entry]] = {}
         self._failures: dict[str, tuple[float, float]] = {}  # key -> (retry_at, backoff)
         self._stats: dict[str, EndpointStats] = {}
         self._tg: TaskGroup | None = None
@@ -122,6 +124,7 @@ class Pool:
         """Close every session (in-flight calls fail with ``ConnectionLost``)."""
         entries = [e for lst in self._entries.values() for e in lst]
         self._entries.clear()
+        self._by_url.clear()
         for entry in entries:
             entry.closing.set()
         with anyio.CancelScope(shield=True):
@@ -171,6 +174,17 @@ class Pool:
     async def _acquire(self, url: str) -> _Entry:
         if self._tg is None:
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
+        entries = self._by_url.get(url)
+        if entries:
+            # Fast path: a ready session with no waiters to open another one.
+            best = min(entries, key=lambda e: e.users)
+            if (
+                best.client is not None
+                and not best.closing.is_set()
+                and (best.users == 0 or len(entries) >= self.max_per_endpoint)
+            ):
+                best.users += 1
+                return best
         endpoint = parse_endpoint(url)
         key = endpoint.key
         async with self._lock:
@@ -197,6 +211,7 @@ class Pool:
                     src = FinsAddress(first_src.network, node, first_src.unit)
                 entry = _Entry(key, url, src)
                 self._entries.setdefault(key, []).append(entry)
+                self._by_url[url] = self._entries[key]
                 self._stats.setdefault(key, EndpointStats())
                 assert self._tg is not None
                 self._tg.start_soon(self._serve, entry)
