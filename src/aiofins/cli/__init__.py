@@ -1,0 +1,79 @@
+"""The ``aiofins`` command line: one module per subcommand (or family of subcommands).
+
+A subcommand module exposes ``register(subparsers)``, ``add_parser(subparsers)`` or
+``add_parsers(subparsers)``; each parser it adds sets ``func`` (``Callable[[Namespace], int]``,
+the exit code) as a default. To add one, write ``cli/<name>.py`` and list it in
+:data:`SUBCOMMANDS`.
+
+A module that fails to import does not take the others down (``aiofins simulate`` must keep
+working whatever state the client code is in): its commands are missing and the import error
+is printed when the command line cannot be parsed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+
+from .. import __version__
+from ..protocol.errors import FinsError
+
+#: Subcommand modules (relative to this package), in the order ``--help`` lists them.
+SUBCOMMANDS: tuple[str, ...] = ("plc", "poll", "bulk", "simulate", "demo")
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser(broken: dict[str, ImportError] | None = None) -> argparse.ArgumentParser:
+    """The full parser; modules that fail to import are left out and put in ``broken``."""
+    parser = argparse.ArgumentParser(
+        prog="aiofins", description="Omron FINS client tools and virtual PLC."
+    )
+    parser.add_argument("--version", action="version", version=f"aiofins {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f".{name}", __name__)
+        except ImportError as exc:
+            if broken is None:
+                raise
+            broken[name] = exc
+            continue
+        for hook in ("register", "add_parser", "add_parsers"):
+            add = getattr(module, hook, None)
+            if add is not None:
+                add(subparsers)
+                break
+        else:  # pragma: no cover - a programming error
+            raise RuntimeError(f"aiofins.cli.{name} has no register/add_parser(s)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (errors go to stderr)."""
+    broken: dict[str, ImportError] = {}
+    parser = build_parser(broken)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        if exc.code not in (0, None):
+            for name, error in broken.items():
+                print(f"aiofins: commands of cli/{name}.py unavailable: {error}", file=sys.stderr)
+        raise
+    handler: Handler = args.func
+    try:
+        return handler(args)
+    except KeyboardInterrupt:
+        return 130
+    except FinsError as exc:
+        print(f"aiofins: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"aiofins: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
