@@ -1,9 +1,330 @@
-"""Placeholder: being written."""
+"""Error log and FINS write access log (manual 5-3-27..5-3-31).
+
+21 01 ERROR CLEAR, 21 02 ERROR LOG READ, 21 03 ERROR LOG CLEAR,
+21 40 FINS WRITE ACCESS LOG READ, 21 41 FINS WRITE ACCESS LOG CLEAR.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any, ClassVar
 
-from ._base import Request
+from ..codec import Reader, check_range
+from ..errors import DecodeError
+from ._base import Request, expect_no_data
+from .clock import (
+    bcd_byte,
+    check_day_of_week,
+    make_datetime,
+    normalise_time,
+    read_bcd,
+    year_from_two_digits,
+)
 
-OPERATIONS: tuple[type[Request[Any]], ...] = ()
+#: ERROR CLEAR codes valid in any mode / PROGRAM mode only (manual 5-3-27).
+CLEAR_CURRENT_ERROR = 0xFFFE
+CLEAR_ALL_ERRORS = 0xFFFF
+
+ERROR_RECORD_SIZE = 10
+ACCESS_RECORD_SIZE = 12
+#: Both logs hold at most 20 records on CS/CJ; the wire field is 16 bits.
+MAX_RECORD_COUNT = 0xFFFF
+
+
+def _no_params(cls: type[Request[Any]], params: bytes) -> None:
+    Reader(params, cls.NAME).end()
+
+
+def _check_records(name: str, max_records: int, stored_records: int) -> None:
+    check_range(f"{name} maximum number of stored records", max_records, 0, 0xFFFF)
+    check_range(f"{name} number of stored records", stored_records, 0, 0xFFFF)
+
+
+@dataclass(frozen=True)
+class ErrorClear(Request[None]):
+    """21 01 ERROR CLEAR: clear the error ``error_code`` (``FFFE`` current, ``FFFF`` all)."""
+
+    MRC: ClassVar[int] = 0x21
+    SRC: ClassVar[int] = 0x01
+    NAME: ClassVar[str] = "ERROR CLEAR"
+    METHOD: ClassVar[str] = "error_clear"
+
+    error_code: int = CLEAR_CURRENT_ERROR
+
+    def __post_init__(self) -> None:
+        check_range("error code", self.error_code, 0, 0xFFFF)
+
+    def encode(self) -> bytes:
+        return self.error_code.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> ErrorClear:
+        r = Reader(params, cls.NAME)
+        code = r.u16()
+        r.end()
+        return cls(code)
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorLogRecord:
+    """One 10-byte error log record: two error codes and when the error occurred."""
+
+    error_code: int
+    error_code_2: int
+    time: datetime
+
+    def __post_init__(self) -> None:
+        check_range("error code 1", self.error_code, 0, 0xFFFF)
+        check_range("error code 2", self.error_code_2, 0, 0xFFFF)
+        object.__setattr__(self, "time", normalise_time(self.time, "error time"))
+
+    def encode(self) -> bytes:
+        t = self.time
+        # Minute, second, day, hour, year, month: BCD (manual 5-3-28).
+        stamp = bytes(
+            bcd_byte(v) for v in (t.minute, t.second, t.day, t.hour, t.year % 100, t.month)
+        )
+        return self.error_code.to_bytes(2, "big") + self.error_code_2.to_bytes(2, "big") + stamp
+
+    @classmethod
+    def read(cls, r: Reader) -> ErrorLogRecord:
+        code1 = r.u16()
+        code2 = r.u16()
+        minute, second, day, hour, yy, month = (read_bcd(r) for _ in range(6))
+        moment = make_datetime(year_from_two_digits(yy), month, day, hour, minute, second)
+        return cls(code1, code2, moment)
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorLog:
+    """Response of ERROR LOG READ.
+
+    When the beginning record is past the stored records, the PLC answers with no data at
+    all (manual 5-3-28); that decodes as ``ErrorLog(0, 0, ())``.
+    """
+
+    max_records: int
+    stored_records: int
+    records: tuple[ErrorLogRecord, ...] = ()
+
+    def __post_init__(self) -> None:
+        _check_records("error log", self.max_records, self.stored_records)
+        object.__setattr__(self, "records", tuple(self.records))
+        check_range("error log records returned", len(self.records), 0, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        head = b"".join(
+            v.to_bytes(2, "big") for v in (self.max_records, self.stored_records, len(self.records))
+        )
+        return head + b"".join(rec.encode() for rec in self.records)
+
+    @classmethod
+    def decode(cls, data: bytes) -> ErrorLog:
+        if not data:
+            return cls(0, 0, ())
+        r = Reader(data, "ERROR LOG READ response")
+        max_records, stored, count = r.u16(), r.u16(), r.u16()
+        if r.remaining != count * ERROR_RECORD_SIZE:
+            raise DecodeError(
+                f"ERROR LOG READ response: {count} record(s) need {count * ERROR_RECORD_SIZE} "
+                f"bytes, got {r.remaining}"
+            )
+        records = tuple(ErrorLogRecord.read(r) for _ in range(count))
+        return cls(max_records, stored, records)
+
+
+@dataclass(frozen=True)
+class ErrorLogRead(Request[ErrorLog]):
+    """21 02 ERROR LOG READ: ``count`` records from ``beginning_record`` (0 = oldest)."""
+
+    MRC: ClassVar[int] = 0x21
+    SRC: ClassVar[int] = 0x02
+    NAME: ClassVar[str] = "ERROR LOG READ"
+    METHOD: ClassVar[str] = "error_log_read"
+    IDEMPOTENT: ClassVar[bool] = True
+
+    beginning_record: int = 0
+    count: int = 20
+
+    def __post_init__(self) -> None:
+        check_range("beginning record number", self.beginning_record, 0, 0xFFFF)
+        check_range("number of records", self.count, 1, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        return self.beginning_record.to_bytes(2, "big") + self.count.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> ErrorLogRead:
+        r = Reader(params, cls.NAME)
+        begin, count = r.u16(), r.u16()
+        r.end()
+        if count == 0:
+            raise DecodeError(f"{cls.NAME}: number of records is 0", end_code=0x110C)
+        return cls(begin, count)
+
+    def decode_response(self, data: bytes) -> ErrorLog:
+        return ErrorLog.decode(data)
+
+
+@dataclass(frozen=True)
+class ErrorLogClear(Request[None]):
+    """21 03 ERROR LOG CLEAR: reset the error log pointer to 0."""
+
+    MRC: ClassVar[int] = 0x21
+    SRC: ClassVar[int] = 0x03
+    NAME: ClassVar[str] = "ERROR LOG CLEAR"
+    METHOD: ClassVar[str] = "error_log_clear"
+
+    def encode(self) -> bytes:
+        return b""
+
+    @classmethod
+    def decode(cls, params: bytes) -> ErrorLogClear:
+        _no_params(cls, params)
+        return cls()
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+# manual wins: 5-3-30 gives a 12-byte access record holding network, node and unit address,
+# the command code, and year, month, day, hour, minute, second, day of week in BCD
+# (3 + 2 + 7 = 12). fins-wire-format.md (from libfins only, no manual page) has a reserved
+# byte after the unit address and six time bytes in error-log order (minute, second, day,
+# hour, year, month). We follow the manual's field list.
+@dataclass(frozen=True, slots=True)
+class FinsWriteAccessRecord:
+    """One 12-byte FINS write access log record: who wrote, with which command, when."""
+
+    network: int
+    node: int
+    unit: int
+    command_code: int
+    time: datetime
+    day_of_week: int
+
+    def __post_init__(self) -> None:
+        check_range("network address", self.network, 0, 0xFF)
+        check_range("node address", self.node, 0, 0xFF)
+        check_range("unit address", self.unit, 0, 0xFF)
+        check_range("command code", self.command_code, 0, 0xFFFF)
+        object.__setattr__(self, "time", normalise_time(self.time, "access time"))
+        check_day_of_week(self.day_of_week)
+
+    def encode(self) -> bytes:
+        t = self.time
+        stamp = bytes(
+            bcd_byte(v)
+            for v in (t.year % 100, t.month, t.day, t.hour, t.minute, t.second, self.day_of_week)
+        )
+        source = bytes((self.network, self.node, self.unit))
+        return source + self.command_code.to_bytes(2, "big") + stamp
+
+    @classmethod
+    def read(cls, r: Reader) -> FinsWriteAccessRecord:
+        network, node, unit = r.u8(), r.u8(), r.u8()
+        code = r.u16()
+        yy, month, day, hour, minute, second, dow = (read_bcd(r) for _ in range(7))
+        if dow > 6:
+            raise DecodeError(f"access log record: day of week {dow} out of range 0..6")
+        moment = make_datetime(year_from_two_digits(yy), month, day, hour, minute, second)
+        return cls(network, node, unit, code, moment, dow)
+
+
+@dataclass(frozen=True, slots=True)
+class FinsWriteAccessLog:
+    """Response of FINS WRITE ACCESS LOG READ."""
+
+    max_records: int
+    stored_records: int
+    records: tuple[FinsWriteAccessRecord, ...] = ()
+
+    def __post_init__(self) -> None:
+        _check_records("access log", self.max_records, self.stored_records)
+        object.__setattr__(self, "records", tuple(self.records))
+        check_range("access log records returned", len(self.records), 0, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        head = b"".join(
+            v.to_bytes(2, "big") for v in (self.max_records, self.stored_records, len(self.records))
+        )
+        return head + b"".join(rec.encode() for rec in self.records)
+
+    @classmethod
+    def decode(cls, data: bytes) -> FinsWriteAccessLog:
+        r = Reader(data, "FINS WRITE ACCESS LOG READ response")
+        max_records, stored, count = r.u16(), r.u16(), r.u16()
+        if r.remaining != count * ACCESS_RECORD_SIZE:
+            raise DecodeError(
+                f"FINS WRITE ACCESS LOG READ response: {count} record(s) need "
+                f"{count * ACCESS_RECORD_SIZE} bytes, got {r.remaining}"
+            )
+        records = tuple(FinsWriteAccessRecord.read(r) for _ in range(count))
+        return cls(max_records, stored, records)
+
+
+@dataclass(frozen=True)
+class FinsWriteAccessLogRead(Request[FinsWriteAccessLog]):
+    """21 40 FINS WRITE ACCESS LOG READ: ``count`` records from ``beginning_record``."""
+
+    MRC: ClassVar[int] = 0x21
+    SRC: ClassVar[int] = 0x40
+    NAME: ClassVar[str] = "FINS WRITE ACCESS LOG READ"
+    METHOD: ClassVar[str] = "fins_write_access_log_read"
+    IDEMPOTENT: ClassVar[bool] = True
+
+    beginning_record: int = 0
+    count: int = 20
+
+    def __post_init__(self) -> None:
+        check_range("beginning record number", self.beginning_record, 0, 0xFFFF)
+        check_range("number of records", self.count, 1, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        return self.beginning_record.to_bytes(2, "big") + self.count.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls, params: bytes) -> FinsWriteAccessLogRead:
+        r = Reader(params, cls.NAME)
+        begin, count = r.u16(), r.u16()
+        r.end()
+        if count == 0:
+            raise DecodeError(f"{cls.NAME}: number of records is 0", end_code=0x110C)
+        return cls(begin, count)
+
+    def decode_response(self, data: bytes) -> FinsWriteAccessLog:
+        return FinsWriteAccessLog.decode(data)
+
+
+@dataclass(frozen=True)
+class FinsWriteAccessLogClear(Request[None]):
+    """21 41 FINS WRITE ACCESS LOG CLEAR."""
+
+    MRC: ClassVar[int] = 0x21
+    SRC: ClassVar[int] = 0x41
+    NAME: ClassVar[str] = "FINS WRITE ACCESS LOG CLEAR"
+    METHOD: ClassVar[str] = "fins_write_access_log_clear"
+
+    def encode(self) -> bytes:
+        return b""
+
+    @classmethod
+    def decode(cls, params: bytes) -> FinsWriteAccessLogClear:
+        _no_params(cls, params)
+        return cls()
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+OPERATIONS: tuple[type[Request[Any]], ...] = (
+    ErrorClear,
+    ErrorLogRead,
+    ErrorLogClear,
+    FinsWriteAccessLogRead,
+    FinsWriteAccessLogClear,
+)
