@@ -1,0 +1,59 @@
+"""The client over Host Link FINS to the virtual PLC's serial server, through a socat pty pair."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from aiofins.connection import connect
+from aiofins.protocol.commands.status import CpuMode
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import run_simulator
+
+pytestmark = [
+    pytest.mark.anyio,
+    pytest.mark.serial,
+    pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed"),
+]
+
+
+@pytest.fixture
+def pty_pair(tmp_path: Path) -> Iterator[tuple[str, str]]:
+    a, b = tmp_path / "plc", tmp_path / "host"
+    proc = subprocess.Popen(
+        ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 5
+        while not (a.exists() and b.exists()):  # socat creates both links within milliseconds
+            if time.monotonic() > deadline:
+                pytest.skip("socat did not create the pty pair")
+            time.sleep(0.005)
+        yield str(a), str(b)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=5)
+
+
+async def test_read_write_status_and_host_link_chunking(pty_pair: tuple[str, str]) -> None:
+    plc_side, host_side = pty_pair
+    plc = VirtualPLC()
+    url = f"serial://{host_side}?baudrate=115200&unit=0"
+    async with run_simulator(plc, serial=plc_side) as sim, connect(url, timeout=2) as client:
+        await client.write("D100", [7, 8, 9])
+        assert await client.read("D100", 3) == [7, 8, 9]
+        assert (await client.cpu_unit_status_read()).mode is CpuMode.PROGRAM
+        data = [(i * 5) & 0xFFFF for i in range(600)]
+        await client.write("D1000", data, allow_split=True)
+        before = sim.counters.requests
+        assert await client.read("D1000", 600) == data
+        assert sim.counters.requests - before == 3  # Host Link: 269 words a frame
+        await client.write_value("D2000", 3.25, "float64")
+        assert await client.read_value("D2000", "float64") == 3.25
