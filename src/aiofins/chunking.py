@@ -18,25 +18,15 @@ from dataclasses import dataclass
 from .protocol.areas import MemoryAddress
 from .protocol.errors import CommandError
 
-#: Area codes whose elements are single bits of words (CS/CJ and CV mode).
-BIT_ADDRESSED_AREAS: frozenset[int] = frozenset(
-    {0x30, 0x31, 0x32, 0x33, 0x70, 0x71, 0x72, 0x02, 0x0A, 0x00, 0x40}
-    | set(range(0x20, 0x30))
-    | set(range(0xE0, 0xE9))
-)
-
 #: Bytes that must stay a multiple of this in program area reads and writes (manual 5-3-9/10).
 PROGRAM_BLOCK_UNIT = 4
 
 
 def offset_address(address: MemoryAddress, elements: int) -> MemoryAddress:
-    """The address ``elements`` elements after ``address``."""
+    """The address ``elements`` elements after ``address`` (see :meth:`MemoryAddress.offset`)."""
     if elements < 0:
         raise CommandError("element offset must not be negative")
-    if address.area_code in BIT_ADDRESSED_AREAS:
-        index = address.word * 16 + address.bit + elements
-        return MemoryAddress(address.area_code, index // 16, index % 16)
-    return MemoryAddress(address.area_code, address.word + elements, address.bit)
+    return address.offset(elements)
 
 
 @dataclass(frozen=True)
