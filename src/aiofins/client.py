@@ -115,6 +115,7 @@ class Client(CommandMethods):
         *,
         dest: FinsAddress | None = None,
         timeout: float | None = None,
+        retries: int | None = None,
     ) -> list[int]:
         """Read ``count`` elements from ``address`` (words, or 0/1 for bits), any size.
 
@@ -127,7 +128,10 @@ class Client(CommandMethods):
         chunks = plan_memory(start, count, self.limits.memory_read_words)
         if len(chunks) == 1:
             result = await self.call(
-                MemoryAreaRead(chunks[0].address, chunks[0].count), dest=dest, timeout=timeout
+                MemoryAreaRead(chunks[0].address, chunks[0].count),
+                dest=dest,
+                timeout=timeout,
+                retries=retries,
             )
             return list(result.values)
         parts: list[tuple[int, ...]] = [()] * len(chunks)
@@ -135,7 +139,10 @@ class Client(CommandMethods):
         async def one(i: int) -> None:
             chunk = chunks[i]
             result = await self.call(
-                MemoryAreaRead(chunk.address, chunk.count), dest=dest, timeout=timeout
+                MemoryAreaRead(chunk.address, chunk.count),
+                dest=dest,
+                timeout=timeout,
+                retries=retries,
             )
             parts[i] = result.values
 
@@ -150,6 +157,7 @@ class Client(CommandMethods):
         allow_split: bool = False,
         dest: FinsAddress | None = None,
         timeout: float | None = None,
+        retries: int | None = None,
     ) -> None:
         """Write words (or 0/1 bits) from ``address``.
 
@@ -167,13 +175,16 @@ class Client(CommandMethods):
                 "allow_split=True to accept that"
             )
         if not chunks:  # count 0: a normal response that writes nothing (manual 5-3-3)
-            await self.call(MemoryAreaWrite(start, b""), dest=dest, timeout=timeout)
+            await self.call(
+                MemoryAreaWrite(start, b""), dest=dest, timeout=timeout, retries=retries
+            )
         for chunk in chunks:
             part = values[chunk.offset : chunk.offset + chunk.count]
             await self.call(
                 MemoryAreaWrite(chunk.address, _element_bytes(part, size)),
                 dest=dest,
                 timeout=timeout,
+                retries=retries,
             )
 
     async def read_bit(self, address: AddressLike, **kw: Any) -> bool:
