@@ -12,6 +12,7 @@ import pytest
 
 from aiofins.connection import connect
 from aiofins.protocol.commands.status import CpuMode
+from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import run_simulator
 
@@ -57,3 +58,16 @@ async def test_read_write_status_and_host_link_chunking(pty_pair: tuple[str, str
         assert sim.counters.requests - before == 3  # Host Link: 269 words a frame
         await client.write_value("D2000", 3.25, "float64")
         assert await client.read_value("D2000", "float64") == 3.25
+
+
+async def test_corrupted_lines_are_caught_by_the_fcs(pty_pair: tuple[str, str]) -> None:
+    plc_side, host_side = pty_pair
+    plan = FaultPlan(FaultRule(corrupt=0.3), seed=7)
+    url = f"serial://{host_side}?baudrate=115200"
+    async with run_simulator(VirtualPLC(), serial=plc_side, faults=plan) as sim:
+        async with connect(url, timeout=0.3, retries=5) as client:
+            await client.write("D0", list(range(20)), retries=5)
+            got = [(await client.read(f"D{i}"))[0] for i in range(20)]
+            assert got == list(range(20))
+            assert client.session.stats.malformed > 0
+        assert sim.counters.corrupted > 0
