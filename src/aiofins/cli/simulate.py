@@ -1,0 +1,267 @@
+"""``aiofins simulate``: run a virtual PLC on UDP/TCP/serial in the foreground.
+
+Prints one ``listening on URL`` line per endpoint (stdout, flushed), serves until SIGINT or
+SIGTERM, then prints the frame and fault counters to stderr and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from typing import TYPE_CHECKING, Any
+
+import anyio
+
+from ..protocol.tcp import DEFAULT_PORT
+from ..simulator.faults import Delay, FaultPlan, FaultRule, FrameLog
+from ..simulator.runner import Simulator, run_simulator
+from ..simulator.serial import SerialSettings
+from ..simulator.tcp import DEFAULT_MAX_CONNECTIONS
+
+if TYPE_CHECKING:
+    SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
+else:
+    SubParsers = Any
+
+DEFAULT_HOST = "127.0.0.1"
+MODES = ("run", "monitor", "program")
+
+
+def endpoint(text: str) -> tuple[str, int]:
+    """``HOST:PORT``, ``HOST`` (port 9600) or ``[V6]:PORT``."""
+    host, sep, port = text.rpartition(":")
+    if not sep or (host.count(":") and not host.startswith("[")):
+        host, port = text, str(DEFAULT_PORT)
+    host = host.strip("[]") or DEFAULT_HOST
+    try:
+        number = int(port)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT") from None
+    if not 0 <= number <= 0xFFFF:
+        raise argparse.ArgumentTypeError(f"port {number} out of range 0..65535")
+    return host, number
+
+
+def probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a probability") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"probability {value} out of range 0..1")
+    return value
+
+
+def hex_int(text: str) -> int:
+    try:
+        return int(text, 16)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not hexadecimal") from None
+
+
+def delay(text: str) -> Delay:
+    try:
+        return Delay.parse_ms(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def relay_point(text: str) -> tuple[int, int]:
+    net, sep, node = text.partition(".")
+    if not sep or not net.isdigit() or not node.isdigit():
+        raise argparse.ArgumentTypeError(f"relay point {text!r} is not NETWORK.NODE")
+    return int(net), int(node)
+
+
+def command_codes(text: str) -> list[int]:
+    return [hex_int(part) for part in text.split(",") if part.strip()]
+
+
+def register(subparsers: SubParsers) -> None:
+    p = subparsers.add_parser(
+        "simulate",
+        help="run a virtual PLC (FINS/UDP, FINS/TCP, Host Link serial)",
+        description="Run a virtual PLC until interrupted. Without --udp/--tcp/--serial it "
+        f"serves UDP and TCP on {DEFAULT_HOST}:{DEFAULT_PORT}. Port 0 picks a free port.",
+    )
+    where = p.add_argument_group("endpoints")
+    where.add_argument("--udp", type=endpoint, metavar="HOST:PORT", help="FINS/UDP endpoint")
+    where.add_argument("--tcp", type=endpoint, metavar="HOST:PORT", help="FINS/TCP endpoint")
+    where.add_argument("--serial", metavar="DEVICE", help="serial device for Host Link FINS")
+    where.add_argument("--serial-unit", type=int, default=0, metavar="N", help="Host Link unit")
+    where.add_argument("--baudrate", type=int, default=9600)
+    where.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
+    where.add_argument("--parity", choices=("N", "E", "O"), default="N")
+    where.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    where.add_argument("--max-connections", type=int, default=DEFAULT_MAX_CONNECTIONS, metavar="N")
+
+    plc = p.add_argument_group("PLC")
+    plc.add_argument("--node", type=int, default=1, help="FINS node (1-254, default 1)")
+    plc.add_argument("--network", type=int, default=0, help="FINS network (default 0)")
+    plc.add_argument("--mode", choices=MODES, default="run", help="operating mode")
+
+    f = p.add_argument_group("faults (probabilities 0..1 per request)")
+    f.add_argument("--drop", type=probability, default=0.0, metavar="P", help="drop requests")
+    f.add_argument("--drop-response", type=probability, default=0.0, metavar="P")
+    f.add_argument("--delay", type=delay, metavar="MS|MIN-MAX", help="delay every response")
+    f.add_argument("--duplicate", type=probability, default=0.0, metavar="P")
+    f.add_argument("--reorder", type=probability, default=0.0, metavar="P")
+    f.add_argument("--corrupt", type=probability, default=0.0, metavar="P")
+    f.add_argument("--truncate", type=probability, default=0.0, metavar="P")
+    f.add_argument(
+        "--late",
+        type=probability,
+        default=0.0,
+        metavar="P",
+        help="answer after --late-after instead",
+    )
+    f.add_argument("--late-after", type=float, default=10000.0, metavar="MS")
+    f.add_argument("--end-code", type=hex_int, metavar="HEX", help="answer this end code")
+    f.add_argument("--end-code-probability", type=probability, default=1.0, metavar="P")
+    f.add_argument(
+        "--relay",
+        type=relay_point,
+        default=(0, 0),
+        metavar="NET.NODE",
+        help="relay point for an end code with bit 15",
+    )
+    f.add_argument(
+        "--flags",
+        type=hex_int,
+        default=0,
+        metavar="40|80|C0",
+        help="CPU error flags set in every end code",
+    )
+    f.add_argument(
+        "--commands",
+        type=command_codes,
+        metavar="HEX[,HEX]",
+        help="apply the faults to these command codes only, e.g. 0101,0102",
+    )
+    f.add_argument(
+        "--max-concurrent", type=int, metavar="N", help="answer 2604 above N commands in progress"
+    )
+    f.add_argument(
+        "--tcp-refuse",
+        type=hex_int,
+        metavar="HEX",
+        help="refuse every FINS/TCP handshake with this error code, e.g. 25",
+    )
+    f.add_argument("--seed", type=int, help="random seed (same seed, same faults)")
+    f.add_argument("--log", metavar="FILE", help="hex log of every frame ('-' = stderr)")
+    p.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
+    p.set_defaults(func=run)
+
+
+def build_plan(args: argparse.Namespace) -> FaultPlan:
+    rule = FaultRule(
+        drop_request=args.drop,
+        drop_response=args.drop_response,
+        delay=args.delay,
+        duplicate=args.duplicate,
+        reorder=args.reorder,
+        corrupt=args.corrupt,
+        truncate=args.truncate,
+        late=args.late,
+        late_after=args.late_after / 1000.0,
+        end_code=args.end_code,
+        end_code_probability=args.end_code_probability,
+        relay=args.relay,
+        flags=args.flags,
+    )
+    log = None
+    if args.log:
+        log = FrameLog(sys.stderr if args.log == "-" else args.log)
+    if args.commands:
+        return FaultPlan(
+            per_command=dict.fromkeys(args.commands, rule),
+            seed=args.seed,
+            max_concurrent=args.max_concurrent,
+            tcp_refusal=args.tcp_refuse,
+            log=log,
+        )
+    return FaultPlan(
+        rule,
+        seed=args.seed,
+        max_concurrent=args.max_concurrent,
+        tcp_refusal=args.tcp_refuse,
+        log=log,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """The ``simulate`` handler: exit code 0 after an interrupt, 2 on bad options."""
+    if not 1 <= args.node <= 254:
+        print(f"aiofins simulate: --node {args.node} out of range 1..254", file=sys.stderr)
+        return 2
+    try:
+        plan = build_plan(args)
+    except (ValueError, OSError) as exc:
+        print(f"aiofins simulate: {exc}", file=sys.stderr)
+        return 2
+    try:
+        anyio.run(_serve, args, plan, backend=args.backend)
+    except KeyboardInterrupt:
+        pass
+    except OSError as exc:
+        print(f"aiofins simulate: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if plan.log is not None:
+            plan.log.close()
+    return 0
+
+
+def endpoints(
+    args: argparse.Namespace,
+) -> tuple[tuple[str, int] | None, tuple[str, int] | None]:
+    """``(udp, tcp)``: UDP and TCP on 127.0.0.1:9600 when no endpoint is given at all."""
+    if args.udp is None and args.tcp is None and args.serial is None:
+        return (DEFAULT_HOST, DEFAULT_PORT), (DEFAULT_HOST, DEFAULT_PORT)
+    return args.udp, args.tcp
+
+
+async def _serve(args: argparse.Namespace, plan: FaultPlan) -> None:
+    from ..simulator.plc import VirtualPLC
+    from ..simulator.state import Mode
+
+    udp, tcp = endpoints(args)
+    plc = VirtualPLC(network=args.network, node=args.node, mode=Mode[args.mode.upper()])
+    settings = SerialSettings(args.baudrate, args.bytesize, args.parity, args.stopbits)
+    async with run_simulator(
+        plc,
+        udp=udp,
+        tcp=tcp,
+        serial=args.serial,
+        faults=plan,
+        server_node=args.node,
+        max_connections=args.max_connections,
+        serial_unit=args.serial_unit,
+        serial_settings=settings,
+    ) as sim:
+        print(
+            f"virtual PLC: network {args.network} node {args.node} mode {args.mode.upper()}",
+            flush=True,
+        )
+        for url in sim.urls():
+            print(f"listening on {url}", flush=True)
+        try:
+            await _wait_for_signal()
+        finally:
+            _report(sim)
+
+
+async def _wait_for_signal() -> None:
+    try:
+        with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+            async for _ in signals:
+                return
+    except NotImplementedError:  # pragma: no cover - Windows: Ctrl-C raises KeyboardInterrupt
+        await anyio.sleep_forever()
+
+
+def _report(sim: Simulator) -> None:
+    counts = sim.counters.as_dict()
+    text = " ".join(f"{k}={v}" for k, v in counts.items() if v)
+    print(f"stopped: {text or 'no frames'}", file=sys.stderr, flush=True)

@@ -1,0 +1,114 @@
+"""Run one PLC behind several servers at once (UDP, TCP, serial) sharing one fault plan."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+
+import anyio
+
+from ..protocol.header import FinsAddress
+from .faults import Dispatcher, FaultCounters, FaultPlan, FrameHandler
+from .serial import SerialServer, SerialSettings
+from .tcp import DEFAULT_MAX_CONNECTIONS, DEFAULT_NODE_POOL, TcpServer
+from .udp import UdpServer
+
+
+@dataclass(eq=False, slots=True)
+class Simulator:
+    """The servers of a running simulator (see :func:`run_simulator`)."""
+
+    plc: FrameHandler
+    dispatcher: Dispatcher
+    udp: UdpServer | None = None
+    tcp: TcpServer | None = None
+    serial: SerialServer | None = None
+
+    @property
+    def plan(self) -> FaultPlan:
+        return self.dispatcher.plan
+
+    @property
+    def counters(self) -> FaultCounters:
+        return self.dispatcher.plan.counters
+
+    @property
+    def udp_port(self) -> int:
+        if self.udp is None or self.udp.port is None:
+            raise RuntimeError("no UDP server is running")
+        return self.udp.port
+
+    @property
+    def tcp_port(self) -> int:
+        if self.tcp is None or self.tcp.port is None:
+            raise RuntimeError("no TCP server is running")
+        return self.tcp.port
+
+    def urls(self) -> list[str]:
+        """Where the simulator listens, as client URLs (``udp://host:port``, ...)."""
+        out: list[str] = []
+        if self.udp is not None:
+            out.append(f"udp://{_host(self.udp.host)}:{self.udp_port}")
+        if self.tcp is not None:
+            out.append(f"tcp://{_host(self.tcp.host)}:{self.tcp_port}")
+        if self.serial is not None:
+            out.append(f"serial://{self.serial.device}")
+        return out
+
+
+def _host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def _plc_node(plc: FrameHandler) -> int:
+    address = getattr(plc, "address", None)
+    if isinstance(address, FinsAddress) and 1 <= address.node <= 254:
+        return address.node
+    return 1
+
+
+@asynccontextmanager
+async def run_simulator(
+    plc: FrameHandler,
+    *,
+    udp: tuple[str, int] | None = None,
+    tcp: tuple[str, int] | None = None,
+    serial: str | None = None,
+    faults: FaultPlan | None = None,
+    server_node: int | None = None,
+    node_pool: Sequence[int] = DEFAULT_NODE_POOL,
+    max_connections: int = DEFAULT_MAX_CONNECTIONS,
+    serial_unit: int = 0,
+    serial_settings: SerialSettings | None = None,
+) -> AsyncIterator[Simulator]:
+    """Serve ``plc`` on the given endpoints while the ``async with`` block runs.
+
+    Port 0 binds an ephemeral port (read it from ``sim.udp_port`` / ``sim.tcp_port``). The
+    FINS/TCP server node defaults to the PLC's node (``plc.address.node``) or 1.
+    """
+    dispatcher = Dispatcher(plc, faults)
+    sim = Simulator(plc, dispatcher)
+    async with anyio.create_task_group() as tg:
+        if udp is not None:
+            sim.udp = UdpServer(dispatcher, udp[0], udp[1])
+            await tg.start(sim.udp.serve)
+        if tcp is not None:
+            sim.tcp = TcpServer(
+                dispatcher,
+                tcp[0],
+                tcp[1],
+                server_node=server_node if server_node is not None else _plc_node(plc),
+                node_pool=node_pool,
+                max_connections=max_connections,
+            )
+            await tg.start(sim.tcp.serve)
+        if serial is not None:
+            sim.serial = SerialServer(
+                dispatcher, serial, unit=serial_unit, settings=serial_settings
+            )
+            await tg.start(sim.serial.serve)
+        try:
+            yield sim
+        finally:
+            tg.cancel_scope.cancel()

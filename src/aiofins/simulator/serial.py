@@ -1,0 +1,145 @@
+"""Host Link FINS server on a serial device (a tty, a USB adapter or a pty).
+
+The device is opened and configured with pyserial (``serial.Serial``), then read and written
+without threads through :func:`anyio.wait_readable` / :func:`anyio.wait_writable` on its file
+descriptor, so it works under asyncio and trio alike (POSIX only: ttys are pollable there).
+Host Link is half-duplex: commands are answered one at a time, in order. Lines for another
+Host Link unit number, or with a bad FCS or format, get no answer (counted in
+:attr:`SerialServer.ignored_lines`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import os
+from dataclasses import dataclass
+
+import anyio
+import serial  # type: ignore[import-untyped]  # no types-pyserial in the env
+from anyio.abc import TaskStatus
+
+from ..protocol.endcodes import EndCode
+from ..protocol.errors import DecodeError
+from ..protocol.header import ICF_NO_RESPONSE, ICF_RESPONSE, ResponseFrame
+from ..protocol.hostlink import (
+    MAX_COMMAND_CHARS,
+    MAX_RESPONSE_DATA_BYTES,
+    LineDecoder,
+    decode_command,
+    encode_response,
+)
+from .faults import Dispatcher
+
+#: End code 110B, "response too long" (manual 5-1-3).
+RESPONSE_TOO_LONG = 0x110B
+
+
+@dataclass(frozen=True, slots=True)
+class SerialSettings:
+    """Line settings. Ptys accept only 8N1 on Linux; real ports often use 7E2."""
+
+    baudrate: int = 9600
+    bytesize: int = 8
+    parity: str = "N"
+    stopbits: float = 1
+
+
+class SerialServer:
+    """Serve a :class:`~aiofins.simulator.faults.Dispatcher` as Host Link unit ``unit``."""
+
+    def __init__(
+        self,
+        dispatcher: Dispatcher,
+        device: str,
+        *,
+        unit: int = 0,
+        settings: SerialSettings | None = None,
+    ) -> None:
+        if not 0 <= unit <= 31:
+            raise ValueError(f"Host Link unit number {unit} out of range 0..31")
+        self.dispatcher = dispatcher
+        self.device = device
+        self.unit = unit
+        self.settings = settings if settings is not None else SerialSettings()
+        self.ignored_lines = 0
+        self._fd = -1
+
+    async def serve(self, *, task_status: TaskStatus[str] = anyio.TASK_STATUS_IGNORED) -> None:
+        """Answer Host Link lines until cancelled or the device goes away."""
+        s = self.settings
+        port = serial.Serial(
+            self.device,
+            baudrate=s.baudrate,
+            bytesize=s.bytesize,
+            parity=s.parity,
+            stopbits=s.stopbits,
+            timeout=0,
+            write_timeout=0,
+        )
+        try:
+            self._fd = port.fileno()
+            os.set_blocking(self._fd, False)
+            task_status.started(self.device)
+            decoder = LineDecoder(max_chars=MAX_COMMAND_CHARS)
+            while True:
+                await anyio.wait_readable(self._fd)
+                try:
+                    data = os.read(self._fd, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError as exc:
+                    if exc.errno == errno.EIO:  # the other end of a pty closed
+                        return
+                    raise
+                if not data:
+                    return
+                for line in decoder.feed(data):
+                    await self._line(line)
+        finally:
+            self._fd = -1
+            port.close()
+
+    async def _line(self, line: bytes) -> None:
+        try:
+            command = decode_command(line)
+        except DecodeError:
+            self.ignored_lines += 1
+            return
+        if command.unit != self.unit:
+            self.ignored_lines += 1
+            return
+        request_icf = command.frame.header.icf
+
+        def encode(response: bytes) -> bytes:
+            frame = ResponseFrame.decode(response)
+            if len(frame.data) > MAX_RESPONSE_DATA_BYTES:
+                # 110B response too long: a Host Link response carries at most 538 data bytes
+                flags = frame.end_code.raw & 0x00C0
+                frame = dataclasses.replace(
+                    frame, end_code=EndCode(RESPONSE_TOO_LONG | flags), data=b"", relay=None
+                )
+            if not command.full_header:
+                # the short form answers the ICF it was sent with, response bit set ("40")
+                icf = (request_icf | ICF_RESPONSE) & ~ICF_NO_RESPONSE & 0xFF
+                frame = dataclasses.replace(
+                    frame, header=dataclasses.replace(frame.header, icf=icf)
+                )
+            return encode_response(frame, unit=command.unit, full_header=command.full_header)
+
+        await self.dispatcher.dispatch(
+            command.frame.encode(), self._write, peer=f"serial:{self.device}", encode=encode
+        )
+
+    async def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            if self._fd < 0:
+                raise anyio.ClosedResourceError
+            try:
+                written = os.write(self._fd, view)
+            except BlockingIOError:
+                written = 0
+            view = view[written:]
+            if view:
+                await anyio.wait_writable(self._fd)

@@ -1,0 +1,200 @@
+"""FINS/TCP server (W421 §7): handshake with node allocation, then FINS frames in command 2.
+
+Handshake: the client sends command 0 with its FINS node (0 = allocate one); the server answers
+command 1 with the client node and its own node, or with an error code and closes:
+
+* ``0x20`` all connections in use (more than ``max_connections`` open),
+* ``0x21`` the fixed node asked for is held by another connection,
+* ``0x23`` the node asked for is out of range 1..254,
+* ``0x24`` the node asked for is the server's own node,
+* ``0x25`` no node left in the allocation pool (default 239..254, as on a CS1W-ETN21),
+* a :class:`~aiofins.simulator.faults.FaultPlan`'s ``tcp_refusal`` code for every handshake.
+
+A bad header (1), an impossible length (2) or a command other than 2 after the handshake (3)
+gets command 3 with that error code, and the connection closes. SA1 of every FINS frame is
+set to the connection's node so that the response's DA1 names it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import anyio
+from anyio.abc import SocketAttribute, SocketStream, TaskGroup, TaskStatus
+
+from ..protocol.errors import FinsTcpError
+from ..protocol.tcp import (
+    DEFAULT_PORT,
+    TcpCommand,
+    TcpDecoder,
+    TcpErrorCode,
+    TcpMessage,
+    encode_error_notification,
+    encode_frame,
+    encode_message,
+    encode_node_response,
+    parse_node_request,
+)
+from .faults import Dispatcher
+
+#: Client nodes a CS1W-ETN21 allocates automatically (W421: 239-254).
+DEFAULT_NODE_POOL = tuple(range(239, 255))
+#: FINS/TCP connections per Ethernet Unit (W421).
+DEFAULT_MAX_CONNECTIONS = 16
+_SA1 = 7
+_logger = logging.getLogger(__name__)
+
+
+@dataclass(eq=False, slots=True)
+class _Connection:
+    stream: SocketStream
+    host: str
+    port: int
+    lock: anyio.Lock = field(default_factory=anyio.Lock)
+    node: int | None = None
+
+    async def send(self, data: bytes) -> None:
+        async with self.lock:
+            await self.stream.send(data)
+
+
+class TcpServer:
+    """Serve a :class:`~aiofins.simulator.faults.Dispatcher` over FINS/TCP."""
+
+    def __init__(
+        self,
+        dispatcher: Dispatcher,
+        host: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        *,
+        server_node: int = 1,
+        node_pool: Sequence[int] = DEFAULT_NODE_POOL,
+        max_connections: int = DEFAULT_MAX_CONNECTIONS,
+    ) -> None:
+        if not 1 <= server_node <= 254:
+            raise ValueError(f"FINS/TCP server node {server_node} out of range 1..254")
+        if max_connections < 1:
+            raise ValueError(f"max_connections {max_connections} must be at least 1")
+        self.dispatcher = dispatcher
+        self.host = host
+        self.requested_port = port
+        self.port: int | None = None
+        self.server_node = server_node
+        self.node_pool = tuple(n for n in node_pool if n != server_node)
+        self.max_connections = max_connections
+        #: FINS frames whose SA1 was not the connection's node (rewritten).
+        self.source_node_rewrites = 0
+        self._open: set[_Connection] = set()
+        self._nodes: dict[int, _Connection] = {}
+
+    @property
+    def connected_nodes(self) -> list[int]:
+        """Client nodes of the connections that completed the handshake."""
+        return sorted(self._nodes)
+
+    async def serve(self, *, task_status: TaskStatus[int] = anyio.TASK_STATUS_IGNORED) -> None:
+        """Accept connections until cancelled."""
+        listener = await anyio.create_tcp_listener(
+            local_host=self.host, local_port=self.requested_port
+        )
+        async with listener, anyio.create_task_group() as tg:
+            self.port = int(listener.extra(SocketAttribute.local_port))
+            task_status.started(self.port)
+            await listener.serve(self._connection, task_group=tg)
+
+    async def _connection(self, stream: SocketStream) -> None:
+        address = stream.extra(SocketAttribute.remote_address)
+        host, port = (str(address[0]), int(address[1])) if isinstance(address, tuple) else ("", 0)
+        conn = _Connection(stream, host, port)
+        self._open.add(conn)
+        try:
+            async with stream, anyio.create_task_group() as tg:
+                await self._run(conn, tg)
+                tg.cancel_scope.cancel()
+        except Exception:
+            # one connection's failure must not stop the listener and the other connections
+            _logger.exception("FINS/TCP connection from %s:%s failed", conn.host, conn.port)
+        finally:
+            self._open.discard(conn)
+            if conn.node is not None and self._nodes.get(conn.node) is conn:
+                del self._nodes[conn.node]
+
+    async def _run(self, conn: _Connection, tg: TaskGroup) -> None:
+        """Read messages until the peer closes or breaks the protocol."""
+        decoder = TcpDecoder()
+        over_limit = len(self._open) > self.max_connections
+        try:
+            async for chunk in conn.stream:
+                try:
+                    messages = decoder.feed(chunk)
+                except FinsTcpError as exc:
+                    await conn.send(encode_error_notification(exc.tcp_error_code))
+                    return
+                for message in messages:
+                    if not await self._message(conn, message, over_limit, tg):
+                        return
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError):
+            return
+
+    async def _message(
+        self, conn: _Connection, message: TcpMessage, over_limit: bool, tg: TaskGroup
+    ) -> bool:
+        """Handle one message; ``False`` closes the connection."""
+        if conn.node is None:
+            if message.command != TcpCommand.NODE_ADDRESS_REQUEST or len(message.payload) != 4:
+                await conn.send(encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED))
+                return False
+            return await self._handshake(conn, parse_node_request(message), over_limit)
+        if message.command != TcpCommand.FRAME:
+            await conn.send(encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED))
+            return False
+        frame = message.payload
+        if len(frame) > _SA1 and frame[_SA1] != conn.node:
+            self.source_node_rewrites += 1
+            frame = frame[:_SA1] + bytes((conn.node,)) + frame[_SA1 + 1 :]
+
+        async def send(reply: bytes) -> None:
+            await conn.send(encode_frame(reply))
+
+        await self.dispatcher.dispatch(
+            frame, send, peer=f"tcp:{conn.host}:{conn.port}:{conn.node}", task_group=tg
+        )
+        return True
+
+    async def _handshake(self, conn: _Connection, requested: int, over_limit: bool) -> bool:
+        plan = self.dispatcher.plan
+        error = TcpErrorCode.NORMAL.value
+        node = requested
+        if plan.tcp_refusal is not None:
+            error = plan.tcp_refusal
+            plan.counters.tcp_refusals += 1
+        elif over_limit:
+            error = TcpErrorCode.ALL_CONNECTIONS_IN_USE
+        elif requested == 0:
+            free = [n for n in self.node_pool if n not in self._nodes]
+            if free:
+                node = free[0]
+            else:
+                error = TcpErrorCode.NO_NODE_AVAILABLE
+        elif requested > 254:
+            error = TcpErrorCode.CLIENT_NODE_OUT_OF_RANGE
+        elif requested == self.server_node:
+            error = TcpErrorCode.SAME_NODE_ADDRESS
+        elif requested in self._nodes:
+            error = TcpErrorCode.NODE_ALREADY_CONNECTED
+            holder = self._nodes[requested]
+            if holder.host == conn.host:
+                # W421: a second request from the same IP and node: confirm the old connection.
+                with contextlib.suppress(
+                    anyio.BrokenResourceError, anyio.ClosedResourceError, OSError
+                ):
+                    await holder.send(encode_message(TcpCommand.CONNECTION_CONFIRMATION))
+        await conn.send(encode_node_response(node, self.server_node, error))
+        if error:
+            return False
+        conn.node = node
+        self._nodes[node] = conn
+        return True

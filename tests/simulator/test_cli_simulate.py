@@ -1,0 +1,180 @@
+"""``aiofins simulate``: a real process serving loopback UDP/TCP, stopped by SIGINT/SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+from aiofins.cli import build_parser, main
+from aiofins.cli.simulate import build_plan, endpoint, endpoints
+from aiofins.simulator import Delay, FaultRule
+
+from .test_servers import READ_D100, node_response
+
+TIMEOUT = 10
+
+
+class SimulatorProcess:
+    def __init__(self, *options: str) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "aiofins.cli", "simulate", *options],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self.urls: dict[str, tuple[str, int]] = {}
+        self.banner = ""
+
+    def wait_listening(self, count: int) -> None:
+        assert self.proc.stdout is not None
+        while len(self.urls) < count:
+            line = self.proc.stdout.readline()
+            if not line:
+                pytest.fail(f"simulator exited: {self.stop()}")
+            if line.startswith("virtual PLC"):
+                self.banner = line.strip()
+            match = re.fullmatch(r"listening on (udp|tcp)://([\d.]+):(\d+)\n", line)
+            if match:
+                self.urls[match.group(1)] = (match.group(2), int(match.group(3)))
+
+    def stop(self, sig: int = signal.SIGINT) -> tuple[int, str]:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        _, err = self.proc.communicate(timeout=TIMEOUT)
+        return self.proc.returncode, err
+
+
+@pytest.fixture
+def process_factory() -> Iterator[list[SimulatorProcess]]:
+    started: list[SimulatorProcess] = []
+    yield started
+    for p in started:
+        if p.proc.poll() is None:
+            p.proc.kill()
+            p.proc.communicate(timeout=TIMEOUT)
+
+
+def start(started: list[SimulatorProcess], *options: str, endpoints: int) -> SimulatorProcess:
+    p = SimulatorProcess(*options)
+    started.append(p)
+    p.wait_listening(endpoints)
+    return p
+
+
+def udp_exchange(address: tuple[str, int], frame: bytes) -> bytes:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.settimeout(TIMEOUT)
+        sock.sendto(frame, address)
+        return sock.recv(4096)
+
+
+def test_serves_udp_and_tcp_and_stops_on_sigint(process_factory: list[SimulatorProcess]) -> None:
+    sim = start(
+        process_factory,
+        "--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0", "--node", "10", "--mode", "monitor",
+        endpoints=2,
+    )  # fmt: skip
+    assert sim.banner == "virtual PLC: network 0 node 10 mode MONITOR"
+    reply = udp_exchange(sim.urls["udp"], READ_D100)
+    assert reply[:14] == bytes.fromhex("C0 00 02 00 22 00 00 0A 00 01 01 01 00 00")
+    assert len(reply) == 14 + 20
+    with socket.create_connection(sim.urls["tcp"], timeout=TIMEOUT) as conn:
+        conn.sendall(bytes.fromhex("46494E53 0000000C 00000000 00000000 00000000"))
+        assert conn.recv(24) == node_response(0xEF, 10)
+    code, err = sim.stop(signal.SIGINT)
+    assert code == 0
+    assert "stopped: requests=1 responses=1" in err
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_faults_from_the_command_line(
+    process_factory: list[SimulatorProcess], backend: str
+) -> None:
+    sim = start(
+        process_factory,
+        "--udp", "127.0.0.1:0", "--node", "10", "--end-code", "1103", "--flags", "40",
+        "--commands", "0101", "--seed", "5", "--backend", backend,
+        endpoints=1,
+    )  # fmt: skip
+    reply = udp_exchange(sim.urls["udp"], READ_D100)
+    assert reply == bytes.fromhex("C0 00 02 00 22 00 00 0A 00 01 01 01 11 43")
+    code, err = sim.stop(signal.SIGTERM)
+    assert code == 0
+    assert "end_codes=1 flags=1" in err
+
+
+def test_tcp_refusal_option(process_factory: list[SimulatorProcess]) -> None:
+    sim = start(process_factory, "--tcp", "127.0.0.1:0", "--tcp-refuse", "25", endpoints=1)
+    with socket.create_connection(sim.urls["tcp"], timeout=TIMEOUT) as conn:
+        conn.sendall(bytes.fromhex("46494E53 0000000C 00000000 00000000 00000005"))
+        assert conn.recv(24) == node_response(5, 1, 0x25)
+    assert sim.stop()[0] == 0
+
+
+def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "--udp", "127.0.0.1:0", "--node", "0"]) == 2
+    assert "--node 0 out of range" in capsys.readouterr().err
+    for bad in (["--drop", "2"], ["--udp", "host:port"], ["--delay", "9-1"], ["--mode", "x"]):
+        with pytest.raises(SystemExit) as info:
+            main(["simulate", *bad])
+        assert info.value.code == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("127.0.0.1:0", ("127.0.0.1", 0)),
+        ("0.0.0.0:9600", ("0.0.0.0", 9600)),
+        ("localhost", ("localhost", 9600)),
+        (":9601", ("127.0.0.1", 9601)),
+        ("[::1]:9602", ("::1", 9602)),
+        ("::1", ("::1", 9600)),
+    ],
+)
+def test_endpoint(text: str, expected: tuple[str, int]) -> None:
+    assert endpoint(text) == expected
+
+
+def parse(*options: str) -> argparse.Namespace:
+    return build_parser().parse_args(["simulate", *options])
+
+
+def test_build_plan_default_and_per_command() -> None:
+    plan = build_plan(
+        parse("--drop", "0.5", "--delay", "10-20", "--seed", "3", "--max-concurrent", "4")
+    )
+    assert plan.rule == FaultRule(drop_request=0.5, delay=Delay(0.01, 0.02), late_after=10.0)
+    assert plan.seed == 3
+    assert plan.max_concurrent == 4
+    assert plan.per_command == {}
+    plan = build_plan(parse("--duplicate", "1", "--commands", "0101,0102", "--relay", "1.5"))
+    assert plan.rule == FaultRule()
+    expected = FaultRule(duplicate=1.0, late_after=10.0, relay=(1, 5))
+    assert plan.per_command == {0x0101: expected, 0x0102: expected}
+
+
+def test_a_broken_subcommand_module_does_not_break_simulate(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import aiofins.cli as cli
+
+    monkeypatch.setattr(cli, "SUBCOMMANDS", ("no_such_module", "simulate"))
+    assert main(["simulate", "--node", "300"]) == 2  # simulate still parses and runs
+    with pytest.raises(SystemExit):
+        main(["read", "udp://127.0.0.1", "D0"])
+    err = capsys.readouterr().err
+    assert "commands of cli/no_such_module.py unavailable" in err
+
+
+def test_default_endpoints() -> None:
+    default = ("127.0.0.1", 9600)
+    assert endpoints(parse()) == (default, default)
+    assert endpoints(parse("--tcp", "0.0.0.0:9601")) == (None, ("0.0.0.0", 9601))
+    assert endpoints(parse("--serial", "/dev/ttyUSB0")) == (None, None)
