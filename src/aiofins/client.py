@@ -21,7 +21,7 @@ from .protocol.areas import MemoryAddress
 from .protocol.commands import Request
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite
 from .protocol.endcodes import EndCode
-from .protocol.errors import CommandError
+from .protocol.errors import CommandError, EndCodeError
 from .protocol.header import FinsAddress
 from .protocol.limits import RouteLimits, limits_for
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
@@ -29,6 +29,9 @@ from .session import Response, Session
 from .tags import ReadPlan, compile_tags
 
 R = TypeVar("R")
+
+#: Commands whose response with this end code still carries a complete, shorter result.
+_PARTIAL_RESULTS: dict[int, int] = {0x2102: 0x1104, 0x2140: 0x1104}
 
 AddressLike = str | MemoryAddress
 
@@ -94,16 +97,28 @@ class Client(CommandMethods):
         timeout: float | None = None,
         retries: int | None = None,
     ) -> R:
-        """Send a typed request and parse its response into the operation's result."""
-        response = await self.execute(
-            request.MRC,
-            request.SRC,
-            request.encode(),
-            dest=dest,
-            timeout=timeout,
-            retries=retries,
-            idempotent=request.IDEMPOTENT,
-        )
+        """Send a typed request and parse its response into the operation's result.
+
+        Log reads (2102, 2140) asked for more records than are stored answer them all with end
+        code 1104 (manual 5-3-28/5-3-30); that is returned as a result, with the end code
+        left in :attr:`last_end_code`.
+        """
+        try:
+            response = await self.execute(
+                request.MRC,
+                request.SRC,
+                request.encode(),
+                dest=dest,
+                timeout=timeout,
+                retries=retries,
+                idempotent=request.IDEMPOTENT,
+            )
+        except EndCodeError as exc:
+            partial = _PARTIAL_RESULTS.get((request.MRC << 8) | request.SRC)
+            if partial is None or exc.end_code.code != partial or not exc.data:
+                raise
+            self.last_end_code = exc.end_code
+            return request.decode_response(exc.data)
         return request.decode_response(response.data)
 
     # -- words and bits -----------------------------------------------------------------

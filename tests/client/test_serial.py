@@ -12,9 +12,11 @@ import pytest
 
 from aiofins.connection import connect
 from aiofins.protocol.commands.status import CpuMode
+from aiofins.protocol.errors import EndCodeError
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import run_simulator
+from tests.client.test_all_operations import EXPECTED_END_CODES, run_script
 
 pytestmark = [
     pytest.mark.anyio,
@@ -71,3 +73,17 @@ async def test_corrupted_lines_are_caught_by_the_fcs(pty_pair: tuple[str, str]) 
             assert got == list(range(20))
             assert client.session.stats.malformed > 0
         assert sim.counters.corrupted > 0
+
+
+async def test_every_operation_is_answered_over_host_link(pty_pair: tuple[str, str]) -> None:
+    plc_side, host_side = pty_pair
+    url = f"serial://{host_side}?baudrate=115200"
+    async with run_simulator(VirtualPLC(), serial=plc_side), connect(url, timeout=2) as client:
+        outcomes = await run_script(client)
+    failures = {
+        name: out
+        for name, out in outcomes.items()
+        if isinstance(out, EndCodeError) and EXPECTED_END_CODES.get(name) != out.end_code.code
+    }
+    assert failures == {}
+    assert len(outcomes) == 47
