@@ -1,0 +1,69 @@
+"""I/O memory area access: 0101 read, 0102 write, 0103 fill, 0104 multiple read, 0105 transfer."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ...protocol.commands.memory import (
+    MemoryAreaFill,
+    MemoryAreaRead,
+    MemoryAreaReadResult,
+    MemoryAreaTransfer,
+    MemoryAreaWrite,
+    MultipleMemoryAreaRead,
+    MultipleMemoryAreaReadItem,
+    MultipleMemoryAreaReadResult,
+)
+from ..memory import FILL_AREAS, MULTIPLE_READ_AREAS, READ_AREAS, WRITE_AREAS
+from ._call import Call, Handler, request_of
+
+if TYPE_CHECKING:
+    from ..plc import VirtualPLC
+
+
+def memory_area_read(plc: VirtualPLC, call: Call) -> bytes:
+    req = request_of(call, MemoryAreaRead)
+    a = req.address
+    data = plc.memory.read(a.area_code, a.word, a.bit, req.count, READ_AREAS)
+    return MemoryAreaReadResult(data, req.element_size).encode()
+
+
+def memory_area_write(plc: VirtualPLC, call: Call) -> bytes:
+    req = request_of(call, MemoryAreaWrite)
+    a = req.address
+    plc.memory.write(a.area_code, a.word, a.bit, req.data, req.count, WRITE_AREAS)
+    return b""
+
+
+def memory_area_fill(plc: VirtualPLC, call: Call) -> bytes:
+    req = request_of(call, MemoryAreaFill)
+    a = req.address
+    plc.memory.fill(a.area_code, a.word, a.bit, req.count, req.value)
+    return b""
+
+
+def multiple_memory_area_read(plc: VirtualPLC, call: Call) -> bytes:
+    req = request_of(call, MultipleMemoryAreaRead)
+    items = []
+    # every item is read before anything is returned: one bad item, nothing read
+    for a in req.addresses:
+        raw = plc.memory.read(a.area_code, a.word, a.bit, 1, MULTIPLE_READ_AREAS)
+        items.append(MultipleMemoryAreaReadItem(a.area_code, int.from_bytes(raw, "big")))
+    return MultipleMemoryAreaReadResult(tuple(items)).encode()
+
+
+def memory_area_transfer(plc: VirtualPLC, call: Call) -> bytes:
+    req = request_of(call, MemoryAreaTransfer)
+    s, d = req.source, req.destination
+    plc.memory.area(s.area_code, FILL_AREAS)
+    plc.memory.transfer((s.area_code, s.word, s.bit), (d.area_code, d.word, d.bit), req.count)
+    return b""
+
+
+HANDLERS: dict[int, Handler] = {
+    0x0101: memory_area_read,
+    0x0102: memory_area_write,
+    0x0103: memory_area_fill,
+    0x0104: multiple_memory_area_read,
+    0x0105: memory_area_transfer,
+}

@@ -1,0 +1,334 @@
+"""The virtual PLC core: one FINS command frame in, one response frame out. No sockets.
+
+Address handling (manual 5-1, wire-format §1): a frame is ours when DNA is 0 or our network
+and DA1 is our node, 0 (the local PLC) or FF (broadcast, executed without a response). A
+frame for another network is answered with a relay error (bit 15 + network/node trailer) or
+dropped, as configured. The response swaps the addresses and echoes RSV, GCT, SID and MRC/SRC.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from ..protocol.commands import Request, operation_for
+from ..protocol.endcodes import EndCode
+from ..protocol.errors import DecodeError
+from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
+from . import restrictions
+from .filememory import FileMemory
+from .handlers import HANDLERS, Call, GatewayHandler, default_gateway
+from .memory import IOMemory
+from .state import COMMAND_TOO_SHORT, UNDEFINED_COMMAND, CommandFailed, Mode
+
+BROADCAST_NODE = 0xFF
+LOCAL_NODE = 0x00
+LOG_CAPACITY = 20
+PROGRAM_AREA_BYTES = 0x20000  # 128 KiB of UM (CJ2M-CPU33: 10 K steps; kept simple)
+
+#: (command, codec end code) pairs where the manual prescribes data with the error, so the
+#: handler answers instead of the codec: 0201 over 498 words reads 498 and answers 1108;
+#: 0201 past the end of the area returns what exists with 1104 (manual 5-3-7).
+_HANDLER_DECIDES = frozenset({(0x0201, 0x1108), (0x0201, 0x1104)})
+PARAMETER_WORDS = 8000  # the whole parameter area, code 8000 (manual 5-3-7)
+
+
+#: Error code ranges → (fatal?, bit of the 0601 fatal / non-fatal error word), per the
+#: error codes of 5-3-27 and the 0601 bit layout (wire-format §6, 0601).
+_ERROR_BITS: tuple[tuple[int, int, bool, int], ...] = (
+    (0xC101, 0xC2FF, True, 0x0040),  # FALS
+    (0x80F1, 0x80F1, True, 0x8000),  # memory error
+    (0x80C0, 0x80C7, True, 0x4000),  # I/O bus error
+    (0x80E9, 0x80EA, True, 0x2000),  # duplication error
+    (0x82F0, 0x82F0, True, 0x1000),  # inner board (fatal)
+    (0x80E1, 0x80E1, True, 0x0800),  # too many I/O points
+    (0x80E0, 0x80E0, True, 0x0400),  # I/O setting error
+    (0x80F0, 0x80F0, True, 0x0200),  # program error
+    (0x809F, 0x809F, True, 0x0100),  # cycle time over
+    (0x4101, 0x42FF, False, 0x8000),  # FAL
+    (0x008B, 0x008B, False, 0x2000),  # interrupt task error
+    (0x009A, 0x009A, False, 0x1000),  # basic I/O unit error
+    (0x009B, 0x009B, False, 0x0400),  # PLC Setup error
+    (0x00E7, 0x00E7, False, 0x0200),  # I/O verification error
+    (0x02F0, 0x02F0, False, 0x0100),  # inner board (non-fatal)
+    (0x0200, 0x020F, False, 0x0080),  # CPU Bus Unit error
+    (0x0300, 0x035F, False, 0x0040),  # Special I/O Unit error
+    (0x00A0, 0x00A1, False, 0x0020),  # SYSMAC BUS error
+    (0x00F7, 0x00F7, False, 0x0010),  # battery error
+    (0x0400, 0x040F, False, 0x0008),  # CPU Bus Unit setting error
+    (0x0500, 0x055F, False, 0x0004),  # Special I/O Unit setting error
+)
+
+
+def error_bit(code: int) -> tuple[bool, int]:
+    """(fatal?, error-word bit) of an error code; unknown codes count as non-fatal, no bit."""
+    for low, high, fatal, bit in _ERROR_BITS:
+        if low <= code <= high:
+            return fatal, bit
+    return False, 0
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorRecord:
+    """One error log record (2102): error codes 1 and 2 and when it happened."""
+
+    code1: int
+    code2: int
+    time: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class WriteRecord:
+    """One FINS write access log record (2140): who wrote with which command, when."""
+
+    source: FinsAddress
+    command_code: int
+    time: datetime
+    weekday: int  # as CLOCK READ would have answered then
+
+
+class VirtualPLC:
+    """A CS/CJ CPU Unit answering FINS commands from memory."""
+
+    def __init__(
+        self,
+        *,
+        network: int = 0,
+        node: int = 1,
+        unit: int = 0,
+        mode: Mode = Mode.PROGRAM,
+        model: str = "CJ2M-CPU33",
+        version: str = "02.01",
+        um_read_protected: bool = False,
+        um_write_protected: bool = False,
+        network_write_protection: bool = False,
+        write_allowed_nodes: Iterable[tuple[int, int]] = (),
+        relay_error: int | None = 0x0501,
+        em_banks: int = 25,
+        memory_card: bool = True,
+        em_file_memory: bool = True,
+        clock: Callable[[], float] = time.time,
+        gateway: GatewayHandler = default_gateway,
+    ) -> None:
+        self.address = FinsAddress(network, node, unit)
+        self.memory = IOMemory(em_banks=em_banks, clock=clock)
+        self.mode = mode
+        self.model = model
+        self.version = version
+        self.um_read_protected = um_read_protected
+        self.um_write_protected = um_write_protected
+        self.network_write_protection = network_write_protection
+        self.write_allowed_nodes = frozenset(write_allowed_nodes)
+        #: End code (bit 15 added) answered for another network; ``None`` drops the frame.
+        self.relay_error = relay_error
+        self.clock = clock
+        self.clock_offset = 0.0
+        self.weekday_delta = 0
+        self.gateway = gateway
+        self.access_holder: FinsAddress | None = None
+        self.error_log: list[ErrorRecord] = []
+        self.write_log: list[WriteRecord] = []
+        self.messages: dict[int, str] = {}
+        self.fal_messages: dict[int, str] = {}
+        self.fatal_errors = 0  # 0601 fatal error bits; non-zero sets end-code bit 7
+        self.non_fatal_errors = 0  # 0601 non-fatal error bits; non-zero sets bit 6
+        self.error_code = 0  # highest-priority current error (0601)
+        self.error_message = ""
+        self.current_errors: list[int] = []
+        self.cycle_times: list[int] = [10] * 8  # 0.1 ms units
+        self.cycle_min = 10
+        self.cycle_max = 10
+        self.program = bytearray(PROGRAM_AREA_BYTES)
+        self.program_length = 0
+        self.parameter_memory = bytearray(2 * PARAMETER_WORDS)
+        self.file_memory: dict[int, FileMemory] = {}
+        if memory_card:
+            self.file_memory[0x8000] = FileMemory(capacity=64 * 1024 * 1024, clock=self.now)
+        if em_file_memory:
+            self.file_memory[0x8001] = FileMemory(capacity=512 * 1024, clock=self.now)
+        self.frames_handled = 0
+        self.frames_ignored = 0
+        self.commands: Counter[int] = Counter()
+
+    @property
+    def mode(self) -> Mode:
+        """Operating mode; cyclic task 0's task flag (TK00) is ON while the program runs."""
+        return self._mode
+
+    @mode.setter
+    def mode(self, mode: Mode) -> None:
+        self._mode = Mode(mode)
+        running = int(self._mode is not Mode.PROGRAM)
+        self.memory.task_flags[0] = running
+        self.memory.task_status[0] = running
+
+    # ---- time -------------------------------------------------------------------------------
+
+    def now(self) -> datetime:
+        """The PLC clock: real time plus the offset set by CLOCK WRITE."""
+        return datetime.fromtimestamp(self.clock() + self.clock_offset)
+
+    def set_clock(self, when: datetime, weekday: int | None) -> None:
+        """CLOCK WRITE: move the clock; an omitted day of week keeps its previous value."""
+        previous = self.weekday()
+        self.clock_offset = (when - datetime.fromtimestamp(self.clock())).total_seconds()
+        target = previous if weekday is None else weekday
+        self.weekday_delta = (target - self._weekday(self.now())) % 7
+
+    @staticmethod
+    def _weekday(when: datetime) -> int:
+        return (when.weekday() + 1) % 7  # FINS: 0 = Sunday
+
+    def weekday(self) -> int:
+        """Day of week as 0701 returns it (the PLC does not check it against the date)."""
+        return (self._weekday(self.now()) + self.weekday_delta) % 7
+
+    # ---- logs -------------------------------------------------------------------------------
+
+    def log_error(self, code1: int, code2: int = 0) -> None:
+        """Record an error in the error log (20 records, oldest dropped)."""
+        self.error_log.append(ErrorRecord(code1, code2, self.now()))
+        del self.error_log[:-LOG_CAPACITY]
+
+    def log_write(self, source: FinsAddress, command_code: int) -> None:
+        """Manual 5-3-30: one record per node (overwritten), appended at the end, 20 max."""
+        key = (source.network, source.node, source.unit)
+        self.write_log = [
+            r for r in self.write_log if (r.source.network, r.source.node, r.source.unit) != key
+        ]
+        self.write_log.append(WriteRecord(source, command_code, self.now(), self.weekday()))
+        del self.write_log[:-LOG_CAPACITY]
+
+    def raise_error(self, code: int, *, message: str = "") -> None:
+        """Make an error current (0601 shows it, 2101 clears it) and log it."""
+        if code not in self.current_errors:
+            self.current_errors.append(code)
+        if message:
+            self.error_message = message
+        self.log_error(code)
+        self.refresh_error_state()
+
+    def refresh_error_state(self) -> None:
+        """Recompute the 0601 error words and error code from the current errors."""
+        self.fatal_errors = self.non_fatal_errors = 0
+        for code in self.current_errors:
+            fatal, bit = error_bit(code)
+            if fatal:
+                self.fatal_errors |= bit
+            else:
+                self.non_fatal_errors |= bit
+        self.error_code = self.current_errors[0] if self.current_errors else 0
+        if not self.current_errors:
+            self.error_message = ""
+
+    def start_operation(self) -> None:
+        """PROGRAM → RUN/MONITOR: the maximum and minimum cycle times start afresh."""
+        self.cycle_min = self.cycle_max = self.cycle_times[-1]
+
+    # ---- frames -----------------------------------------------------------------------------
+
+    def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
+        """Answer one FINS command frame; ``None`` when there is nothing to send back.
+
+        ``from_network=False`` marks a frame from the CPU Unit's own serial port (Host Link):
+        network write protection does not apply to it.
+        """
+        try:
+            command = CommandFrame.decode(frame)
+        except DecodeError:
+            self.frames_ignored += 1
+            return None
+        response = self.handle(command, from_network=from_network)
+        return None if response is None else response.encode()
+
+    def handle(self, command: CommandFrame, *, from_network: bool = True) -> ResponseFrame | None:
+        """Answer one decoded command frame (see the module docstring for addressing)."""
+        header = command.header
+        dest = header.destination
+        if dest.network not in (0, self.address.network):
+            self.frames_ignored += 1
+            if self.relay_error is None or not header.response_required:
+                return None
+            return self._reply(command, 0x8000 | self.relay_error, b"", relay=True)
+        if dest.node not in (self.address.node, LOCAL_NODE, BROADCAST_NODE):
+            self.frames_ignored += 1
+            return None
+        self.frames_handled += 1
+        self.commands[command.command_code] += 1
+        end_code, data = self.execute(command, from_network=from_network)
+        if dest.node == BROADCAST_NODE or not header.response_required:
+            return None
+        return self._reply(command, end_code, data)
+
+    def _reply(
+        self, command: CommandFrame, end_code: int, data: bytes, relay: bool = False
+    ) -> ResponseFrame:
+        h = command.header
+        me = FinsAddress(h.destination.network, self.address.node, h.destination.unit)
+        reply = Header(h.source, me, sid=h.sid, icf=0xC0, rsv=h.rsv, gct=h.gct)
+        if not relay:
+            if self.fatal_errors:
+                end_code |= 0x0080
+            if self.non_fatal_errors:
+                end_code |= 0x0040
+        trailer = (self.address.network, self.address.node) if relay else None
+        return ResponseFrame(reply, command.mrc, command.src, EndCode(end_code), data, trailer)
+
+    # ---- execution --------------------------------------------------------------------------
+
+    def conditions(
+        self, source: FinsAddress, *, from_network: bool = True
+    ) -> restrictions.Conditions:
+        """The restriction-table conditions for a command from ``source``."""
+        refused = (
+            from_network
+            and self.network_write_protection
+            and (source.network, source.node) not in self.write_allowed_nodes
+        )
+        return restrictions.Conditions(
+            mode=self.mode,
+            access_right_elsewhere=self.access_holder is not None and self.access_holder != source,
+            um_read_protected=self.um_read_protected,
+            um_write_protected=self.um_write_protected,
+            network_write_refused=refused,
+        )
+
+    def execute(self, command: CommandFrame, *, from_network: bool = True) -> tuple[int, bytes]:
+        """Run one command: (end code, response data)."""
+        code, params, source = command.command_code, command.params, command.header.source
+        handler = HANDLERS.get(code)
+        if handler is None:
+            return UNDEFINED_COMMAND, b""
+        try:
+            # The protocol codec is the judge of a malformed command, when it knows the code.
+            op = operation_for(command.mrc, command.src, params)
+        except DecodeError:
+            op = None
+        request: Request[Any] | None = None
+        try:
+            if op is not None:
+                request = op.decode(params)
+        except DecodeError as exc:
+            if (code, exc.end_code) not in _HANDLER_DECIDES:
+                return exc.end_code or COMMAND_TOO_SHORT, b""
+        if restrictions.is_write_command(code, params):
+            # manual 5-3-30: the log keeps every FINS write access, whatever the setting
+            self.log_write(source, code)
+        refused = restrictions.check(
+            code, params, self.conditions(source, from_network=from_network)
+        )
+        if refused is not None:
+            holder = self.access_holder
+            if code == 0x0C01 and refused == restrictions.ACCESS_RIGHT_HELD and holder:
+                return refused, bytes((holder.network, holder.node, holder.unit))
+            return refused, b""
+        try:
+            return 0, handler(self, Call(code, params, source, request))
+        except CommandFailed as exc:
+            return exc.end_code, exc.data
+        except DecodeError as exc:
+            return exc.end_code or COMMAND_TOO_SHORT, b""
