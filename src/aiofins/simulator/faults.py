@@ -332,6 +332,11 @@ class Dispatcher:
         self.in_flight = 0
         self._held: tuple[list[bytes], Send, str] | None = None
 
+    @property
+    def held_count(self) -> int:
+        """Responses held back by the reorder fault, waiting for the next response."""
+        return 0 if self._held is None else 1
+
     async def dispatch(
         self,
         request: bytes,

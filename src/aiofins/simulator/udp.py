@@ -2,11 +2,66 @@
 
 from __future__ import annotations
 
+import asyncio
+import socket
+from typing import Any, cast
+
 import anyio
+import sniffio
 from anyio.abc import TaskGroup, TaskStatus, UDPSocket
 
 from ..protocol.tcp import DEFAULT_PORT
-from .faults import Dispatcher
+from .faults import Dispatcher, FaultRule
+
+_NO_FAULTS = FaultRule()
+
+
+class _FastProtocol(asyncio.DatagramProtocol):
+    """asyncio only: answer fault-free requests straight from the event loop's callback."""
+
+    def __init__(self, server: UdpServer, tg: TaskGroup) -> None:
+        self.server = server
+        self.tg = tg
+        self.transport: asyncio.DatagramTransport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.DatagramTransport, transport)
+
+    def datagram_received(self, data: bytes, addr: Any) -> None:
+        dispatcher = self.server.dispatcher
+        plan = dispatcher.plan
+        transport = self.transport
+        assert transport is not None
+        if (
+            plan.rule == _NO_FAULTS
+            and not plan.per_command
+            and plan.max_concurrent is None
+            and plan.log is None
+            and dispatcher.held_count == 0
+        ):
+            # No fault can apply: skip the decision machinery (the common, fast case).
+            plan.counters.requests += 1
+            try:
+                reply = dispatcher.plc.handle_frame(data)
+            except Exception:
+                plan.counters.handler_errors += 1
+                return
+            if reply is not None:
+                plan.counters.responses += 1
+                transport.sendto(reply, addr)
+            return
+
+        async def send(reply: bytes) -> None:
+            transport.sendto(reply, addr)
+
+        peer = f"udp:{addr[0]}:{addr[1]}"
+        self.tg.start_soon(self._dispatch, data, send, peer)
+
+    async def _dispatch(self, data: bytes, send: Any, peer: str) -> None:
+        await self.server.dispatcher.dispatch(data, send, peer=peer, task_group=self.tg)
+
+    def error_received(self, exc: Exception) -> None:
+        pass  # e.g. ICMP port unreachable from a client that went away
 
 
 class UdpServer:
@@ -31,6 +86,9 @@ class UdpServer:
 
     async def serve(self, *, task_status: TaskStatus[int] = anyio.TASK_STATUS_IGNORED) -> None:
         """Receive and answer datagrams until cancelled."""
+        if sniffio.current_async_library() == "asyncio":
+            await self._serve_asyncio(task_status)
+            return
         sock = await anyio.create_udp_socket(local_host=self.host, local_port=self.requested_port)
         async with sock, anyio.create_task_group() as tg:
             self.port = int(sock.extra(anyio.abc.SocketAttribute.local_port))
@@ -42,6 +100,22 @@ class UdpServer:
                     continue  # e.g. an ICMP port-unreachable surfaced on the socket
                 # IPv6 addresses come with flow info and scope id: keep host and port
                 await self._handle(sock, tg, data, str(address[0]), int(address[1]))
+
+    async def _serve_asyncio(self, task_status: TaskStatus[int]) -> None:
+        loop = asyncio.get_running_loop()
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        async with anyio.create_task_group() as tg:
+            transport, _ = await loop.create_datagram_endpoint(
+                lambda: _FastProtocol(self, tg),
+                local_addr=(self.host, self.requested_port),
+                family=family,
+            )
+            try:
+                self.port = int(transport.get_extra_info("sockname")[1])
+                task_status.started(self.port)
+                await anyio.sleep_forever()
+            finally:
+                transport.close()
 
     async def _handle(
         self, sock: UDPSocket, tg: TaskGroup, data: bytes, host: str, port: int
