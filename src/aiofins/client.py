@@ -30,6 +30,19 @@ from .tags import ReadPlan, compile_tags
 
 R = TypeVar("R")
 
+#: End codes that usually mean the FINS addresses (or routing tables) are wrong.
+_ADDRESSING_END_CODES = frozenset({0x0105, 0x0201, 0x0202, 0x0205, 0x1004, 0x1005})
+
+
+def _addressing_hint(dest: FinsAddress, source: FinsAddress) -> str:
+    return (
+        f"Check the FINS addresses: destination {dest} (DNA.DA1.DA2: the PLC's network, its "
+        f"node number as set on its Ethernet/serial unit, unit 0 for the CPU) and source "
+        f"{source} (SA1 must be a node the PLC accepts and no other client uses), and the "
+        "routing tables for a remote network"
+    )
+
+
 #: Commands whose response with this end code still carries a complete, shorter result.
 _PARTIAL_RESULTS: dict[int, int] = {0x2102: 0x1104, 0x2140: 0x1104}
 
@@ -77,15 +90,21 @@ class Client(CommandMethods):
 
         Non-normal end codes raise :class:`~aiofins.EndCodeError` subclasses.
         """
-        response = await self.session.request(
-            mrc,
-            src,
-            params,
-            dest=dest or self.dest,
-            timeout=timeout,
-            idempotent=idempotent,
-            retries=retries,
-        )
+        target = dest or self.dest
+        try:
+            response = await self.session.request(
+                mrc,
+                src,
+                params,
+                dest=target,
+                timeout=timeout,
+                idempotent=idempotent,
+                retries=retries,
+            )
+        except EndCodeError as exc:
+            if exc.end_code.code in _ADDRESSING_END_CODES:
+                exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
+            raise
         self.last_end_code = response.end_code
         return response
 

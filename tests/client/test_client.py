@@ -113,3 +113,12 @@ async def test_timeout_is_raised_and_the_next_call_works(sim: Simulator, url: st
             await plc.cpu_unit_status_read()
         assert await plc.read("D0", 1) == [0]
         assert plc.session.stats.timeouts == 1
+
+
+async def test_addressing_end_codes_say_what_to_check(sim: Simulator, url: str) -> None:
+    sim.plan.per_command[0x0101] = FaultRule(end_code=0x1005)
+    async with connect(url, timeout=1) as plc:
+        with pytest.raises(aiofins.EndCodeError) as info:
+            await plc.read("D0")
+        assert info.value.end_code.code == 0x1005
+        assert "Check the FINS addresses: destination 0.1.0" in str(info.value)
