@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import anyio
 import pytest
@@ -115,3 +116,30 @@ def test_demo_shows_good_values(tmp_path: object) -> None:
     assert shown >= 2
     assert "temperature" in text and "LOT-0042" in text
     assert "error" not in text and "stale" not in text
+
+
+def test_backup_restore_and_files(
+    sim_url: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    image = tmp_path / "program.bin"
+    assert run(capsys, "backup", sim_url, str(image))[0] == 0
+    assert image.stat().st_size > 0 and image.stat().st_size % 4 == 0
+    code, out, err = run(capsys, "restore", sim_url, str(image), "--stop")
+    assert code == 0 and "restored" in out, err
+    params = tmp_path / "params.json"
+    assert run(capsys, "backup", sim_url, str(params), "--what", "parameters")[0] == 0
+    assert set(json.loads(params.read_text())) == {"8010", "8012", "8013", "8002"}
+    assert run(capsys, "restore", sim_url, str(params), "--what", "parameters")[0] == 0
+
+    local = tmp_path / "notes.txt"
+    local.write_bytes(b"line\n" * 1000)
+    assert run(capsys, "files", sim_url, "put", "NOTES.TXT", str(local))[0] == 0
+    code, out, _ = run(capsys, "files", sim_url, "list", "--json")
+    sizes = {e["name"]: e["size"] for e in json.loads(out)}
+    assert code == 0 and sizes["NOTES.TXT"] == 5000
+    back = tmp_path / "back.txt"
+    assert run(capsys, "files", sim_url, "get", "NOTES.TXT", str(back))[0] == 0
+    assert back.read_bytes() == local.read_bytes()
+    assert run(capsys, "files", sim_url, "delete", "NOTES.TXT")[0] == 0
+    code, out, _ = run(capsys, "files", sim_url, "list", "--json")
+    assert "NOTES.TXT" not in out
