@@ -1,0 +1,500 @@
+"""The session: SIDs, the in-flight table, deadlines, retries and response matching.
+
+Hot path (one request): take a slot of the destination, pick a SID, build the frame from a
+pre-built header prefix, register the request in one dict keyed by the 32-bit
+``SNA SA1 SA2 SID`` the reply will carry, push its deadline on one heap, send, await one
+future. The transport pushes each reply to :meth:`Session.frame_received`, which finds the
+request with a single dict lookup and resolves its future. No task and no timer per request:
+one watcher task sleeps until the earliest deadline of the heap.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import math
+from time import monotonic
+from types import TracebackType
+from typing import Any
+
+import anyio
+from anyio.abc import TaskGroup
+
+from ..protocol.endcodes import EndCode
+from ..protocol.errors import (
+    CommandError,
+    ConnectionLost,
+    FinsError,
+    FinsTimeout,
+    RelayError,
+    error_for_end_code,
+)
+from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
+from ..transport.base import Transport, is_asyncio
+from .background import Background
+from .response import RING_MASK, Response, SessionStats
+from .slots import (
+    AsyncioPending,
+    DestState,
+    EventPending,
+    Pending,
+    SlotQueue,
+    SlotTimeout,
+)
+
+_NORMAL = EndCode(0)
+_BUSY_CODES = (0x2604, 0x2605)
+
+
+class Session:
+    """Multiplexes FINS requests over one transport.
+
+    Use as ``async with Session(transport, source=..., dest=...) as s: await s.request(...)``.
+    ``timeout`` is per attempt (waiting for a free slot and waiting for the reply are each
+    bounded by it). Reads (``idempotent=True``) are retried ``retries`` times after a timeout,
+    each time with a fresh SID; other requests only if the caller passes ``retries``.
+    End codes 2604/2605 (busy) are retried ``busy_retries`` times with a growing pause, as the
+    command was not executed.
+    """
+
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        source: FinsAddress,
+        dest: FinsAddress,
+        gct: int = DEFAULT_GCT,
+        max_in_flight: int = 5,
+        timeout: float = 2.0,
+        retries: int = 2,
+        busy_retries: int = 3,
+        busy_backoff: float = 0.01,
+        quarantine_factor: float = 2.0,
+        reconnect_backoff: tuple[float, float] = (0.05, 5.0),
+    ) -> None:
+        if not 0 <= gct <= 0xFF:
+            raise CommandError(f"GCT {gct} out of range 0..255")
+        if not 1 <= max_in_flight <= 255:
+            raise CommandError(f"max_in_flight {max_in_flight} out of range 1..255")
+        if timeout <= 0:
+            raise CommandError(f"timeout {timeout} must be positive")
+        self.transport = transport
+        self.source = source
+        self.dest = dest
+        self.gct = gct
+        self.timeout = timeout
+        self.retries = retries
+        self.busy_retries = busy_retries
+        self.busy_backoff = busy_backoff
+        self.quarantine_factor = quarantine_factor
+        self.reconnect_backoff = reconnect_backoff
+        limit = transport.max_in_flight
+        self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
+        #: One request on the line at a time across all destinations (serial links).
+        self._shared_slots = limit == 1
+        self._pending: dict[int, Pending] = {}
+        self._quarantine: dict[int, float] = {}
+        self._recent: dict[int, None] = {}
+        self._dests: dict[FinsAddress, DestState] = {}
+        self._slots: dict[Any, SlotQueue] = {}
+        self._last_dest: FinsAddress | None = None
+        self._last_state: Any = None
+        self._heap: list[tuple[float, int, Pending]] = []
+        self._seq = 0
+        self._timer_at = math.inf
+        self._timer_scope: anyio.CancelScope | None = None
+        self._tg: TaskGroup | None = None
+        self._background: Background | None = None
+        self._asyncio = False
+        self._loop: Any = None  # the running asyncio loop, if any
+        self._closed = False
+        self._open_lock: anyio.Lock | None = None
+        self._backoff = 0.0
+        self._lost_exc: BaseException | None = None
+        self.stats = SessionStats(self._pending)
+
+    # ----------------------------------------------------------------- lifecycle
+
+    async def __aenter__(self) -> Session:
+        self._asyncio = is_asyncio()
+        if self._asyncio:
+            self._loop = asyncio.get_running_loop()
+        self._open_lock = anyio.Lock()
+        tg = anyio.create_task_group()
+        await tg.__aenter__()
+        self._tg = tg
+        self._background = Background(tg)
+        try:
+            self._background.start_soon(self._deadline_watcher)
+            await self._ensure_open()
+        except BaseException as exc:
+            await self.aclose()
+            self._tg = None
+            await tg.__aexit__(None, None, None)
+            raise exc
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        await self.aclose()
+        tg = self._tg
+        if tg is not None:
+            self._tg = None
+            # Our own tasks are cancelled by now; let the caller's exception pass unwrapped.
+            await tg.__aexit__(None, None, None)
+        return None
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    async def aclose(self) -> None:
+        """Fail every request in flight or queued with :class:`ConnectionLost`; close."""
+        if self._closed:
+            return
+        self._closed = True
+        self._fail_all(ConnectionLost(f"session to {self.transport.description} closed"))
+        for q in self._slots.values():
+            q.fail_waiters(ConnectionLost("session closed"))
+        if self._background is not None:
+            self._background.cancel_all()
+        with anyio.CancelScope(shield=True):
+            await self.transport.aclose()
+
+    async def _ensure_open(self) -> None:
+        if self.transport.is_open:
+            return
+        if self._closed:
+            raise ConnectionLost(f"session to {self.transport.description} is closed")
+        if self._background is None or self._open_lock is None:
+            raise RuntimeError("Session is not running: use 'async with Session(...)'")
+        async with self._open_lock:
+            if self.transport.is_open:
+                return
+            if self._backoff:
+                await anyio.sleep(self._backoff)
+            try:
+                await self.transport.open(self, self._background)
+            except (OSError, FinsError) as exc:
+                low, high = self.reconnect_backoff
+                self._backoff = min(high, max(low, self._backoff * 2))
+                if isinstance(exc, FinsError):
+                    raise
+                raise ConnectionLost(
+                    f"cannot connect to {self.transport.description}: {exc}"
+                ) from exc
+            self._backoff = 0.0
+            self._lost_exc = None
+            self.stats.connects += 1
+            node = self.transport.local_node
+            if node is not None and node != self.source.node:
+                self.source = FinsAddress(self.source.network, node, self.source.unit)
+                for state in self._dests.values():
+                    state.prefix = self._prefix(state.address)
+
+    # ----------------------------------------------------------------- transport sink
+
+    def frame_received(self, frame: bytes, _addr: object = None) -> None:
+        """Called by the transport for each whole frame; never raises.
+
+        (The unused second argument lets asyncio call this as ``datagram_received``.)
+        """
+        if len(frame) < 14:
+            self.stats.malformed += 1
+            return
+        key = (frame[6] << 24) | (frame[7] << 16) | (frame[8] << 8) | frame[9]
+        p = self._pending.get(key)
+        if p is None:
+            p = self._match_wildcard(key)
+            if p is None and frame[12] & 0x80 and len(frame) >= 16:
+                p = self._match_relay_error(frame)
+            if p is None:
+                self._unmatched(key)
+                return
+            key = p.key
+        if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
+            self.stats.mismatched += 1
+            return
+        if frame[12] & 0x80 and len(frame) < 16:
+            self.stats.malformed += 1
+            return
+        del self._pending[key]
+        self._recent[key] = None
+        p.done = True
+        p.wake(frame)
+        stats = self.stats  # latency bookkeeping inlined: this runs once per reply
+        latency = monotonic() - p.sent_at
+        n = stats._lat_count
+        stats._lat_count = n + 1
+        stats._lat_sum += latency
+        stats._lat_ring[n & RING_MASK] = latency
+        heap = self._heap
+        while heap and heap[0][2].done:
+            heapq.heappop(heap)
+        if len(heap) > 64 + 4 * len(self._pending):
+            # A slow request at the top keeps completed ones below it: compact, O(n) rarely.
+            heap[:] = [entry for entry in heap if not entry[2].done]
+            heapq.heapify(heap)
+
+    def _match_wildcard(self, key: int) -> Pending | None:
+        # A request to network 0 (local) or node 0 may be answered with the real numbers.
+        pending = self._pending
+        for mask in (0x00FFFFFF, 0xFF00FFFF, 0x0000FFFF):
+            p = pending.get(key & mask)
+            if p is not None:
+                return p
+        return None
+
+    def _match_relay_error(self, frame: bytes) -> Pending | None:
+        """A relay error comes from the relay point, not from the destination we asked.
+
+        Match it on SID and command code alone when exactly one request fits (preferring the
+        one whose destination network the reply names); never guess between several.
+        """
+        sid, mrc, src = frame[9], frame[10], frame[11]
+        fits = [
+            p for k, p in self._pending.items() if k & 0xFF == sid and p.mrc == mrc and p.src == src
+        ]
+        if len(fits) > 1:
+            fits = [p for p in fits if p.key >> 24 == frame[6]]
+        return fits[0] if len(fits) == 1 else None
+
+    def _unmatched(self, key: int) -> None:
+        stats = self.stats
+        q = self._quarantine
+        for k in (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF):
+            if k in q:
+                stats.late_replies += 1
+                return
+        for k in (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF):
+            if k in self._recent:
+                stats.duplicates += 1
+                return
+        stats.unsolicited += 1
+
+    def frame_dropped(self, reason: str) -> None:
+        self.stats.malformed += 1
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        if self._closed:
+            return
+        if isinstance(exc, FinsError):
+            err: FinsError = exc
+        else:
+            err = ConnectionLost(f"connection to {self.transport.description} lost: {exc}")
+            err.__cause__ = exc
+        self._lost_exc = err
+        self._fail_all(err)
+
+    def _fail_all(self, exc: BaseException) -> None:
+        pending = list(self._pending.values())
+        self._pending.clear()
+        for p in pending:
+            p.done = True
+            p.fail(exc)
+        self._heap.clear()
+
+    # ----------------------------------------------------------------- deadlines
+
+    async def _deadline_watcher(self) -> None:
+        """The only timer: sleeps until the earliest deadline in the heap, expires what is due."""
+        while True:
+            self._expire(monotonic())
+            heap = self._heap
+            at = heap[0][0] if heap else math.inf
+            with anyio.CancelScope() as scope:
+                self._timer_scope = scope
+                self._timer_at = at
+                if at != math.inf:
+                    scope.deadline = anyio.current_time() + (at - monotonic())
+                await anyio.sleep_forever()
+            self._timer_scope = None
+
+    def _arm(self, deadline: float) -> None:
+        scope = self._timer_scope
+        if deadline < self._timer_at and scope is not None:
+            self._timer_at = deadline
+            scope.deadline = anyio.current_time() + (deadline - monotonic())
+
+    def _expire(self, now: float) -> None:
+        heap = self._heap
+        while heap:
+            deadline, _, p = heap[0]
+            if not p.done:
+                if deadline > now:
+                    return
+                self._pending.pop(p.key, None)
+                p.done = True
+                self._quarantine[p.key] = now + self.quarantine_factor * (deadline - p.sent_at)
+                self.stats.timeouts += 1
+                p.fail(FinsTimeout("request timed out"))
+            heapq.heappop(heap)
+
+    # ----------------------------------------------------------------- requests
+
+    def _dest_state(self, dest: FinsAddress) -> DestState:
+        state = self._dests.get(dest)
+        if state is None:
+            if self._shared_slots:
+                slots = self._slots.get(None)
+                if slots is None:
+                    slots = self._slots[None] = SlotQueue(self.max_in_flight)
+            else:
+                slots = self._slots[dest] = SlotQueue(self.max_in_flight)
+            state = self._dests[dest] = DestState(dest, self._prefix(dest), slots)
+        self._last_dest, self._last_state = dest, state
+        return state
+
+    def _prefix(self, dest: FinsAddress) -> bytes:
+        """ICF RSV GCT DNA DA1 DA2 SNA SA1 SA2: the header before the SID."""
+        s = self.source
+        return bytes(
+            (0x80, 0, self.gct, dest.network, dest.node, dest.unit, s.network, s.node, s.unit)
+        )
+
+    def _allocate_sid(self, state: DestState) -> int | None:
+        pending, quarantine = self._pending, self._quarantine
+        base, sid = state.base, state.cursor
+        now = 0.0
+        for _ in range(256):
+            key = base | sid
+            sid = (sid + 1) & 0xFF
+            if key in pending:
+                continue
+            if quarantine:
+                until = quarantine.get(key)
+                if until is not None:
+                    now = now or monotonic()
+                    if until > now:
+                        continue
+                    del quarantine[key]
+            state.cursor = sid
+            return key
+        return None
+
+    async def request(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+    ) -> Response:
+        """Send one command and return its normal-completion response.
+
+        Raises the :class:`EndCodeError` subclass for the end code (:class:`RelayError` for
+        bit 15), :class:`FinsTimeout` when every attempt timed out, :class:`ConnectionLost`
+        when the link failed or the session closed.
+        """
+        if dest is None:
+            dest = self.dest
+        if timeout is None:
+            timeout = self.timeout
+        if retries is None:
+            retries = self.retries if idempotent else 0
+        if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
+            raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
+        if len(params) > MAX_PARAMETER_SIZE:
+            raise CommandError(
+                f"{len(params)} parameter bytes exceed the FINS limit of {MAX_PARAMETER_SIZE}"
+            )
+        attempt = busy = 0
+        while True:
+            try:
+                frame = await self._attempt(dest, mrc, src, params, timeout)
+            except FinsTimeout as exc:
+                if attempt >= retries or isinstance(exc, SlotTimeout):
+                    raise
+                attempt += 1
+                self.stats.retries += 1
+                continue
+            raw = (frame[12] << 8) | frame[13]
+            if not raw & 0xFF3F:
+                self.stats.completed += 1
+                return Response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
+            end_code = EndCode(raw)
+            if end_code.code in _BUSY_CODES and busy < self.busy_retries:
+                self.stats.busy_retries += 1
+                await anyio.sleep(self.busy_backoff * (2**busy))
+                busy += 1
+                continue
+            self.stats.end_code_errors += 1
+            command_code = (mrc << 8) | src
+            if end_code.relay_error:
+                raise RelayError(
+                    end_code,
+                    network=frame[14],
+                    node=frame[15],
+                    command_code=command_code,
+                    data=frame[16:],
+                )
+            raise error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+
+    async def _attempt(
+        self, dest: FinsAddress, mrc: int, src: int, params: bytes, timeout: float
+    ) -> bytes:
+        """One attempt with a fresh SID; returns the matched reply frame."""
+        transport = self.transport
+        if not transport.is_open:
+            await self._ensure_open()
+        state = self._last_state if dest is self._last_dest else self._dest_state(dest)
+        slots = state.slots
+        if slots.in_flight < slots.limit and not slots.waiters:
+            slots.in_flight += 1
+        else:
+            await slots.acquire(timeout, f"{dest}")
+        try:
+            key = self._allocate_sid(state)
+            while key is None:  # all 256 SIDs busy or quarantined: wait for the first release
+                await anyio.sleep(min(0.01, timeout))
+                key = self._allocate_sid(state)
+            if self._asyncio:
+                fut = self._loop.create_future()
+                p: Pending = AsyncioPending(key, mrc, src, fut)
+            else:
+                p = EventPending(key, mrc, src)
+            p.sent_at = now = monotonic()
+            p.deadline = deadline = now + timeout
+            self._pending[key] = p
+            self._seq += 1
+            heapq.heappush(self._heap, (deadline, self._seq, p))
+            if deadline < self._timer_at:
+                self._arm(deadline)
+            frame = state.prefix + bytes((key & 0xFF, mrc, src)) + params
+            try:
+                fast_send = transport.fast_send
+                if fast_send is not None:
+                    fast_send(frame)
+                else:
+                    await transport.send(frame)
+                if self._asyncio:
+                    return await fut  # type: ignore[no-any-return]
+                return await p.wait()
+            except FinsTimeout:
+                raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
+            except BaseException:
+                if not p.done:  # cancelled or failed to send: the reply may still come
+                    p.done = True
+                    self._pending.pop(key, None)
+                    self._quarantine[key] = monotonic() + self.quarantine_factor * timeout
+                    self.stats.cancelled += 1
+                raise
+        finally:
+            slots.release()
+
+    def _timeout_message(self, dest: FinsAddress, mrc: int, src: int, timeout: float) -> str:
+        s = self.source
+        return (
+            f"no response to command {mrc:02X}{src:02X} from {dest} within {timeout} s "
+            f"via {self.transport.description}. Check the destination node (DA1={dest.node}) "
+            f"and unit (DA2={dest.unit}) match the PLC, that our source node (SA1={s.node}) "
+            f"is not used by another client and is allowed by the PLC's node settings, "
+            f"the port, and that the PLC is reachable"
+        )

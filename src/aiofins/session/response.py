@@ -1,0 +1,135 @@
+"""What a request returns, and the session's counters."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ..protocol.endcodes import EndCode
+from ..protocol.header import Header
+
+if TYPE_CHECKING:
+    from collections.abc import Sized
+
+_RING = 1024  # latencies kept for the p99 estimate (a power of two)
+RING_MASK = _RING - 1
+
+
+@dataclass(frozen=True, slots=True)
+class Response:
+    """A normal-completion response (flags 0040/0080 included, relay errors never).
+
+    ``frame`` is the whole response frame as received; ``data`` the bytes after the end code.
+    The header is decoded only when asked for.
+    """
+
+    end_code: EndCode
+    data: bytes
+    frame: bytes
+
+    @property
+    def header(self) -> Header:
+        return Header.decode(self.frame)
+
+    @property
+    def mrc(self) -> int:
+        return self.frame[10]
+
+    @property
+    def src(self) -> int:
+        return self.frame[11]
+
+    @property
+    def command_code(self) -> int:
+        return (self.frame[10] << 8) | self.frame[11]
+
+    @property
+    def relay(self) -> tuple[int, int] | None:
+        """Always ``None`` here: a relay error (bit 15) raises :class:`RelayError` instead."""
+        return None
+
+    @property
+    def fatal_cpu_error(self) -> bool:
+        """End code bit 7 (0080): the PLC has a fatal CPU error; the command still worked."""
+        return self.end_code.fatal_cpu_error
+
+    @property
+    def non_fatal_cpu_error(self) -> bool:
+        """End code bit 6 (0040): the PLC has a non-fatal CPU error; the command worked."""
+        return self.end_code.non_fatal_cpu_error
+
+
+class SessionStats:
+    """Counters of one session; cheap to update on the hot path, read at any time."""
+
+    __slots__ = (
+        "_lat_count",
+        "_lat_ring",
+        "_lat_sum",
+        "_pending",
+        "busy_retries",
+        "cancelled",
+        "completed",
+        "connects",
+        "duplicates",
+        "end_code_errors",
+        "late_replies",
+        "malformed",
+        "mismatched",
+        "retries",
+        "timeouts",
+        "unsolicited",
+    )
+
+    def __init__(self, pending: Sized) -> None:
+        self._pending = pending
+        self.completed = 0
+        self.timeouts = 0
+        self.cancelled = 0
+        self.late_replies = 0
+        self.duplicates = 0
+        self.unsolicited = 0
+        self.mismatched = 0
+        self.malformed = 0
+        self.retries = 0
+        self.busy_retries = 0
+        self.end_code_errors = 0
+        self.connects = 0
+        self._lat_sum = 0.0
+        self._lat_count = 0
+        self._lat_ring: list[float] = [0.0] * _RING
+
+    @property
+    def in_flight(self) -> int:
+        """Requests sent and not yet answered, timed out or cancelled."""
+        return len(self._pending)
+
+    def record_latency(self, seconds: float) -> None:
+        """Add one round-trip time (the session inlines the same steps on its hot path)."""
+        n = self._lat_count
+        self._lat_count = n + 1
+        self._lat_sum += seconds
+        self._lat_ring[n & RING_MASK] = seconds
+
+    @property
+    def latency_mean(self) -> float:
+        """Mean round-trip time in seconds over every completed request (0.0 if none)."""
+        return self._lat_sum / self._lat_count if self._lat_count else 0.0
+
+    @property
+    def latency_p99(self) -> float:
+        """99th percentile round-trip time in seconds over the last 1,024 replies."""
+        ring = sorted(self._lat_ring[: min(self._lat_count, _RING)])
+        return ring[min(len(ring) - 1, int(len(ring) * 0.99))] if ring else 0.0
+
+    def as_dict(self) -> dict[str, float]:
+        names = [n for n in self.__slots__ if not n.startswith("_")]
+        out: dict[str, float] = {n: getattr(self, n) for n in sorted(names)}
+        out["in_flight"] = self.in_flight
+        out["latency_mean"] = self.latency_mean
+        out["latency_p99"] = self.latency_p99
+        return out
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}={v:.6g}" for k, v in self.as_dict().items())
+        return f"SessionStats({inner})"

@@ -1,0 +1,177 @@
+"""Per-request waiters and the per-destination in-flight limit (FIFO, cancellation-safe)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections import deque
+
+import anyio
+
+from ..protocol.errors import FinsTimeout
+from ..protocol.header import FinsAddress
+
+
+class Pending:
+    """One request on the wire: what its reply must carry and how to wake its caller."""
+
+    __slots__ = ("deadline", "done", "key", "mrc", "sent_at", "src")
+
+    def __init__(self, key: int, mrc: int, src: int) -> None:
+        self.key = key
+        self.mrc = mrc
+        self.src = src
+        self.done = False
+        self.deadline = 0.0
+        self.sent_at = 0.0
+
+    def wake(self, frame: bytes) -> None:
+        raise NotImplementedError
+
+    def fail(self, exc: BaseException) -> None:
+        raise NotImplementedError
+
+    async def wait(self) -> bytes:
+        raise NotImplementedError
+
+
+class AsyncioPending(Pending):
+    """Waits on a bare asyncio future: the cheapest wake-up asyncio has."""
+
+    __slots__ = ("fut",)
+
+    def __init__(self, key: int, mrc: int, src: int, fut: asyncio.Future[bytes]) -> None:
+        self.key = key
+        self.mrc = mrc
+        self.src = src
+        self.done = False
+        self.fut = fut
+
+    def wake(self, frame: bytes) -> None:
+        if not self.fut.done():
+            self.fut.set_result(frame)
+
+    def fail(self, exc: BaseException) -> None:
+        if not self.fut.done():
+            self.fut.set_exception(exc)
+
+    async def wait(self) -> bytes:
+        return await self.fut
+
+
+class EventPending(Pending):
+    """Waits on an anyio event (trio and other backends)."""
+
+    __slots__ = ("event", "result")
+
+    def __init__(self, key: int, mrc: int, src: int) -> None:
+        Pending.__init__(self, key, mrc, src)
+        self.event = anyio.Event()
+        self.result: bytes | BaseException | None = None
+
+    def wake(self, frame: bytes) -> None:
+        if self.result is None:
+            self.result = frame
+            self.event.set()
+
+    def fail(self, exc: BaseException) -> None:
+        if self.result is None:
+            self.result = exc
+            self.event.set()
+
+    async def wait(self) -> bytes:
+        await self.event.wait()
+        result = self.result
+        if isinstance(result, BaseException):
+            raise result
+        assert result is not None
+        return result
+
+
+class SlotTimeout(FinsTimeout):
+    """No request slot became free in time (the destination's queue did not drain).
+
+    Not retried: a retry would only queue again behind the same requests.
+    """
+
+
+class _Waiter:
+    __slots__ = ("error", "event", "granted")
+
+    def __init__(self) -> None:
+        self.event = anyio.Event()
+        self.granted = False
+        self.error: BaseException | None = None
+
+
+class SlotQueue:
+    """At most ``limit`` requests in flight; the rest wait first come, first served."""
+
+    __slots__ = ("in_flight", "limit", "waiters")
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.in_flight = 0
+        self.waiters: deque[_Waiter] = deque()
+
+    def try_acquire(self) -> bool:
+        if self.in_flight < self.limit and not self.waiters:
+            self.in_flight += 1
+            return True
+        return False
+
+    async def acquire(self, timeout: float, what: str) -> None:
+        """Wait for a slot; :class:`FinsTimeout` after ``timeout`` seconds."""
+        if self.try_acquire():
+            return
+        waiter = _Waiter()
+        self.waiters.append(waiter)
+        try:
+            with anyio.move_on_after(timeout):
+                await waiter.event.wait()
+        except BaseException:
+            self._abandon(waiter)
+            raise
+        if waiter.error is not None:
+            raise waiter.error
+        if not waiter.granted:
+            self._abandon(waiter)
+            raise SlotTimeout(
+                f"no free request slot for {what} within {timeout} s: "
+                f"{self.in_flight} requests in flight did not complete"
+            )
+
+    def _abandon(self, waiter: _Waiter) -> None:
+        if waiter.granted:
+            self.release()  # the slot was handed over as we gave up: pass it on
+        else:
+            with contextlib.suppress(ValueError):
+                self.waiters.remove(waiter)
+
+    def release(self) -> None:
+        waiters = self.waiters
+        while waiters:
+            waiter = waiters.popleft()
+            waiter.granted = True  # the slot moves to the waiter: in_flight unchanged
+            waiter.event.set()
+            return
+        self.in_flight -= 1
+
+    def fail_waiters(self, exc: BaseException) -> None:
+        while self.waiters:
+            waiter = self.waiters.popleft()
+            waiter.error = exc
+            waiter.event.set()
+
+
+class DestState:
+    """Per-destination state: header prefix, SID cursor and in-flight slots."""
+
+    __slots__ = ("address", "base", "cursor", "prefix", "slots")
+
+    def __init__(self, address: FinsAddress, prefix: bytes, slots: SlotQueue) -> None:
+        self.address = address
+        self.base = (address.network << 24) | (address.node << 16) | (address.unit << 8)
+        self.cursor = 0
+        self.prefix = prefix
+        self.slots = slots

@@ -1,0 +1,97 @@
+"""The transport contract: move whole FINS frames over one medium, know nothing about SIDs.
+
+A transport is opened with a :class:`FrameSink` (the session). It *pushes* every complete
+FINS frame it receives to ``sink.frame_received(frame)`` and reports framing faults and the
+end of the connection through the other two sink methods. Pushing (instead of a receive loop
+in the session) lets the asyncio transports hand a datagram to its waiting request straight
+from the event loop's callback: one wake-up per request instead of two.
+
+A transport may need a background reader (trio, or any stream read through anyio); it starts
+it with the spawner (task group) the session gives to :meth:`Transport.open`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Awaitable, Callable
+from typing import Any, Protocol
+
+from ..protocol.errors import FinsError
+
+
+class FrameSink(Protocol):
+    """What a transport reports to (implemented by the session)."""
+
+    def frame_received(self, frame: bytes, _addr: object = None, /) -> None:
+        """One whole FINS frame (10-byte header first) arrived."""
+
+    def frame_dropped(self, reason: str) -> None:
+        """Bytes arrived that do not form a usable frame (bad FCS, bad envelope, ...)."""
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        """The link is gone (``exc`` is ``None`` after a local close)."""
+
+
+class TaskSpawner(Protocol):
+    """Where a transport starts its background reader (an anyio task group will do)."""
+
+    def start_soon(self, func: Callable[..., Awaitable[Any]], *args: Any) -> None: ...
+
+
+class Transport(ABC):
+    """Moves FINS frames. Subclasses: UDP, FINS/TCP, Host Link serial."""
+
+    #: Requests the medium can carry at once (``None`` = no limit of its own).
+    max_in_flight: int | None = None
+    #: Our FINS node as assigned by the peer (FINS/TCP handshake), else ``None``.
+    local_node: int | None = None
+    #: The peer's FINS node as told by the peer (FINS/TCP handshake), else ``None``.
+    remote_node: int | None = None
+    #: Whether the transport can be opened again after the link was lost.
+    reconnectable: bool = False
+    #: A synchronous send the session may call instead of ``await send()`` (set while open
+    #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
+    fast_send: Callable[[bytes], None] | None = None
+
+    @property
+    @abstractmethod
+    def is_open(self) -> bool:
+        """True while frames can be sent."""
+
+    @property
+    @abstractmethod
+    def description(self) -> str:
+        """Where the frames go, for error messages (e.g. ``udp://10.0.0.1:9600``)."""
+
+    @abstractmethod
+    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
+        """Open (or re-open) the link; raise :class:`ConnectionLost`/``OSError`` on failure."""
+
+    @abstractmethod
+    async def send(self, frame: bytes) -> None:
+        """Send one whole FINS frame; raise :class:`ConnectionLost` if the link is gone."""
+
+    @abstractmethod
+    async def aclose(self) -> None:
+        """Close the link and release the socket (idempotent)."""
+
+
+def is_asyncio() -> bool:
+    """True when running under asyncio (stock or uvloop): the callback fast path applies."""
+    import sniffio
+
+    try:
+        return sniffio.current_async_library() == "asyncio"
+    except sniffio.AsyncLibraryNotFoundError:  # pragma: no cover - only called from async code
+        return False
+
+
+def wrap_os_error(exc: BaseException, where: str) -> FinsError:
+    """A :class:`ConnectionLost` naming the endpoint, for errors raised by the socket layer."""
+    from ..protocol.errors import ConnectionLost
+
+    if isinstance(exc, FinsError):
+        return exc
+    err = ConnectionLost(f"{where}: {exc or type(exc).__name__}")
+    err.__cause__ = exc
+    return err

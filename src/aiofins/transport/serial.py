@@ -1,0 +1,190 @@
+"""FINS over Host Link (serial, ASCII hex lines ending ``*`` CR).
+
+The line carries one command at a time (``max_in_flight = 1``); the session queues the rest.
+The session hands us binary FINS frames; we re-encode each as a Host Link line (short header
+for the directly connected CPU, full header when routing) and turn each reply line back into a
+binary frame with a 10-byte header, so the session matches it like any other reply. A reply
+with a bad FCS (or any other framing fault) is dropped and counted in :attr:`frame_errors`;
+the request then times out and may be retried.
+
+Under asyncio the port is driven by ``serial_asyncio_fast``; under other anyio backends (trio)
+pyserial is used in non-blocking mode with ``anyio.wait_readable`` (POSIX only).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import anyio
+
+from ..protocol.errors import CommandError, ConnectionLost, DecodeError
+from ..protocol.header import CommandFrame
+from ..protocol.hostlink import LineDecoder, decode_response, encode_command
+from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+
+
+class _LineHandler:
+    """Turns received bytes into binary FINS frames for the sink."""
+
+    def __init__(self, owner: SerialTransport, sink: FrameSink) -> None:
+        self.owner = owner
+        self.sink = sink
+        self.decoder = LineDecoder()
+
+    def feed(self, data: bytes) -> None:
+        owner = self.owner
+        for line in self.decoder.feed(data):
+            try:
+                unit, response = decode_response(line, full_header=owner._full_header)
+            except DecodeError as exc:
+                owner.frame_errors += 1
+                self.sink.frame_dropped(str(exc))
+                continue
+            if unit != owner.unit:
+                owner.frame_errors += 1
+                self.sink.frame_dropped(f"Host Link reply from unit {unit}, expected {owner.unit}")
+                continue
+            self.sink.frame_received(response.encode())
+
+
+class _SerialProtocol(asyncio.Protocol):
+    def __init__(self, owner: SerialTransport, handler: _LineHandler) -> None:
+        self.owner = owner
+        self.handler = handler
+        self.transport: asyncio.BaseTransport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.handler.feed(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.owner._aio is self.transport:
+            self.owner._aio = None
+            self.handler.sink.connection_lost(exc or ConnectionLost("serial port closed"))
+
+
+class SerialTransport(Transport):
+    """Host Link FINS on a serial port (``/dev/ttyUSB0`` or any pyserial URL)."""
+
+    max_in_flight = 1
+    reconnectable = True
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 9600,
+        bytesize: int = 8,
+        parity: str = "N",
+        stopbits: float = 1,
+        unit: int = 0,
+        response_wait: int = 0,
+    ) -> None:
+        if not 0 <= unit <= 31:
+            raise CommandError(f"Host Link unit number {unit} out of range 0..31")
+        if not 0 <= response_wait <= 0xF:
+            raise CommandError(f"Host Link response wait time {response_wait} out of range 0..15")
+        self.port = port
+        self.baudrate = baudrate
+        self.bytesize = bytesize
+        self.parity = parity
+        self.stopbits = stopbits
+        self.unit = unit
+        self.response_wait = response_wait
+        #: Reply lines dropped for a bad FCS, bad text, a refused frame or a wrong unit.
+        self.frame_errors = 0
+        self._full_header = False
+        self._aio: asyncio.WriteTransport | None = None
+        self._serial: Any = None  # pyserial Serial on non-asyncio backends
+
+    @property
+    def is_open(self) -> bool:
+        return self._aio is not None or self._serial is not None
+
+    @property
+    def description(self) -> str:
+        return f"serial://{self.port}?baudrate={self.baudrate}&unit={self.unit}"
+
+    def _settings(self) -> dict[str, Any]:
+        return {
+            "baudrate": self.baudrate,
+            "bytesize": self.bytesize,
+            "parity": self.parity,
+            "stopbits": self.stopbits,
+        }
+
+    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
+        if self.is_open:
+            return
+        handler = _LineHandler(self, sink)
+        try:
+            if is_asyncio():
+                import serial_asyncio_fast
+
+                loop = asyncio.get_running_loop()
+                transport, _ = await serial_asyncio_fast.create_serial_connection(
+                    loop, lambda: _SerialProtocol(self, handler), self.port, **self._settings()
+                )
+                self._aio = transport
+            else:
+                import serial  # type: ignore[import-untyped]
+
+                ser = serial.serial_for_url(self.port, timeout=0, **self._settings())
+                self._serial = ser
+                task_group.start_soon(self._reader, ser, handler)
+        except (OSError, ValueError) as exc:
+            raise wrap_os_error(exc, f"cannot open {self.description}") from exc
+
+    async def _reader(self, ser: Any, handler: _LineHandler) -> None:
+        exc: BaseException | None = None
+        try:
+            while True:
+                await anyio.wait_readable(ser.fileno())
+                data = ser.read(max(1, ser.in_waiting))
+                if data:
+                    handler.feed(data)
+        except (OSError, anyio.ClosedResourceError) as err:
+            exc = err
+        except Exception as err:  # pyserial raises SerialException (an OSError) or TypeError
+            exc = err
+        finally:
+            if self._serial is ser:
+                self._serial = None
+                ser.close()
+                handler.sink.connection_lost(
+                    wrap_os_error(exc, f"{self.description} failed") if exc else None
+                )
+
+    def _encode(self, frame: bytes) -> bytes:
+        command = CommandFrame.decode(frame)
+        dest = command.header.destination
+        self._full_header = dest.network != 0 or dest.node != 0
+        return encode_command(
+            command, unit=self.unit, wait_time=self.response_wait, full_header=self._full_header
+        )
+
+    async def send(self, frame: bytes) -> None:
+        line = self._encode(frame)
+        if self._aio is not None:
+            self._aio.write(line)
+            return
+        ser = self._serial
+        if ser is None:
+            raise ConnectionLost(f"{self.description} is not open")
+        try:
+            ser.write(line)
+        except Exception as exc:
+            raise wrap_os_error(exc, f"cannot write to {self.description}") from exc
+
+    async def aclose(self) -> None:
+        aio, ser = self._aio, self._serial
+        self._aio = None
+        self._serial = None
+        if aio is not None:
+            aio.close()
+        if ser is not None:
+            anyio.notify_closing(ser.fileno())  # wake the reader before the fd goes away
+            ser.close()

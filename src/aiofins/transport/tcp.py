@@ -1,0 +1,169 @@
+"""FINS/TCP: a 16-byte envelope per message, a node-address handshake per connection.
+
+After connecting we send our client node (0 = "allocate one for me") and wait for the
+server's reply, which names our node and the server's; both are exposed as
+:attr:`TcpTransport.local_node` and :attr:`TcpTransport.remote_node`. The session uses the
+allocated node as SA1. Command 3 (error notification) ends the connection with
+:class:`FinsTcpError`; command 6 (connection confirmation) is discarded. The socket is closed
+on every path out (a leaked connection holds one of the PLC's node slots).
+"""
+
+from __future__ import annotations
+
+import anyio
+from anyio.abc import SocketStream
+
+from ..protocol.errors import ConnectionLost, FinsTcpError, FrameError
+from ..protocol.tcp import (
+    DEFAULT_PORT,
+    TcpCommand,
+    TcpDecoder,
+    TcpMessage,
+    encode_frame,
+    encode_node_request,
+    parse_node_response,
+    tcp_error_meaning,
+)
+from .base import FrameSink, TaskSpawner, Transport, wrap_os_error
+
+
+class TcpTransport(Transport):
+    """FINS/TCP to ``host:port``; ``node`` 0 lets the PLC allocate our node."""
+
+    reconnectable = True
+
+    def __init__(
+        self,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        node: int = 0,
+        connect_timeout: float = 5.0,
+    ) -> None:
+        if not 0 <= node <= 0xFE:
+            raise FrameError(f"FINS/TCP client node {node} out of range 0..254")
+        self.host = host
+        self.port = port
+        #: The client node we ask for in the handshake (0 = let the server allocate).
+        self.node = node
+        self.connect_timeout = connect_timeout
+        self._stream: SocketStream | None = None
+        self._send_lock = anyio.Lock()
+        self.local_node: int | None = None
+        self.remote_node: int | None = None
+
+    @property
+    def is_open(self) -> bool:
+        return self._stream is not None
+
+    @property
+    def description(self) -> str:
+        return f"tcp://{self.host}:{self.port}"
+
+    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
+        if self._stream is not None:
+            return
+        try:
+            with anyio.fail_after(self.connect_timeout):
+                stream = await anyio.connect_tcp(self.host, self.port)
+        except TimeoutError as exc:
+            raise ConnectionLost(
+                f"cannot connect to {self.description} within {self.connect_timeout} s"
+            ) from exc
+        except OSError as exc:
+            raise wrap_os_error(exc, f"cannot connect to {self.description}") from exc
+        decoder = TcpDecoder()
+        try:
+            backlog = await self._handshake(stream, decoder)
+        except BaseException:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+            raise
+        self._stream = stream
+        self._send_lock = anyio.Lock()
+        task_group.start_soon(self._reader, stream, decoder, backlog, sink)
+
+    async def _handshake(self, stream: SocketStream, decoder: TcpDecoder) -> list[TcpMessage]:
+        """Send our node, read the server's reply; returns messages that followed it."""
+        try:
+            with anyio.fail_after(self.connect_timeout):
+                await stream.send(encode_node_request(self.node))
+                while True:
+                    messages = decoder.feed(await stream.receive())
+                    while messages:
+                        message = messages.pop(0)
+                        if message.command == TcpCommand.CONNECTION_CONFIRMATION:
+                            continue
+                        if message.command == TcpCommand.FRAME_ERROR:
+                            raise FinsTcpError(
+                                "FINS/TCP handshake refused: "
+                                + tcp_error_meaning(message.error_code),
+                                tcp_error_code=message.error_code,
+                            )
+                        self.local_node, self.remote_node = parse_node_response(message)
+                        return messages
+        except TimeoutError as exc:
+            raise ConnectionLost(
+                f"no FINS/TCP node address reply from {self.description} "
+                f"within {self.connect_timeout} s"
+            ) from exc
+        except (anyio.EndOfStream, anyio.BrokenResourceError, OSError) as exc:
+            raise ConnectionLost(
+                f"{self.description} closed the connection during the FINS/TCP handshake"
+            ) from exc
+
+    async def _reader(
+        self,
+        stream: SocketStream,
+        decoder: TcpDecoder,
+        backlog: list[TcpMessage],
+        sink: FrameSink,
+    ) -> None:
+        exc: BaseException | None = None
+        try:
+            messages = backlog
+            while True:
+                for message in messages:
+                    command = message.command
+                    if command == TcpCommand.FRAME:
+                        sink.frame_received(message.payload)
+                    elif command == TcpCommand.FRAME_ERROR:
+                        raise FinsTcpError(
+                            f"{self.description} reported a FINS/TCP error: "
+                            + tcp_error_meaning(message.error_code),
+                            tcp_error_code=message.error_code,
+                        )
+                    elif command != TcpCommand.CONNECTION_CONFIRMATION:
+                        sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+                messages = decoder.feed(await stream.receive())
+        except FrameError as err:  # FinsTcpError included: the stream is unusable now
+            exc = err
+        except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError) as err:
+            exc = ConnectionLost(f"{self.description} closed the connection")
+            exc.__cause__ = err
+        except OSError as err:
+            exc = wrap_os_error(err, f"connection to {self.description} failed")
+        finally:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+            if self._stream is stream:
+                self._stream = None
+                if exc is not None:
+                    sink.connection_lost(exc)
+
+    async def send(self, frame: bytes) -> None:
+        stream = self._stream
+        if stream is None:
+            raise ConnectionLost(f"{self.description} is not connected")
+        data = encode_frame(frame)
+        try:
+            async with self._send_lock:
+                await stream.send(data)
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError) as exc:
+            raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
+
+    async def aclose(self) -> None:
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()

@@ -1,0 +1,240 @@
+"""FINS over UDP: one datagram is one FINS frame.
+
+One socket per transport, bound to an ephemeral local port and *connected* to the PLC, so
+the kernel drops datagrams from anyone else. The receive buffer is enlarged (best effort) so
+that many large replies in flight do not overflow it.
+
+Under asyncio (stock or uvloop) a reader callback on the socket drains every queued datagram
+straight into the session; under any other anyio backend (trio) a reader task does the same.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+from collections import deque
+
+import anyio
+
+from ..protocol.errors import ConnectionLost
+from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+
+DEFAULT_PORT = 9600
+#: Receive buffer asked for: room for 50 in-flight 999-word replies many times over.
+DEFAULT_RCVBUF = 4 * 1024 * 1024
+
+
+#: Bytes asked of recv(): above the largest FINS frame, so a longer datagram shows as such.
+_RECV_SIZE = 4096
+#: Datagrams read per readiness callback before yielding to the event loop.
+_BATCH = 64
+
+
+class _AsyncioSocket:
+    """The asyncio path: one reader callback drains every queued datagram into the sink.
+
+    asyncio's own datagram transport reads one datagram per event-loop iteration; with many
+    replies in flight that makes every reply pay a whole iteration (an ``epoll_wait``).
+    """
+
+    def __init__(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        sock: socket.socket,
+        owner: UdpTransport,
+        sink: FrameSink,
+    ) -> None:
+        self.loop = loop
+        self.sock = sock
+        self.owner = owner
+        self.sink = sink
+        self.backlog: deque[bytes] = deque()
+        loop.add_reader(sock.fileno(), self._readable)
+
+    def _readable(self) -> None:
+        recv = self.sock.recv
+        received = self.sink.frame_received
+        for _ in range(_BATCH):
+            try:
+                data = recv(_RECV_SIZE)
+            except (BlockingIOError, InterruptedError):
+                return
+            except ConnectionRefusedError as exc:  # ICMP port unreachable: not fatal for UDP
+                self.sink.frame_dropped(f"socket error: {exc}")
+                continue
+            except OSError as exc:
+                self.owner._lost(self, exc)
+                return
+            received(data)
+
+    def send(self, frame: bytes) -> None:
+        if self.backlog:
+            self.backlog.append(frame)
+            return
+        try:
+            self.sock.send(frame)
+        except (BlockingIOError, InterruptedError):  # send buffer full: wait for room
+            self.backlog.append(frame)
+            self.loop.add_writer(self.sock.fileno(), self._writable)
+        except ConnectionRefusedError as exc:  # an earlier ICMP error surfacing here
+            self.sink.frame_dropped(f"socket error: {exc}")
+        except OSError as exc:
+            self.owner._lost(self, exc)
+            raise ConnectionLost(f"cannot send to {self.owner.description}: {exc}") from exc
+
+    def _writable(self) -> None:
+        backlog = self.backlog
+        while backlog:
+            try:
+                self.sock.send(backlog[0])
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                if not isinstance(exc, ConnectionRefusedError):
+                    self.owner._lost(self, exc)
+                    return
+            backlog.popleft()
+        self.loop.remove_writer(self.sock.fileno())
+
+    def close(self) -> None:
+        if self.sock.fileno() >= 0:
+            self.loop.remove_reader(self.sock.fileno())
+            self.loop.remove_writer(self.sock.fileno())
+        self.backlog.clear()
+        self.sock.close()
+
+
+class UdpTransport(Transport):
+    """FINS/UDP to ``host:port`` from an ephemeral local port."""
+
+    reconnectable = True
+
+    def __init__(
+        self,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        local_host: str | None = None,
+        local_port: int = 0,
+        rcvbuf: int = DEFAULT_RCVBUF,
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.local_host = local_host
+        self.local_port = local_port
+        self.rcvbuf = rcvbuf
+        self._aio: _AsyncioSocket | None = None
+        self._sock: socket.socket | None = None  # the socket of the anyio (trio) driver
+
+    @property
+    def is_open(self) -> bool:
+        return self._aio is not None or self._sock is not None
+
+    @property
+    def description(self) -> str:
+        return f"udp://{self.host}:{self.port}"
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """``(host, port)`` the socket is bound to, while open."""
+        sock = self._aio.sock if self._aio is not None else self._sock
+        if sock is None:
+            return None
+        host, port = sock.getsockname()[:2]
+        return str(host), int(port)
+
+    async def _socket(self) -> socket.socket:
+        """A non-blocking UDP socket, bound to an ephemeral port and connected to the PLC."""
+        infos = await anyio.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)
+        family, _, _, _, remote = infos[0]
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setblocking(False)
+            # Best effort: Linux caps it at net.core.rmem_max without complaint.
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.rcvbuf)
+            local = self.local_host or ("::" if family == socket.AF_INET6 else "0.0.0.0")
+            sock.bind((local, self.local_port))
+            sock.connect(remote)
+        except BaseException:
+            sock.close()
+            raise
+        return sock
+
+    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
+        if self.is_open:
+            return
+        try:
+            sock = await self._socket()
+        except OSError as exc:
+            raise wrap_os_error(exc, f"cannot open {self.description}") from exc
+        if is_asyncio():
+            self._aio = _AsyncioSocket(asyncio.get_running_loop(), sock, self, sink)
+            self.fast_send = self._aio.send
+        else:
+            self._sock = sock
+            task_group.start_soon(self._reader, sock, sink)
+
+    async def _reader(self, sock: socket.socket, sink: FrameSink) -> None:
+        """The anyio driver: wait until readable, then drain every queued datagram."""
+        received = sink.frame_received
+        recv = sock.recv
+        exc: BaseException | None = None
+        try:
+            while True:
+                await anyio.wait_readable(sock)
+                for _ in range(_BATCH):
+                    try:
+                        data = recv(_RECV_SIZE)
+                    except (BlockingIOError, InterruptedError):
+                        break
+                    except ConnectionRefusedError as err:  # ICMP unreachable: keep going
+                        sink.frame_dropped(f"socket error: {err}")
+                        continue
+                    received(data)
+        except (anyio.ClosedResourceError, ValueError):
+            pass  # closed locally (ValueError: fileno -1)
+        except OSError as err:
+            exc = err
+        if self._sock is sock:
+            self._sock = None
+            sock.close()
+            sink.connection_lost(exc)
+
+    async def send(self, frame: bytes) -> None:
+        aio = self._aio
+        if aio is not None:
+            aio.send(frame)
+            return
+        sock = self._sock
+        if sock is None:
+            raise ConnectionLost(f"{self.description} is closed")
+        while True:
+            try:
+                sock.send(frame)
+                return
+            except (BlockingIOError, InterruptedError):  # send buffer full: wait for room
+                await anyio.wait_writable(sock)
+            except ConnectionRefusedError:  # an earlier ICMP error: the request times out
+                return
+            except OSError as exc:
+                raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
+
+    def _lost(self, aio: _AsyncioSocket, exc: BaseException) -> None:
+        if self._aio is aio:
+            self._aio = None
+            self.fast_send = None
+            aio.close()
+            aio.sink.connection_lost(exc)
+
+    async def aclose(self) -> None:
+        aio, sock = self._aio, self._sock
+        self._aio = None
+        self._sock = None
+        self.fast_send = None
+        if aio is not None:
+            aio.close()
+        if sock is not None:
+            anyio.notify_closing(sock)  # wake the reader before the socket goes away
+            sock.close()

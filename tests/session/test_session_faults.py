@@ -1,0 +1,389 @@
+"""Faults on the wire never hand a reply to the wrong caller, and no call outlives its deadline.
+
+Runs the session against the in-test UDP responder of ``test_session_udp`` (real loopback).
+"""
+
+from __future__ import annotations
+
+import random
+
+import anyio
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from aiofins.protocol.errors import ConnectionLost, FinsTimeout, ParameterError
+from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
+from aiofins.session.slots import Pending
+from aiofins.transport import UdpTransport
+
+from .test_session_udp import (
+    Reply,
+    Responder,
+    answer,
+    read_params,
+    reply,
+    session_for,
+    udp_responder,
+    word_data,
+)
+
+PLC_ADDR = FinsAddress(0, 1, 0)
+
+
+def addr_of(session: Session) -> tuple[str, int]:
+    return ("127.0.0.1", session.transport.local_address[1])  # type: ignore[attr-defined]
+
+
+@pytest.mark.anyio
+async def test_dropped_request_times_out_with_a_helpful_message() -> None:
+    async with udp_responder(lambda c: []) as peer, session_for(peer, timeout=0.1) as session:
+        start = anyio.current_time()
+        with pytest.raises(FinsTimeout) as info:
+            await session.request(0x01, 0x01, read_params(0))
+        elapsed = anyio.current_time() - start
+        assert 0.09 <= elapsed < 0.5
+        text = str(info.value)
+        assert "DA1=1" in text and "SA1=2" in text and "port" in text and "0101" in text
+        assert session.stats.timeouts == 1 and session.stats.in_flight == 0
+        assert isinstance(info.value, TimeoutError)
+
+
+@pytest.mark.anyio
+async def test_idempotent_request_is_retried_with_a_fresh_sid() -> None:
+    calls = 0
+
+    def drop_first(cmd: bytes) -> list[Reply]:
+        nonlocal calls
+        calls += 1
+        return [] if calls == 1 else answer(cmd)
+
+    async with udp_responder(drop_first) as peer, session_for(peer, timeout=0.1) as session:
+        response = await session.request(0x01, 0x01, read_params(7), idempotent=True)
+        assert response.data == (7).to_bytes(2, "big") or response.data == bytes.fromhex("1007")
+        assert session.stats.retries == 1 and session.stats.timeouts == 1
+        assert peer.received[0][9] != peer.received[1][9]
+
+
+@pytest.mark.anyio
+async def test_non_idempotent_request_is_not_retried_unless_asked() -> None:
+    async with udp_responder(lambda c: []) as peer, session_for(peer, timeout=0.05) as session:
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x02, read_params(1) + b"\x00\x01")
+        assert len(peer.received) == 1
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x02, read_params(1) + b"\x00\x01", retries=2)
+        assert len(peer.received) == 4
+        assert len({f[9] for f in peer.received}) == 4
+
+
+@pytest.mark.anyio
+async def test_late_reply_is_counted_and_never_reaches_the_next_request() -> None:
+    late: list[bytes] = []
+
+    def first_late(cmd: bytes) -> list[Reply]:
+        if not late:
+            late.append(cmd)
+            return []
+        return answer(cmd)
+
+    async with udp_responder(first_late) as peer, session_for(peer, timeout=0.05) as session:
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(1))
+        old_sid = late[0][9]
+        # The late reply arrives just before the next request's reply.
+        peer.send(reply(late[0], 0, b"\xde\xad"), addr_of(session))
+        response = await session.request(0x01, 0x01, read_params(2))
+        assert response.data == bytes.fromhex("1002")
+        assert peer.received[1][9] != old_sid
+        assert session.stats.late_replies == 1
+
+
+@pytest.mark.anyio
+async def test_quarantined_sid_is_not_reused_before_it_expires() -> None:
+    async with (
+        udp_responder(lambda c: []) as peer,
+        session_for(peer, timeout=0.01, quarantine_factor=1000.0) as session,
+    ):
+        for _ in range(20):
+            with pytest.raises(FinsTimeout):
+                await session.request(0x01, 0x01, read_params(0))
+        sids = [f[9] for f in peer.received]
+        assert len(set(sids)) == 20
+
+
+@pytest.mark.anyio
+async def test_duplicate_reply_is_counted_and_dropped() -> None:
+    def twice(cmd: bytes) -> list[Reply]:
+        frame = reply(cmd, 0, word_data(cmd))
+        return [(0.0, frame), (0.0, frame)]
+
+    async with udp_responder(twice) as peer, session_for(peer) as session:
+        for word in range(5):
+            response = await session.request(0x01, 0x01, read_params(word))
+            assert response.data == (0x1000 | word).to_bytes(2, "big")
+        await session.request(0x01, 0x01, read_params(99))
+        assert session.stats.duplicates >= 5
+        assert session.stats.completed == 6
+
+
+@pytest.mark.anyio
+async def test_malformed_mismatched_and_unsolicited_frames_are_counted() -> None:
+    def noisy(cmd: bytes) -> list[Reply]:
+        good = reply(cmd, 0, word_data(cmd))
+        wrong_code = bytearray(good)
+        wrong_code[11] = 0x02  # answers 0102, we asked 0101
+        wrong_node = bytearray(good)
+        wrong_node[7] = 9  # from node 9: not who we asked
+        not_response = bytearray(good)
+        not_response[0] = 0x80
+        return [
+            (0.0, good[:11]),
+            (0.0, bytes(wrong_code)),
+            (0.0, bytes(wrong_node)),
+            (0.0, bytes(not_response)),
+            (0.0, good[:12] + b"\x80"),  # relay bit without trailer: too short
+            (0.0, good),
+        ]
+
+    async with udp_responder(noisy) as peer, session_for(peer) as session:
+        response = await session.request(0x01, 0x01, read_params(3))
+        assert response.data == bytes.fromhex("1003")
+        stats = session.stats
+        assert stats.malformed == 2
+        assert stats.mismatched == 2
+        assert stats.unsolicited == 1
+
+
+@pytest.mark.anyio
+async def test_cancellation_frees_the_slot_and_quarantines_the_sid() -> None:
+    held: list[bytes] = []
+
+    def hold_first(cmd: bytes) -> list[Reply]:
+        if not held:
+            held.append(cmd)
+            return []
+        return answer(cmd)
+
+    async with (
+        udp_responder(hold_first) as peer,
+        session_for(peer, max_in_flight=1, timeout=5) as session,
+    ):
+        with anyio.move_on_after(0.05) as scope:
+            await session.request(0x01, 0x01, read_params(1))
+        assert scope.cancelled_caught
+        assert session.stats.in_flight == 0 and session.stats.cancelled == 1
+        # The only slot is free again; the cancelled request's SID is not reused.
+        peer.send(reply(held[0], 0, b"\xbe\xef"), addr_of(session))
+        response = await session.request(0x01, 0x01, read_params(4))
+        assert response.data == bytes.fromhex("1004")
+        assert peer.received[1][9] != held[0][9]
+        assert session.stats.late_replies == 1
+
+
+@pytest.mark.anyio
+async def test_cancelled_queued_caller_gives_up_its_place() -> None:
+    held: list[bytes] = []
+    async with (
+        udp_responder(lambda c: held.append(c) or []) as peer,  # type: ignore[func-returns-value]
+        session_for(peer, max_in_flight=1, timeout=5) as session,
+    ):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(session.request, 0x01, 0x01, read_params(1))
+            await anyio.wait_all_tasks_blocked()
+            with anyio.move_on_after(0.02):
+                await session.request(0x01, 0x01, read_params(2))
+            queue = session._slots[session.dest]
+            assert len(queue.waiters) == 0 and queue.in_flight == 1
+            tg.cancel_scope.cancel()
+        assert session.stats.in_flight == 0
+        assert queue.in_flight == 0
+
+
+@pytest.mark.anyio
+async def test_aclose_fails_in_flight_and_queued_requests() -> None:
+    outcomes: list[BaseException] = []
+    body_went_on = False
+    async with udp_responder(lambda c: []) as peer:
+        session = session_for(peer, max_in_flight=2, timeout=10)
+        async with session:
+
+            async def one(word: int) -> None:
+                try:
+                    await session.request(0x01, 0x01, read_params(word))
+                except ConnectionLost as exc:
+                    outcomes.append(exc)
+
+            async with anyio.create_task_group() as tg:
+                for word in range(5):
+                    tg.start_soon(one, word)
+                await anyio.wait_all_tasks_blocked()
+                with anyio.fail_after(1):
+                    await session.aclose()
+            await anyio.sleep(0)  # closing did not cancel the body of 'async with session'
+            body_went_on = True
+        assert body_went_on
+        assert len(outcomes) == 5
+        with pytest.raises(ConnectionLost):
+            await session.request(0x01, 0x01, read_params(0))
+
+
+@pytest.mark.anyio
+async def test_random_faults_never_misdeliver_and_never_hang() -> None:
+    """Drop, delay, duplicate, reorder, corrupt and late-reply at random; check every call."""
+    rng = random.Random(1234)
+
+    def chaos(cmd: bytes) -> list[Reply]:
+        good = reply(cmd, 0, word_data(cmd))
+        roll = rng.random()
+        if roll < 0.15:
+            return []  # drop
+        if roll < 0.30:
+            return [(rng.uniform(0.25, 0.35), good)]  # late: after the 0.2 s timeout
+        if roll < 0.45:
+            return [(0.0, good), (rng.uniform(0, 0.02), good)]  # duplicate
+        if roll < 0.55:
+            bad = bytearray(good)
+            bad[rng.choice((0, 10, 11))] ^= 0x5A  # corrupt ICF, MRC or SRC
+            return [(0.0, bytes(bad)), (0.01, good)]
+        if roll < 0.65:
+            return [(rng.uniform(0, 0.04), good)]  # reorder by random delay
+        if roll < 0.70:
+            return [(0.0, reply(cmd, 0x1103, word_data(cmd)))]  # an error for this caller
+        return [(0.0, good)]
+
+    timeout, retries = 0.2, 2
+    good = timeouts = errors = 0
+    async with (
+        udp_responder(chaos) as peer,
+        session_for(peer, timeout=timeout, retries=retries, max_in_flight=30) as session,
+    ):
+        deadline = timeout * (retries + 1) * 2 + 0.5  # queueing + attempts, generous margin
+
+        async def one(node: int, word: int) -> None:
+            nonlocal good, timeouts, errors
+            dest = FinsAddress(0, node, 0)
+            expected = (((node << 12) ^ word) & 0xFFFF).to_bytes(2, "big")
+            with anyio.fail_after(deadline):  # a hang fails the test
+                try:
+                    r = await session.request(
+                        0x01, 0x01, read_params(word), dest=dest, idempotent=True
+                    )
+                except FinsTimeout:
+                    timeouts += 1
+                    return
+                except ParameterError as exc:
+                    assert exc.data == expected  # the error reply reached its own caller
+                    errors += 1
+                    return
+            assert r.data == expected
+            good += 1
+
+        async with anyio.create_task_group() as tg:
+            for word in range(30):
+                for node in range(1, 7):
+                    tg.start_soon(one, node, 500 + word)
+    stats = session.stats
+    assert good + timeouts + errors == 180, stats
+    assert good > 120, (good, timeouts, errors, stats)
+    assert session.stats.late_replies + session.stats.duplicates > 0
+
+
+@pytest.mark.anyio
+async def test_slot_wait_is_bounded_by_the_timeout() -> None:
+    async with (
+        udp_responder(lambda c: []) as peer,
+        session_for(peer, max_in_flight=1, timeout=0.1) as session,
+    ):
+        results: list[str] = []
+
+        async def one() -> None:
+            try:
+                await session.request(0x01, 0x01, read_params(0))
+            except FinsTimeout as exc:
+                results.append(str(exc))
+
+        with anyio.fail_after(1):
+            async with anyio.create_task_group() as tg:
+                for _ in range(3):
+                    tg.start_soon(one)
+        assert len(results) == 3
+        assert isinstance(peer, Responder)
+
+
+class _Recorder(Pending):
+    """A pending request that records what woke it (no event loop needed)."""
+
+    __slots__ = ("woken",)
+
+    def __init__(self, key: int, mrc: int, src: int) -> None:
+        super().__init__(key, mrc, src)
+        self.woken: list[bytes] = []
+
+    def wake(self, frame: bytes) -> None:
+        self.woken.append(frame)
+
+    def fail(self, exc: BaseException) -> None:  # pragma: no cover - not reached here
+        raise AssertionError(exc)
+
+
+@settings(max_examples=300, deadline=None)
+@given(frames=st.lists(st.binary(min_size=0, max_size=40), max_size=20))
+def test_arbitrary_frames_never_raise_and_only_matching_ones_are_delivered(
+    frames: list[bytes],
+) -> None:
+    session = Session(UdpTransport("127.0.0.1", 9), source=FinsAddress(0, 2, 0), dest=PLC_ADDR)
+    key = (0 << 24) | (1 << 16) | (0 << 8) | 0x07  # node 1, SID 7
+    p = _Recorder(key, 0x01, 0x01)
+    session._pending[key] = p
+    for frame in frames:
+        session.frame_received(frame)
+    stats = session.stats
+    counted = (
+        stats.malformed + stats.mismatched + stats.unsolicited + stats.duplicates + len(p.woken)
+    )
+    assert counted == len(frames)
+    for frame in p.woken:  # delivered: right SID, MRC/SRC, a response ICF, an end code
+        assert frame[9] == 0x07 and frame[7] == 1 and frame[10:12] == b"\x01\x01"
+        assert frame[0] & 0x7E == 0x40 and len(frame) >= 14
+    assert len(p.woken) <= 1  # the first match completes the request; later ones are dups
+
+
+@settings(max_examples=200, deadline=None)
+@given(sid=st.integers(0, 255), node=st.integers(0, 255), data=st.binary(max_size=20))
+def test_a_reply_reaches_exactly_its_own_request(sid: int, node: int, data: bytes) -> None:
+    session = Session(UdpTransport("127.0.0.1", 9), source=FinsAddress(0, 2, 0), dest=PLC_ADDR)
+    mine = _Recorder((node << 16) | sid, 0x01, 0x01)
+    other_sid = _Recorder((node << 16) | ((sid + 1) & 0xFF), 0x01, 0x01)
+    other_node = _Recorder((((node + 1) & 0xFF) << 16) | sid, 0x01, 0x01)
+    for p in (mine, other_sid, other_node):
+        session._pending[p.key] = p
+    cmd = bytes((0x80, 0, 2, 0, node, 0, 0, 2, 0, sid, 0x01, 0x01))
+    session.frame_received(reply(cmd, 0, data))
+    assert mine.woken == [reply(cmd, 0, data)]
+    assert other_sid.woken == [] and other_node.woken == []
+
+
+@pytest.mark.anyio
+async def test_deadline_heap_stays_small_behind_a_slow_request() -> None:
+    first: list[bytes] = []
+
+    def hold_first(cmd: bytes) -> list[Reply]:
+        if not first:
+            first.append(cmd)
+            return []
+        return answer(cmd)
+
+    async with (
+        udp_responder(hold_first) as peer,
+        session_for(peer, timeout=10, max_in_flight=10) as session,
+    ):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(session.request, 0x01, 0x01, read_params(0))
+            await anyio.wait_all_tasks_blocked()
+            for word in range(1, 400):
+                await session.request(0x01, 0x01, read_params(word))
+            assert len(session._heap) <= 64 + 4 * session.stats.in_flight
+            peer.send(reply(first[0], 0, b"\x00\x00"), addr_of(session))
+        assert session.stats.completed == 400

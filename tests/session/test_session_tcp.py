@@ -1,0 +1,220 @@
+"""Session over real loopback FINS/TCP against an in-test server (asyncio and trio)."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+
+import anyio
+import pytest
+from anyio.abc import SocketAttribute, SocketStream
+
+from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
+from aiofins.protocol.header import FinsAddress
+from aiofins.protocol.tcp import TcpDecoder, encode_message, encode_node_response
+from aiofins.session import Session
+from aiofins.transport import TcpTransport
+
+from .test_session_udp import read_params, reply, word_data
+
+pytestmark = pytest.mark.anyio
+
+
+@dataclass
+class TcpPeer:
+    """Behaviour of the in-test FINS/TCP server."""
+
+    assign_node: int = 0x21
+    server_node: int = 0x01
+    refuse: int = 0  # FINS/TCP error code for the handshake reply
+    confirmation: bool = False  # send command 6 before every reply
+    byte_by_byte: bool = False  # dribble every message one byte at a time
+    answer: Callable[[bytes], bytes | None] = lambda c: reply(c, 0, word_data(c))
+    port: int = 0
+    requested_nodes: list[int] = field(default_factory=list)
+    frames: list[bytes] = field(default_factory=list)
+    streams: list[SocketStream] = field(default_factory=list)
+    connections: int = 0
+    error_notification: int = 0  # answer the next frame with command 3 instead
+    serving: anyio.CancelScope | None = None
+    listener: anyio.abc.SocketListener | None = None
+
+    async def stop(self) -> None:
+        """The PLC goes away: stop listening, drop every connection."""
+        if self.serving is not None:
+            self.serving.cancel()
+        for stream in self.streams:
+            await stream.aclose()
+        if self.listener is not None:
+            await self.listener.aclose()
+
+    async def write(self, stream: SocketStream, data: bytes) -> None:
+        if self.byte_by_byte:
+            for i in range(len(data)):
+                await stream.send(data[i : i + 1])
+        else:
+            await stream.send(data)
+
+    async def handle(self, stream: SocketStream) -> None:
+        self.connections += 1
+        self.streams.append(stream)
+        decoder = TcpDecoder()
+        try:
+            async with stream:
+                while True:
+                    for msg in decoder.feed(await stream.receive()):
+                        await self.on_message(stream, msg.command, msg.payload)
+        except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            pass
+
+    async def on_message(self, stream: SocketStream, command: int, payload: bytes) -> None:
+        if command == 0:
+            requested = int.from_bytes(payload, "big")
+            self.requested_nodes.append(requested)
+            node = requested or self.assign_node
+            await self.write(stream, encode_node_response(node, self.server_node, self.refuse))
+            if self.refuse:
+                await stream.aclose()
+        elif command == 2:
+            self.frames.append(payload)
+            if self.error_notification:
+                await self.write(stream, encode_message(3, b"", self.error_notification))
+                await stream.aclose()
+                return
+            answer = self.answer(payload)
+            if answer is None:
+                return
+            if self.confirmation:
+                await self.write(stream, encode_message(6, b""))
+            await self.write(stream, encode_message(2, answer))
+
+
+@asynccontextmanager
+async def tcp_server(peer: TcpPeer) -> AsyncIterator[TcpPeer]:
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=peer.port)
+    peer.port = listener.extra(SocketAttribute.local_port)
+    peer.listener = listener
+    async with anyio.create_task_group() as tg:
+        peer.serving = tg.cancel_scope
+        tg.start_soon(listener.serve, peer.handle, tg)
+        yield peer
+        tg.cancel_scope.cancel()
+    await peer.stop()
+
+
+def tcp_session(peer: TcpPeer, node: int = 0, **options: object) -> Session:
+    return Session(
+        TcpTransport("127.0.0.1", peer.port, node=node, connect_timeout=2),
+        source=FinsAddress(0, 0, 0),
+        dest=FinsAddress(0, 1, 0),
+        **options,  # type: ignore[arg-type]
+    )
+
+
+async def test_handshake_allocates_our_node_and_it_becomes_sa1() -> None:
+    async with tcp_server(TcpPeer(assign_node=0x21)) as peer, tcp_session(peer) as session:
+        transport = session.transport
+        assert (transport.local_node, transport.remote_node) == (0x21, 0x01)
+        assert peer.requested_nodes == [0]
+        response = await session.request(0x01, 0x01, read_params(10, 2))
+        assert response.data == bytes.fromhex("100A100B")
+        frame = peer.frames[0]
+        assert frame[:9] == bytes((0x80, 0, 2, 0, 1, 0, 0, 0x21, 0))
+        assert session.source == FinsAddress(0, 0x21, 0)
+
+
+async def test_fixed_client_node_is_requested() -> None:
+    async with tcp_server(TcpPeer()) as peer, tcp_session(peer, node=7) as session:
+        assert peer.requested_nodes == [7]
+        assert session.transport.local_node == 7
+        await session.request(0x01, 0x01, read_params(0))
+        assert peer.frames[0][7] == 7
+
+
+async def test_refused_handshake_raises_fins_tcp_error() -> None:
+    async with tcp_server(TcpPeer(refuse=0x21)) as peer:
+        with pytest.raises(FinsTcpError) as info:
+            async with tcp_session(peer):
+                pass
+        assert info.value.tcp_error_code == 0x21
+        assert "already connected" in str(info.value)
+
+
+async def test_split_frames_and_confirmations_are_handled() -> None:
+    peer_cfg = TcpPeer(byte_by_byte=True, confirmation=True)
+    async with tcp_server(peer_cfg) as peer, tcp_session(peer) as session:
+        results = []
+        async with anyio.create_task_group() as tg:
+
+            async def one(word: int) -> None:
+                results.append((word, (await session.request(0x01, 0x01, read_params(word))).data))
+
+            for word in range(8):
+                tg.start_soon(one, word)
+        assert sorted(results) == [(w, (0x1000 | w).to_bytes(2, "big")) for w in range(8)]
+        assert session.stats.malformed == 0
+
+
+async def test_error_notification_fails_in_flight_with_fins_tcp_error() -> None:
+    async with tcp_server(TcpPeer(error_notification=0x03)) as peer, tcp_session(peer) as s:
+        with pytest.raises(FinsTcpError) as info:
+            await s.request(0x01, 0x01, read_params(0))
+        assert info.value.tcp_error_code == 0x03
+        # The server closed the connection: the next call reconnects.
+        peer.error_notification = 0
+        assert (await s.request(0x01, 0x01, read_params(1))).data == bytes.fromhex("1001")
+        assert peer.connections == 2 and s.stats.connects == 2
+
+
+async def test_server_restart_mid_flight_then_next_call_reconnects() -> None:
+    first = TcpPeer(answer=lambda c: None)  # never answers: the request stays in flight
+    async with tcp_server(first) as peer:
+        port = peer.port
+        session = tcp_session(peer, timeout=5, reconnect_backoff=(0.01, 0.1))
+        async with session:
+            outcome: list[BaseException] = []
+
+            async def in_flight() -> None:
+                try:
+                    await session.request(0x01, 0x01, read_params(0))
+                except ConnectionLost as exc:
+                    outcome.append(exc)
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(in_flight)
+                await anyio.wait_all_tasks_blocked()
+                while not peer.frames:
+                    await anyio.wait_all_tasks_blocked()
+                    await anyio.sleep(0)
+                await peer.stop()  # the PLC goes away
+            assert len(outcome) == 1 and "closed" in str(outcome[0])
+            async with tcp_server(TcpPeer(port=port, assign_node=0x33)):
+                with anyio.fail_after(3):
+                    r = await session.request(0x01, 0x01, read_params(2))
+                assert r.data == bytes.fromhex("1002")
+                assert session.source.node == 0x33
+                assert session.stats.connects == 2
+
+
+async def test_connect_refused_raises_connection_lost() -> None:
+    async with tcp_server(TcpPeer()) as peer:
+        port = peer.port
+    session = Session(
+        TcpTransport("127.0.0.1", port, connect_timeout=1),
+        source=FinsAddress(0, 0, 0),
+        dest=FinsAddress(0, 1, 0),
+    )
+    with pytest.raises(ConnectionLost):
+        async with session:
+            pass
+
+
+async def test_timeout_over_tcp() -> None:
+    async with (
+        tcp_server(TcpPeer(answer=lambda c: None)) as peer,
+        tcp_session(peer, timeout=0.05) as session,
+    ):
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(0))
+        assert session.stats.timeouts == 1
