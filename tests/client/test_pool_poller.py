@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 
 import anyio
 import pytest
@@ -127,3 +127,30 @@ async def test_poller_stale_quality_and_changes_only(sim: Simulator) -> None:
         assert fourth is not None
         assert fourth["a"].quality is Quality.STALE and fourth["a"].value == 0
         assert fourth.error is not None and "FinsTimeout" in fourth.error
+
+
+async def _until(condition: Callable[[], bool]) -> None:
+    with anyio.fail_after(5):
+        while not condition():
+            await anyio.sleep(0.01)
+
+
+async def test_pool_health_checks_and_closes_idle_sessions(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(health_interval=0.05, idle_timeout=60, timeout=0.1, retries=0) as pool:
+        async with pool.client(url) as plc:
+            assert await plc.read("D0") == [0]
+        before = sim.plc.commands[0x0601] if isinstance(sim.plc, VirtualPLC) else 0
+        await _until(
+            lambda: isinstance(sim.plc, VirtualPLC) and sim.plc.commands[0x0601] > before
+        )  # 0601 health check sent
+        sim.plan.rule = FaultRule(drop_request=1.0)  # the PLC goes silent
+        await _until(lambda: pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 0)
+        assert pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].health_failures == 1
+        sim.plan.rule = FaultRule()
+        async with pool.client(url) as plc:  # a new session is opened on demand
+            assert await plc.read("D0") == [0]
+    async with Pool(idle_timeout=0.05, health_interval=60) as pool:
+        async with pool.client(url) as plc:
+            await plc.read("D0")
+        await _until(lambda: pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 0)
