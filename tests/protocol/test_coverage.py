@@ -63,7 +63,7 @@ MANUAL_OPERATIONS: list[tuple[int, str, str]] = [
 
 
 def _normalise(name: str) -> str:
-    return re.sub(r"[^A-Z/]", "", name.upper().replace("–", "-"))
+    return re.sub(r"[^A-Z/]", "", name.upper().replace("\u2013", "-"))
 
 
 def test_manual_counts() -> None:
@@ -73,17 +73,18 @@ def test_manual_counts() -> None:
 
 def test_every_operation_implemented_once() -> None:
     assert len(ALL_OPERATIONS) == 47
-    assert COMMAND_CODES == {code for code, _, _ in MANUAL_OPERATIONS}
+    assert {code for code, _, _ in MANUAL_OPERATIONS} == COMMAND_CODES
     implemented = {(op.command_code(), op.METHOD) for op in ALL_OPERATIONS}
     expected = {(code, method) for code, _, method in MANUAL_OPERATIONS}
     assert implemented == expected
     assert len({op.METHOD for op in ALL_OPERATIONS}) == 47
 
 
-@pytest.mark.parametrize(("code", "name", "method"), MANUAL_OPERATIONS,
-                         ids=[m for _, _, m in MANUAL_OPERATIONS])
+@pytest.mark.parametrize(
+    ("code", "name", "method"), MANUAL_OPERATIONS, ids=[m for _, _, m in MANUAL_OPERATIONS]
+)
 def test_operation_has_builder_and_parser(code: int, name: str, method: str) -> None:
-    matches = [op for op in ALL_OPERATIONS if op.METHOD == method]
+    matches = [op for op in ALL_OPERATIONS if method == op.METHOD]
     assert len(matches) == 1, f"{code:04X} {name}: no operation named {method}"
     op = matches[0]
     assert op.command_code() == code
@@ -99,4 +100,7 @@ def test_message_variants_dispatch_by_parameter_bits() -> None:
     clear = operation_for(0x09, 0x20, bytes((0x40, 0x01)))
     fal = operation_for(0x09, 0x20, bytes((0x80, 0x01)))
     assert (read.METHOD, clear.METHOD, fal.METHOD) == (
-        "message_read", "message_clear", "fal_fals_read")
+        "message_read",
+        "message_clear",
+        "fal_fals_read",
+    )
