@@ -7,13 +7,20 @@ import socket
 from typing import Any, cast
 
 import anyio
-import sniffio
 from anyio.abc import TaskGroup, TaskStatus, UDPSocket
 
 from ..protocol.tcp import DEFAULT_PORT
 from .faults import Dispatcher, FaultRule
 
 _NO_FAULTS = FaultRule()
+
+
+def _under_asyncio() -> bool:
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:  # trio: no asyncio loop running
+        return False
+    return True
 
 
 class _FastProtocol(asyncio.DatagramProtocol):
@@ -86,7 +93,7 @@ class UdpServer:
 
     async def serve(self, *, task_status: TaskStatus[int] = anyio.TASK_STATUS_IGNORED) -> None:
         """Receive and answer datagrams until cancelled."""
-        if sniffio.current_async_library() == "asyncio":
+        if _under_asyncio():
             await self._serve_asyncio(task_status)
             return
         sock = await anyio.create_udp_socket(local_host=self.host, local_port=self.requested_port)

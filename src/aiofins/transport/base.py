@@ -77,13 +77,18 @@ class Transport(ABC):
 
 
 def is_asyncio() -> bool:
-    """True when running under asyncio (stock or uvloop): the callback fast path applies."""
-    import sniffio
+    """True when running under asyncio (stock or uvloop): the callback fast path applies.
+
+    (anyio no longer depends on sniffio, so ask asyncio itself: under trio there is no
+    running asyncio loop.)
+    """
+    import asyncio
 
     try:
-        return sniffio.current_async_library() == "asyncio"
-    except sniffio.AsyncLibraryNotFoundError:  # pragma: no cover - only called from async code
+        asyncio.get_running_loop()
+    except RuntimeError:
         return False
+    return True
 
 
 def wrap_os_error(exc: BaseException, where: str) -> FinsError:
