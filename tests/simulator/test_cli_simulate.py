@@ -160,17 +160,12 @@ def test_build_plan_default_and_per_command() -> None:
     assert plan.per_command == {0x0101: expected, 0x0102: expected}
 
 
-def test_a_broken_subcommand_module_does_not_break_simulate(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_broken_subcommand_module_fails_loudly(monkeypatch: pytest.MonkeyPatch) -> None:
     import aiofins.cli as cli
 
     monkeypatch.setattr(cli, "SUBCOMMANDS", ("no_such_module", "simulate"))
-    assert main(["simulate", "--node", "300"]) == 2  # simulate still parses and runs
-    with pytest.raises(SystemExit):
-        main(["read", "udp://127.0.0.1", "D0"])
-    err = capsys.readouterr().err
-    assert "commands of cli/no_such_module.py unavailable" in err
+    with pytest.raises(ModuleNotFoundError, match="no_such_module"):
+        main(["simulate", "--node", "3"])
 
 
 def test_default_endpoints() -> None:

@@ -26,21 +26,15 @@ SUBCOMMANDS: tuple[str, ...] = ("plc", "poll", "bulk", "simulate", "demo")
 Handler = Callable[[argparse.Namespace], int]
 
 
-def build_parser(broken: dict[str, ImportError] | None = None) -> argparse.ArgumentParser:
-    """The full parser; modules that fail to import are left out and put in ``broken``."""
+def build_parser() -> argparse.ArgumentParser:
+    """The full parser (a subcommand module that fails to import is an error, loudly)."""
     parser = argparse.ArgumentParser(
         prog="aiofins", description="Omron FINS client tools and virtual PLC."
     )
     parser.add_argument("--version", action="version", version=f"aiofins {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in SUBCOMMANDS:
-        try:
-            module = importlib.import_module(f".{name}", __name__)
-        except ImportError as exc:
-            if broken is None:
-                raise
-            broken[name] = exc
-            continue
+        module = importlib.import_module(f".{name}", __name__)
         for hook in ("register", "add_parser", "add_parsers"):
             add = getattr(module, hook, None)
             if add is not None:
@@ -53,15 +47,7 @@ def build_parser(broken: dict[str, ImportError] | None = None) -> argparse.Argum
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (errors go to stderr)."""
-    broken: dict[str, ImportError] = {}
-    parser = build_parser(broken)
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        if exc.code not in (0, None):
-            for name, error in broken.items():
-                print(f"aiofins: commands of cli/{name}.py unavailable: {error}", file=sys.stderr)
-        raise
+    args = build_parser().parse_args(argv)
     handler: Handler = args.func
     try:
         return handler(args)
