@@ -8,6 +8,7 @@ stats). Prints a table; ``--json`` prints the rows as JSON.
     python benchmarks/bench_session.py                 # 3 s per case
     python benchmarks/bench_session.py --pin 0         # responder and client on CPU 0
     python benchmarks/bench_session.py --pin 0,1       # responder on CPU 0, client on CPU 1
+    python benchmarks/bench_session.py --tcp           # FINS/TCP rows too
 
 On a small VM a cross-core wake-up costs tens of microseconds, so pinning both to one core
 shows the per-request cost of the client; one core each shows pipelined throughput.
@@ -30,6 +31,7 @@ import anyio
 
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
+from aiofins.transport.tcp import TcpTransport
 from aiofins.transport.udp import UdpTransport
 
 PERF_TOOLS = Path(
@@ -86,11 +88,14 @@ def summarise(case: str, loop: str, latencies: list[float], seconds: float) -> d
     }
 
 
-async def run_cases(port: int, duration: float, loop: str) -> list[dict[str, Any]]:
+async def run_cases(
+    port: int, duration: float, loop: str, tcp: bool = False
+) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     clock = time.perf_counter
+    transport = TcpTransport("127.0.0.1", port) if tcp else UdpTransport("127.0.0.1", port)
     session = Session(
-        UdpTransport("127.0.0.1", port),
+        transport,
         source=FinsAddress(0, 2, 0),
         dest=FinsAddress(0, 1, 0),
         max_in_flight=50,
@@ -114,7 +119,7 @@ async def run_cases(port: int, duration: float, loop: str) -> list[dict[str, Any
                 lat.append(now - t0)
             if len(r.data) != expect:
                 raise AssertionError("wrong reply size")
-            rows.append(summarise(case, loop, lat, now - start))
+            rows.append(summarise(prefix + case, loop, lat, now - start))
 
         async def pipelined(case: str, width: int, count: int) -> None:
             params = read_params(100, count)
@@ -135,12 +140,14 @@ async def run_cases(port: int, duration: float, loop: str) -> list[dict[str, Any
             async with anyio.create_task_group() as tg:
                 for _ in range(width):
                     tg.start_soon(worker)
-            rows.append(summarise(case, loop, lat, clock() - start))
+            rows.append(summarise(prefix + case, loop, lat, clock() - start))
 
+        prefix = "TCP " if tcp else ""
         await sequential("sequential 1 word", 1, 2)
         await pipelined("50 in flight, 1 word", 50, 1)
-        await sequential("sequential 999 words", 999, 1998)
-        await pipelined("50 in flight, 999 words", 50, 999)
+        if not tcp:
+            await sequential("sequential 999 words", 999, 1998)
+            await pipelined("50 in flight, 999 words", 50, 999)
         stats = session.stats
         if stats.timeouts or stats.malformed or stats.unsolicited:
             raise AssertionError(f"faults during the benchmark: {stats}")
@@ -206,6 +213,7 @@ def main() -> None:
     parser.add_argument("--pin", default="", help="CPU for responder[,client], e.g. 0 or 0,1")
     parser.add_argument("--json", action="store_true", help="print JSON rows")
     parser.add_argument("--no-c", action="store_true", help="skip the C baseline")
+    parser.add_argument("--tcp", action="store_true", help="also run FINS/TCP (1-word cases)")
     args = parser.parse_args()
     cpus = [int(c) for c in args.pin.split(",") if c.strip()]
     server_cpu = cpus[0] if cpus else None
@@ -238,16 +246,19 @@ def main() -> None:
         except ImportError:
             print("uvloop not installed: skipped", file=sys.stderr)
         rows += anyio.run(run_cases, port, args.duration, "trio", backend="trio")
+        if args.tcp:
+            rows += anyio.run(run_cases, port, args.duration, "asyncio", True, backend="asyncio")
+            rows += anyio.run(run_cases, port, args.duration, "trio", True, backend="trio")
     finally:
         proc.terminate()
         proc.wait(timeout=5)
     if args.json:
         print(json.dumps(rows, indent=2))
         return
-    print(f"{'loop':<11} {'case':<26} {'req/s':>9} {'p50 µs':>8} {'p99 µs':>8}")
+    print(f"{'loop':<11} {'case':<30} {'req/s':>9} {'p50 µs':>8} {'p99 µs':>8}")
     for row in rows:
         print(
-            f"{row['loop']:<11} {row['case']:<26} {row['req_s']:>9.0f} "
+            f"{row['loop']:<11} {row['case']:<30} {row['req_s']:>9.0f} "
             f"{row['p50_us']:>8.1f} {row['p99_us']:>8.1f}"
         )
 

@@ -17,14 +17,13 @@ from anyio.abc import TaskGroup
 
 from aiofins.protocol.errors import (
     CommandRejectedError,
+    FinsTimeout,
     ParameterError,
     RelayError,
 )
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.transport import UdpTransport
-
-pytestmark = pytest.mark.anyio
 
 SOURCE = FinsAddress(0, 2, 0)
 PLC = FinsAddress(0, 1, 0)
@@ -117,6 +116,7 @@ def session_for(responder: Responder, **options: object) -> Session:
     )
 
 
+@pytest.mark.anyio
 async def test_read_sends_exact_bytes_and_returns_data() -> None:
     async with udp_responder() as peer, session_for(peer) as session:
         response = await session.request(0x01, 0x01, read_params(100, 2), idempotent=True)
@@ -132,6 +132,7 @@ async def test_read_sends_exact_bytes_and_returns_data() -> None:
         assert session.stats.latency_mean > 0
 
 
+@pytest.mark.anyio
 async def test_thousand_concurrent_requests_each_get_their_own_data() -> None:
     """1,000 requests to 10 nodes x 100 words; replies come back in reverse batches."""
     held: list[bytes] = []
@@ -177,6 +178,7 @@ async def test_thousand_concurrent_requests_each_get_their_own_data() -> None:
     assert session.stats.timeouts == 0
 
 
+@pytest.mark.anyio
 async def test_in_flight_cap_per_destination() -> None:
     seen_max = 0
     waiting: list[bytes] = []
@@ -223,6 +225,7 @@ async def test_in_flight_cap_per_destination() -> None:
         assert sorted(sent[i : i + 3]) == sorted(called[i : i + 3])
 
 
+@pytest.mark.anyio
 async def test_end_code_error_is_raised_with_its_class() -> None:
     def bad_area(cmd: bytes) -> list[Reply]:
         return [(0.0, reply(cmd, 0x1101))]
@@ -235,6 +238,7 @@ async def test_end_code_error_is_raised_with_its_class() -> None:
         assert session.stats.end_code_errors == 1
 
 
+@pytest.mark.anyio
 async def test_cpu_error_flags_ride_on_the_response() -> None:
     def flagged(cmd: bytes) -> list[Reply]:
         return [(0.0, reply(cmd, 0x0040, b"\x12\x34"))]
@@ -246,6 +250,7 @@ async def test_cpu_error_flags_ride_on_the_response() -> None:
         assert response.end_code.is_normal and response.end_code.raw == 0x0040
 
 
+@pytest.mark.anyio
 async def test_fatal_flag_0080_is_not_an_error() -> None:
     async with (
         udp_responder(lambda c: [(0.0, reply(c, 0x0080, b"\x00\x01"))]) as peer,
@@ -255,6 +260,7 @@ async def test_fatal_flag_0080_is_not_an_error() -> None:
         assert response.fatal_cpu_error and response.data == b"\x00\x01"
 
 
+@pytest.mark.anyio
 async def test_relay_error_names_the_relay_point() -> None:
     def relay(cmd: bytes) -> list[Reply]:
         return [(0.0, reply(cmd, 0x8000 | 0x0101, trailer=bytes((3, 17))))]
@@ -266,6 +272,7 @@ async def test_relay_error_names_the_relay_point() -> None:
         assert info.value.code == 0x0101
 
 
+@pytest.mark.anyio
 async def test_busy_end_code_is_retried_then_succeeds() -> None:
     calls = 0
 
@@ -284,6 +291,7 @@ async def test_busy_end_code_is_retried_then_succeeds() -> None:
         assert len(set(sids)) == 3  # each attempt with a fresh SID
 
 
+@pytest.mark.anyio
 async def test_busy_forever_raises_command_rejected() -> None:
     async with (
         udp_responder(lambda c: [(0.0, reply(c, 0x2605))]) as peer,
@@ -295,6 +303,7 @@ async def test_busy_forever_raises_command_rejected() -> None:
         assert len(peer.received) == 2
 
 
+@pytest.mark.anyio
 async def test_icf_c1_reply_is_accepted() -> None:
     async with (
         udp_responder(lambda c: [(0.0, reply(c, 0, b"\xab\xcd", icf=0xC1))]) as peer,
@@ -303,6 +312,7 @@ async def test_icf_c1_reply_is_accepted() -> None:
         assert (await session.request(0x01, 0x01, read_params(1))).data == b"\xab\xcd"
 
 
+@pytest.mark.anyio
 async def test_reply_from_real_network_matches_request_to_network_zero() -> None:
     def renumbered(cmd: bytes) -> list[Reply]:
         frame = bytearray(reply(cmd, 0, b"\x00\x09"))
@@ -313,6 +323,7 @@ async def test_reply_from_real_network_matches_request_to_network_zero() -> None
         assert (await session.request(0x01, 0x01, read_params(1))).data == b"\x00\x09"
 
 
+@pytest.mark.anyio
 async def test_relay_error_from_the_relay_point_reaches_its_request() -> None:
     """The relay point answers with its own address as source, not the destination's."""
 
@@ -326,3 +337,26 @@ async def test_relay_error_from_the_relay_point_reaches_its_request() -> None:
             await session.request(0x01, 0x01, read_params(0), dest=FinsAddress(5, 9, 0))
         assert (info.value.network, info.value.node) == (0, 7)
         assert info.value.code == 0x0501
+
+
+def test_under_uvloop() -> None:
+    """uvloop takes its own UDP path (its datagram transport calls the session directly)."""
+    pytest.importorskip("uvloop")
+
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer, timeout=1) as session:
+            results: dict[int, bytes] = {}
+
+            async def one(word: int) -> None:
+                results[word] = (await session.request(0x01, 0x01, read_params(word))).data
+
+            async with anyio.create_task_group() as tg:
+                for word in range(50):
+                    tg.start_soon(one, word)
+            assert results == {w: (0x1000 | w).to_bytes(2, "big") for w in range(50)}
+            peer.handler = lambda cmd: []
+            with pytest.raises(FinsTimeout):
+                await session.request(0x01, 0x01, read_params(0), timeout=0.05)
+            assert session.stats.timeouts == 1
+
+    anyio.run(main, backend="asyncio", backend_options={"use_uvloop": True})

@@ -6,12 +6,17 @@ server's reply, which names our node and the server's; both are exposed as
 allocated node as SA1. Command 3 (error notification) ends the connection with
 :class:`FinsTcpError`; command 6 (connection confirmation) is discarded. The socket is closed
 on every path out (a leaked connection holds one of the PLC's node slots).
+
+Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session from
+``data_received`` and sends synchronously; under trio a reader task on an anyio stream does.
 """
 
 from __future__ import annotations
 
+import asyncio
+
 import anyio
-from anyio.abc import SocketStream
+from anyio.abc import SocketAttribute, SocketStream
 
 from ..protocol.errors import ConnectionLost, FinsTcpError, FrameError
 from ..protocol.tcp import (
@@ -24,7 +29,74 @@ from ..protocol.tcp import (
     parse_node_response,
     tcp_error_meaning,
 )
-from .base import FrameSink, TaskSpawner, Transport, wrap_os_error
+from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+
+
+class _TcpProtocol(asyncio.Protocol):
+    """The asyncio path: frames go from ``data_received`` straight to the session."""
+
+    def __init__(self, owner: TcpTransport, sink: FrameSink) -> None:
+        self.owner = owner
+        self.sink = sink
+        self.decoder = TcpDecoder()
+        self.handshake: asyncio.Future[tuple[int, int]] = asyncio.get_running_loop().create_future()
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def send(self, frame: bytes) -> None:
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            raise ConnectionLost(f"{self.owner.description} is not connected")
+        transport.write(encode_frame(frame))
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            messages = self.decoder.feed(data)
+        except FrameError as exc:
+            self.fail(exc)
+            return
+        for message in messages:
+            command = message.command
+            if command == TcpCommand.FRAME and self.handshake.done():
+                self.sink.frame_received(message.payload)
+            elif command == TcpCommand.CONNECTION_CONFIRMATION:
+                continue
+            elif command == TcpCommand.FRAME_ERROR:
+                self.fail(_error_notification(self.owner, message.error_code))
+                return
+            elif not self.handshake.done():
+                try:
+                    self.handshake.set_result(parse_node_response(message))
+                except FrameError as exc:
+                    self.fail(exc)
+                    return
+            else:
+                self.sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+
+    def fail(self, exc: BaseException) -> None:
+        """End the connection: the stream is unusable after a framing error or command 3."""
+        if not self.handshake.done():
+            self.handshake.set_exception(exc)
+        elif self.owner._aio is self:
+            self.owner._detach()
+            self.sink.connection_lost(exc)
+        if self.transport is not None:
+            self.transport.close()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        lost = ConnectionLost(f"{self.owner.description} closed the connection")
+        lost.__cause__ = exc
+        self.fail(lost)
+
+
+def _error_notification(owner: TcpTransport, code: int) -> FinsTcpError:
+    return FinsTcpError(
+        f"{owner.description} reported a FINS/TCP error: {tcp_error_meaning(code)}",
+        tcp_error_code=code,
+    )
 
 
 class TcpTransport(Transport):
@@ -48,20 +120,24 @@ class TcpTransport(Transport):
         self.node = node
         self.connect_timeout = connect_timeout
         self._stream: SocketStream | None = None
+        self._aio: _TcpProtocol | None = None
         self._send_lock = anyio.Lock()
         self.local_node: int | None = None
         self.remote_node: int | None = None
 
     @property
     def is_open(self) -> bool:
-        return self._stream is not None
+        return self._stream is not None or self._aio is not None
 
     @property
     def description(self) -> str:
         return f"tcp://{self.host}:{self.port}"
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
-        if self._stream is not None:
+        if self.is_open:
+            return
+        if is_asyncio():
+            await self._open_asyncio(sink)
             return
         try:
             with anyio.fail_after(self.connect_timeout):
@@ -82,6 +158,33 @@ class TcpTransport(Transport):
         self._stream = stream
         self._send_lock = anyio.Lock()
         task_group.start_soon(self._reader, stream, decoder, backlog, sink)
+
+    async def _open_asyncio(self, sink: FrameSink) -> None:
+        loop = asyncio.get_running_loop()
+        proto = _TcpProtocol(self, sink)
+        try:
+            with anyio.fail_after(self.connect_timeout):
+                await loop.create_connection(lambda: proto, self.host, self.port)
+                assert proto.transport is not None
+                proto.transport.write(encode_node_request(self.node))
+                self.local_node, self.remote_node = await proto.handshake
+        except BaseException as exc:
+            if proto.transport is not None:
+                proto.transport.close()
+            if isinstance(exc, TimeoutError):
+                raise ConnectionLost(
+                    f"no FINS/TCP connection or node address reply from {self.description} "
+                    f"within {self.connect_timeout} s"
+                ) from exc
+            if isinstance(exc, OSError):
+                raise wrap_os_error(exc, f"cannot connect to {self.description}") from exc
+            raise
+        self._aio = proto
+        self.fast_send = proto.send
+
+    def _detach(self) -> None:
+        self._aio = None
+        self.fast_send = None
 
     async def _handshake(self, stream: SocketStream, decoder: TcpDecoder) -> list[TcpMessage]:
         """Send our node, read the server's reply; returns messages that followed it."""
@@ -128,11 +231,7 @@ class TcpTransport(Transport):
                     if command == TcpCommand.FRAME:
                         sink.frame_received(message.payload)
                     elif command == TcpCommand.FRAME_ERROR:
-                        raise FinsTcpError(
-                            f"{self.description} reported a FINS/TCP error: "
-                            + tcp_error_meaning(message.error_code),
-                            tcp_error_code=message.error_code,
-                        )
+                        raise _error_notification(self, message.error_code)
                     elif command != TcpCommand.CONNECTION_CONFIRMATION:
                         sink.frame_dropped(f"unexpected FINS/TCP command {command}")
                 messages = decoder.feed(await stream.receive())
@@ -152,17 +251,34 @@ class TcpTransport(Transport):
                     sink.connection_lost(exc)
 
     async def send(self, frame: bytes) -> None:
+        if self._aio is not None:
+            self._aio.send(frame)
+            return
         stream = self._stream
         if stream is None:
             raise ConnectionLost(f"{self.description} is not connected")
         data = encode_frame(frame)
         try:
-            async with self._send_lock:
+            lock = self._send_lock
+            if not lock.locked():  # nobody mid-write: try the socket directly, no await
+                raw = stream.extra(SocketAttribute.raw_socket)
+                try:
+                    sent = raw.send(data)
+                except (BlockingIOError, InterruptedError):
+                    sent = 0
+                if sent == len(data):
+                    return
+                data = data[sent:]
+            async with lock:  # the rest, in order, behind any other partial write
                 await stream.send(data)
         except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError) as exc:
             raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
 
     async def aclose(self) -> None:
+        proto = self._aio
+        self._detach()
+        if proto is not None and proto.transport is not None:
+            proto.transport.close()
         stream, self._stream = self._stream, None
         if stream is not None:
             with anyio.CancelScope(shield=True):

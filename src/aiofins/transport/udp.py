@@ -4,8 +4,10 @@ One socket per transport, bound to an ephemeral local port and *connected* to th
 the kernel drops datagrams from anyone else. The receive buffer is enlarged (best effort) so
 that many large replies in flight do not overflow it.
 
-Under asyncio (stock or uvloop) a reader callback on the socket drains every queued datagram
-straight into the session; under any other anyio backend (trio) a reader task does the same.
+Under stock asyncio a reader callback on the socket drains every queued datagram straight
+into the session (asyncio's datagram transport reads one per loop iteration); under uvloop its
+own datagram transport calls the session directly (it reads in C); under any other anyio
+backend (trio) a reader task drains the socket.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import asyncio
 import contextlib
 import socket
 from collections import deque
+from typing import Any
 
 import anyio
 
@@ -105,6 +108,40 @@ class _AsyncioSocket:
         self.sock.close()
 
 
+class _UvloopProtocol(asyncio.DatagramProtocol):
+    """The uvloop path: uvloop's own datagram transport reads in C and calls us directly."""
+
+    def __init__(self, owner: UdpTransport, sink: FrameSink) -> None:
+        self.owner = owner
+        self.sink = sink
+        self.transport: Any = None  # uvloop's UDPTransport (not an asyncio subclass)
+        self.datagram_received = sink.frame_received  # type: ignore[assignment,method-assign]
+
+    @property
+    def sock(self) -> socket.socket:
+        sock: socket.socket = self.transport.get_extra_info("socket")
+        return sock
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport
+
+    def send(self, frame: bytes) -> None:
+        self.transport.sendto(frame)
+
+    def error_received(self, exc: Exception) -> None:
+        self.sink.frame_dropped(f"socket error: {exc}")  # ICMP unreachable: not fatal
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.owner._aio is self:
+            self.owner._aio = None
+            self.owner.fast_send = None
+            self.sink.connection_lost(exc)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+
+
 class UdpTransport(Transport):
     """FINS/UDP to ``host:port`` from an ephemeral local port."""
 
@@ -124,7 +161,7 @@ class UdpTransport(Transport):
         self.local_host = local_host
         self.local_port = local_port
         self.rcvbuf = rcvbuf
-        self._aio: _AsyncioSocket | None = None
+        self._aio: _AsyncioSocket | _UvloopProtocol | None = None
         self._sock: socket.socket | None = None  # the socket of the anyio (trio) driver
 
     @property
@@ -170,7 +207,17 @@ class UdpTransport(Transport):
         except OSError as exc:
             raise wrap_os_error(exc, f"cannot open {self.description}") from exc
         if is_asyncio():
-            self._aio = _AsyncioSocket(asyncio.get_running_loop(), sock, self, sink)
+            loop = asyncio.get_running_loop()
+            if type(loop).__module__.startswith("uvloop"):
+                proto = _UvloopProtocol(self, sink)
+                try:
+                    await loop.create_datagram_endpoint(lambda: proto, sock=sock)
+                except BaseException:
+                    sock.close()
+                    raise
+                self._aio = proto
+            else:
+                self._aio = _AsyncioSocket(loop, sock, self, sink)
             self.fast_send = self._aio.send
         else:
             self._sock = sock
@@ -221,7 +268,7 @@ class UdpTransport(Transport):
             except OSError as exc:
                 raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
 
-    def _lost(self, aio: _AsyncioSocket, exc: BaseException) -> None:
+    def _lost(self, aio: _AsyncioSocket | _UvloopProtocol, exc: BaseException) -> None:
         if self._aio is aio:
             self._aio = None
             self.fast_send = None
