@@ -115,6 +115,7 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
         self.owner = owner
         self.sink = sink
         self.transport: Any = None  # uvloop's UDPTransport (not an asyncio subclass)
+        self._raw_send: Any = None
         self.datagram_received = sink.frame_received  # type: ignore[assignment,method-assign]
 
     @property
@@ -126,7 +127,12 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
         self.transport = transport
 
     def send(self, frame: bytes) -> None:
-        self.transport.sendto(frame)
+        # The socket is connected: a plain send() is cheaper than uvloop's sendto(), which
+        # looks up the address each time. Fall back to the transport if the buffer is full.
+        try:
+            self._raw_send(frame)
+        except (BlockingIOError, InterruptedError):
+            self.transport.sendto(frame)
 
     def error_received(self, exc: Exception) -> None:
         self.sink.frame_dropped(f"socket error: {exc}")  # ICMP unreachable: not fatal
@@ -210,6 +216,7 @@ class UdpTransport(Transport):
             loop = asyncio.get_running_loop()
             if type(loop).__module__.startswith("uvloop"):
                 proto = _UvloopProtocol(self, sink)
+                proto._raw_send = sock.send  # our own socket object: connected, non-blocking
                 try:
                     await loop.create_datagram_endpoint(lambda: proto, sock=sock)
                 except BaseException:
