@@ -16,12 +16,17 @@ Builders validate their arguments in ``__post_init__`` and raise :class:`Command
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from enum import IntEnum
 from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
-from ..errors import DecodeError
+from ..codec import Reader
+from ..errors import AddressError, CommandError, DecodeError
 
 R = TypeVar("R")
+T = TypeVar("T")
 Q = TypeVar("Q", bound="Request[Any]")
+E = TypeVar("E", bound=IntEnum)
 
 
 class Encodable(Protocol):
@@ -72,3 +77,63 @@ def expect_no_data(request: Request[Any], data: bytes) -> None:
 def encode_result(result: Encodable | None) -> bytes:
     """Response data bytes of a result (``None`` → no data)."""
     return b"" if result is None else result.encode()
+
+
+class ParameterlessRequest(Request[None]):
+    """Base of operations with no parameters and no response data (e.g. the log clears)."""
+
+    def encode(self) -> bytes:
+        return b""
+
+    @classmethod
+    def decode(cls: type[Q], params: bytes) -> Q:
+        Reader(params, cls.NAME).end()
+        return cls()
+
+    def decode_response(self, data: bytes) -> None:
+        expect_no_data(self, data)
+
+
+class _Rejected(CommandError):
+    """A :class:`CommandError` that also names the end code a PLC answers for it."""
+
+    def __init__(self, message: str, end_code: int) -> None:
+        super().__init__(message)
+        self.end_code = end_code
+
+
+class _RejectedAddress(AddressError):
+    """An :class:`AddressError` that also names the end code a PLC answers for it."""
+
+    def __init__(self, message: str, end_code: int) -> None:
+        super().__init__(message)
+        self.end_code = end_code
+
+
+def _decoded(op: type[Request[Any]], build: Callable[[], T], end_code: int = 0x110C) -> T:
+    """Run a builder on decoded fields; argument errors become :class:`DecodeError`."""
+    try:
+        return build()
+    except (CommandError, AddressError) as exc:
+        code = getattr(exc, "end_code", end_code)
+        raise DecodeError(f"{op.NAME}: {exc}", end_code=code) from exc
+
+
+def _decode_fields(op: type[Q], params: bytes, *fields: Callable[[Reader], Any]) -> Q:
+    """Read ``fields`` in order from all of ``params`` and build ``op`` from the values.
+
+    Short or long parameters raise :class:`DecodeError` (1002 / 1001); argument errors of the
+    builder become :class:`DecodeError` as in :func:`_decoded`.
+    """
+    r = Reader(params, op.NAME)
+    values = [read(r) for read in fields]
+    r.end()
+    return _decoded(op, lambda: op(*values))
+
+
+def _member(kind: type[E], value: int, what: str, choices: str) -> E:
+    """``kind(value)``; a value not in ``kind`` is rejected with end code 110C."""
+    try:
+        return kind(value)
+    except ValueError:
+        raise _Rejected(f"{what} {value!r} not one of {choices}", 0x110C) from None

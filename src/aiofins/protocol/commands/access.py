@@ -8,10 +8,10 @@ names the holder: network, node and unit address, one byte each.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from ..codec import Reader, check_range
-from ._base import Request, expect_no_data
+from ._base import R, Request, expect_no_data
 
 #: The program number CS/CJ-series CPU Units require.
 PROGRAM_NUMBER = 0xFFFF
@@ -41,15 +41,31 @@ class AccessRightHolder:
         return out
 
 
-def _program_number(cls: type[Request[Any]], params: bytes) -> int:
-    r = Reader(params, cls.NAME)
-    number = r.u16()
-    r.end()
-    return number
+_AccessT = TypeVar("_AccessT", bound="_AccessRightRequest[Any]")
 
 
 @dataclass(frozen=True)
-class AccessRightAcquire(Request["AccessRightHolder | None"]):
+class _AccessRightRequest(Request[R]):
+    """The parameters all three access right commands share: the program number."""
+
+    program_number: int = PROGRAM_NUMBER
+
+    def __post_init__(self) -> None:
+        check_range("program number", self.program_number, 0, 0xFFFF)
+
+    def encode(self) -> bytes:
+        return self.program_number.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls: type[_AccessT], params: bytes) -> _AccessT:
+        r = Reader(params, cls.NAME)
+        number = r.u16()
+        r.end()
+        return cls(number)
+
+
+@dataclass(frozen=True)
+class AccessRightAcquire(_AccessRightRequest["AccessRightHolder | None"]):
     """0C 01 ACCESS RIGHT ACQUIRE: take the access right unless another device holds it.
 
     A normal response carries no data (``None``). With end code 3001 the response data
@@ -62,18 +78,6 @@ class AccessRightAcquire(Request["AccessRightHolder | None"]):
     NAME: ClassVar[str] = "ACCESS RIGHT ACQUIRE"
     METHOD: ClassVar[str] = "access_right_acquire"
 
-    program_number: int = PROGRAM_NUMBER
-
-    def __post_init__(self) -> None:
-        check_range("program number", self.program_number, 0, 0xFFFF)
-
-    def encode(self) -> bytes:
-        return self.program_number.to_bytes(2, "big")
-
-    @classmethod
-    def decode(cls, params: bytes) -> AccessRightAcquire:
-        return cls(_program_number(cls, params))
-
     def decode_response(self, data: bytes) -> AccessRightHolder | None:
         if not data:
             return None
@@ -81,7 +85,7 @@ class AccessRightAcquire(Request["AccessRightHolder | None"]):
 
 
 @dataclass(frozen=True)
-class AccessRightForcedAcquire(Request[None]):
+class AccessRightForcedAcquire(_AccessRightRequest[None]):
     """0C 02 ACCESS RIGHT FORCED ACQUIRE: take the access right even from another holder."""
 
     MRC: ClassVar[int] = 0x0C
@@ -89,42 +93,18 @@ class AccessRightForcedAcquire(Request[None]):
     NAME: ClassVar[str] = "ACCESS RIGHT FORCED ACQUIRE"
     METHOD: ClassVar[str] = "access_right_forced_acquire"
 
-    program_number: int = PROGRAM_NUMBER
-
-    def __post_init__(self) -> None:
-        check_range("program number", self.program_number, 0, 0xFFFF)
-
-    def encode(self) -> bytes:
-        return self.program_number.to_bytes(2, "big")
-
-    @classmethod
-    def decode(cls, params: bytes) -> AccessRightForcedAcquire:
-        return cls(_program_number(cls, params))
-
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)
 
 
 @dataclass(frozen=True)
-class AccessRightRelease(Request[None]):
+class AccessRightRelease(_AccessRightRequest[None]):
     """0C 03 ACCESS RIGHT RELEASE: release the access right, whoever holds it."""
 
     MRC: ClassVar[int] = 0x0C
     SRC: ClassVar[int] = 0x03
     NAME: ClassVar[str] = "ACCESS RIGHT RELEASE"
     METHOD: ClassVar[str] = "access_right_release"
-
-    program_number: int = PROGRAM_NUMBER
-
-    def __post_init__(self) -> None:
-        check_range("program number", self.program_number, 0, 0xFFFF)
-
-    def encode(self) -> bytes:
-        return self.program_number.to_bytes(2, "big")
-
-    @classmethod
-    def decode(cls, params: bytes) -> AccessRightRelease:
-        return cls(_program_number(cls, params))
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 from ..areas import MemoryAddress
 from ..codec import Reader, check_range
 from ..errors import AddressError, CommandError, DecodeError
-from ._base import Request, expect_no_data
+from ._base import ParameterlessRequest, Request, expect_no_data
 
 
 class ForceSpec(enum.IntEnum):
@@ -140,24 +140,13 @@ class ForcedSetReset(Request[None]):
 
 
 @dataclass(frozen=True)
-class ForcedSetResetCancel(Request[None]):
+class ForcedSetResetCancel(ParameterlessRequest):
     """23 02 FORCED SET/RESET CANCEL: release every forced bit/flag."""
 
     MRC: ClassVar[int] = 0x23
     SRC: ClassVar[int] = 0x02
     NAME: ClassVar[str] = "FORCED SET/RESET CANCEL"
     METHOD: ClassVar[str] = "forced_set_reset_cancel"
-
-    def encode(self) -> bytes:
-        return b""
-
-    @classmethod
-    def decode(cls, params: bytes) -> ForcedSetResetCancel:
-        Reader(params, cls.NAME).end()
-        return cls()
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
 
 
 OPERATIONS: tuple[type[Request[Any]], ...] = (ForcedSetReset, ForcedSetResetCancel)

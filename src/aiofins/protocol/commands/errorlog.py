@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 from ..codec import Reader, check_range
 from ..errors import DecodeError
-from ._base import Request, expect_no_data
+from ._base import Encodable, ParameterlessRequest, Request, expect_no_data
 from .clock import (
     bcd_byte,
     check_day_of_week,
@@ -32,13 +32,81 @@ ACCESS_RECORD_SIZE = 12
 MAX_RECORD_COUNT = 0xFFFF
 
 
-def _no_params(cls: type[Request[Any]], params: bytes) -> None:
-    Reader(params, cls.NAME).end()
+_RecordT = TypeVar("_RecordT", bound=Encodable)
+_LogT = TypeVar("_LogT", bound="_RecordLog[Any]")
+_ReadT = TypeVar("_ReadT", bound="_RecordLogRead[Any]")
 
 
-def _check_records(name: str, max_records: int, stored_records: int) -> None:
-    check_range(f"{name} maximum number of stored records", max_records, 0, 0xFFFF)
-    check_range(f"{name} number of stored records", stored_records, 0, 0xFFFF)
+@dataclass(frozen=True, slots=True)
+class _RecordLog(Generic[_RecordT]):
+    """Data of a log read: maximum and stored record counts, then fixed-size records."""
+
+    #: Log name in messages, e.g. ``"error log"``.
+    _LOG: ClassVar[str]
+    #: Name of the read command, e.g. ``"ERROR LOG READ"``.
+    _READ: ClassVar[str]
+    #: The record type; its ``read(Reader)`` parses one record.
+    _RECORD: ClassVar[type[Any]]
+    _RECORD_SIZE: ClassVar[int]
+    #: Whether response data of no bytes at all means "no records" (``(0, 0, ())``).
+    _EMPTY_MEANS_NONE: ClassVar[bool] = False
+
+    max_records: int
+    stored_records: int
+    records: tuple[_RecordT, ...] = ()
+
+    def __post_init__(self) -> None:
+        log = self._LOG
+        check_range(f"{log} maximum number of stored records", self.max_records, 0, 0xFFFF)
+        check_range(f"{log} number of stored records", self.stored_records, 0, 0xFFFF)
+        object.__setattr__(self, "records", tuple(self.records))
+        check_range(f"{log} records returned", len(self.records), 0, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        head = b"".join(
+            v.to_bytes(2, "big") for v in (self.max_records, self.stored_records, len(self.records))
+        )
+        return head + b"".join(rec.encode() for rec in self.records)
+
+    @classmethod
+    def decode(cls: type[_LogT], data: bytes) -> _LogT:
+        if not data and cls._EMPTY_MEANS_NONE:
+            return cls(0, 0, ())
+        r = Reader(data, f"{cls._READ} response")
+        max_records, stored, count = r.u16(), r.u16(), r.u16()
+        size = count * cls._RECORD_SIZE
+        if r.remaining != size:
+            raise DecodeError(
+                f"{cls._READ} response: {count} record(s) need {size} bytes, got {r.remaining}"
+            )
+        records = tuple(cls._RECORD.read(r) for _ in range(count))
+        return cls(max_records, stored, records)
+
+
+@dataclass(frozen=True)
+class _RecordLogRead(Request[_LogT]):
+    """A log read: ``count`` records from ``beginning_record`` (0 = oldest)."""
+
+    IDEMPOTENT: ClassVar[bool] = True
+
+    beginning_record: int = 0
+    count: int = 20
+
+    def __post_init__(self) -> None:
+        check_range("beginning record number", self.beginning_record, 0, 0xFFFF)
+        check_range("number of records", self.count, 1, MAX_RECORD_COUNT)
+
+    def encode(self) -> bytes:
+        return self.beginning_record.to_bytes(2, "big") + self.count.to_bytes(2, "big")
+
+    @classmethod
+    def decode(cls: type[_ReadT], params: bytes) -> _ReadT:
+        r = Reader(params, cls.NAME)
+        begin, count = r.u16(), r.u16()
+        r.end()
+        if count == 0:
+            raise DecodeError(f"{cls.NAME}: number of records is 0", end_code=0x110C)
+        return cls(begin, count)
 
 
 @dataclass(frozen=True)
@@ -100,95 +168,41 @@ class ErrorLogRecord:
 
 
 @dataclass(frozen=True, slots=True)
-class ErrorLog:
+class ErrorLog(_RecordLog[ErrorLogRecord]):
     """Response of ERROR LOG READ.
 
     When the beginning record is past the stored records, the PLC answers with no data at
     all (manual 5-3-28); that decodes as ``ErrorLog(0, 0, ())``.
     """
 
-    max_records: int
-    stored_records: int
-    records: tuple[ErrorLogRecord, ...] = ()
-
-    def __post_init__(self) -> None:
-        _check_records("error log", self.max_records, self.stored_records)
-        object.__setattr__(self, "records", tuple(self.records))
-        check_range("error log records returned", len(self.records), 0, MAX_RECORD_COUNT)
-
-    def encode(self) -> bytes:
-        head = b"".join(
-            v.to_bytes(2, "big") for v in (self.max_records, self.stored_records, len(self.records))
-        )
-        return head + b"".join(rec.encode() for rec in self.records)
-
-    @classmethod
-    def decode(cls, data: bytes) -> ErrorLog:
-        if not data:
-            return cls(0, 0, ())
-        r = Reader(data, "ERROR LOG READ response")
-        max_records, stored, count = r.u16(), r.u16(), r.u16()
-        if r.remaining != count * ERROR_RECORD_SIZE:
-            raise DecodeError(
-                f"ERROR LOG READ response: {count} record(s) need {count * ERROR_RECORD_SIZE} "
-                f"bytes, got {r.remaining}"
-            )
-        records = tuple(ErrorLogRecord.read(r) for _ in range(count))
-        return cls(max_records, stored, records)
+    _LOG = "error log"
+    _READ = "ERROR LOG READ"
+    _RECORD = ErrorLogRecord
+    _RECORD_SIZE = ERROR_RECORD_SIZE
+    _EMPTY_MEANS_NONE = True
 
 
 @dataclass(frozen=True)
-class ErrorLogRead(Request[ErrorLog]):
+class ErrorLogRead(_RecordLogRead[ErrorLog]):
     """21 02 ERROR LOG READ: ``count`` records from ``beginning_record`` (0 = oldest)."""
 
     MRC: ClassVar[int] = 0x21
     SRC: ClassVar[int] = 0x02
     NAME: ClassVar[str] = "ERROR LOG READ"
     METHOD: ClassVar[str] = "error_log_read"
-    IDEMPOTENT: ClassVar[bool] = True
-
-    beginning_record: int = 0
-    count: int = 20
-
-    def __post_init__(self) -> None:
-        check_range("beginning record number", self.beginning_record, 0, 0xFFFF)
-        check_range("number of records", self.count, 1, MAX_RECORD_COUNT)
-
-    def encode(self) -> bytes:
-        return self.beginning_record.to_bytes(2, "big") + self.count.to_bytes(2, "big")
-
-    @classmethod
-    def decode(cls, params: bytes) -> ErrorLogRead:
-        r = Reader(params, cls.NAME)
-        begin, count = r.u16(), r.u16()
-        r.end()
-        if count == 0:
-            raise DecodeError(f"{cls.NAME}: number of records is 0", end_code=0x110C)
-        return cls(begin, count)
 
     def decode_response(self, data: bytes) -> ErrorLog:
         return ErrorLog.decode(data)
 
 
 @dataclass(frozen=True)
-class ErrorLogClear(Request[None]):
+class ErrorLogClear(ParameterlessRequest):
     """21 03 ERROR LOG CLEAR: reset the error log pointer to 0."""
 
     MRC: ClassVar[int] = 0x21
     SRC: ClassVar[int] = 0x03
     NAME: ClassVar[str] = "ERROR LOG CLEAR"
     METHOD: ClassVar[str] = "error_log_clear"
-
-    def encode(self) -> bytes:
-        return b""
-
-    @classmethod
-    def decode(cls, params: bytes) -> ErrorLogClear:
-        _no_params(cls, params)
-        return cls()
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
 
 
 # manual wins: 5-3-30 gives a 12-byte access record holding network, node and unit address,
@@ -236,89 +250,36 @@ class FinsWriteAccessRecord:
 
 
 @dataclass(frozen=True, slots=True)
-class FinsWriteAccessLog:
+class FinsWriteAccessLog(_RecordLog[FinsWriteAccessRecord]):
     """Response of FINS WRITE ACCESS LOG READ."""
 
-    max_records: int
-    stored_records: int
-    records: tuple[FinsWriteAccessRecord, ...] = ()
-
-    def __post_init__(self) -> None:
-        _check_records("access log", self.max_records, self.stored_records)
-        object.__setattr__(self, "records", tuple(self.records))
-        check_range("access log records returned", len(self.records), 0, MAX_RECORD_COUNT)
-
-    def encode(self) -> bytes:
-        head = b"".join(
-            v.to_bytes(2, "big") for v in (self.max_records, self.stored_records, len(self.records))
-        )
-        return head + b"".join(rec.encode() for rec in self.records)
-
-    @classmethod
-    def decode(cls, data: bytes) -> FinsWriteAccessLog:
-        r = Reader(data, "FINS WRITE ACCESS LOG READ response")
-        max_records, stored, count = r.u16(), r.u16(), r.u16()
-        if r.remaining != count * ACCESS_RECORD_SIZE:
-            raise DecodeError(
-                f"FINS WRITE ACCESS LOG READ response: {count} record(s) need "
-                f"{count * ACCESS_RECORD_SIZE} bytes, got {r.remaining}"
-            )
-        records = tuple(FinsWriteAccessRecord.read(r) for _ in range(count))
-        return cls(max_records, stored, records)
+    _LOG = "access log"
+    _READ = "FINS WRITE ACCESS LOG READ"
+    _RECORD = FinsWriteAccessRecord
+    _RECORD_SIZE = ACCESS_RECORD_SIZE
 
 
 @dataclass(frozen=True)
-class FinsWriteAccessLogRead(Request[FinsWriteAccessLog]):
+class FinsWriteAccessLogRead(_RecordLogRead[FinsWriteAccessLog]):
     """21 40 FINS WRITE ACCESS LOG READ: ``count`` records from ``beginning_record``."""
 
     MRC: ClassVar[int] = 0x21
     SRC: ClassVar[int] = 0x40
     NAME: ClassVar[str] = "FINS WRITE ACCESS LOG READ"
     METHOD: ClassVar[str] = "fins_write_access_log_read"
-    IDEMPOTENT: ClassVar[bool] = True
-
-    beginning_record: int = 0
-    count: int = 20
-
-    def __post_init__(self) -> None:
-        check_range("beginning record number", self.beginning_record, 0, 0xFFFF)
-        check_range("number of records", self.count, 1, MAX_RECORD_COUNT)
-
-    def encode(self) -> bytes:
-        return self.beginning_record.to_bytes(2, "big") + self.count.to_bytes(2, "big")
-
-    @classmethod
-    def decode(cls, params: bytes) -> FinsWriteAccessLogRead:
-        r = Reader(params, cls.NAME)
-        begin, count = r.u16(), r.u16()
-        r.end()
-        if count == 0:
-            raise DecodeError(f"{cls.NAME}: number of records is 0", end_code=0x110C)
-        return cls(begin, count)
 
     def decode_response(self, data: bytes) -> FinsWriteAccessLog:
         return FinsWriteAccessLog.decode(data)
 
 
 @dataclass(frozen=True)
-class FinsWriteAccessLogClear(Request[None]):
+class FinsWriteAccessLogClear(ParameterlessRequest):
     """21 41 FINS WRITE ACCESS LOG CLEAR."""
 
     MRC: ClassVar[int] = 0x21
     SRC: ClassVar[int] = 0x41
     NAME: ClassVar[str] = "FINS WRITE ACCESS LOG CLEAR"
     METHOD: ClassVar[str] = "fins_write_access_log_clear"
-
-    def encode(self) -> bytes:
-        return b""
-
-    @classmethod
-    def decode(cls, params: bytes) -> FinsWriteAccessLogClear:
-        _no_params(cls, params)
-        return cls()
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
 
 
 OPERATIONS: tuple[type[Request[Any]], ...] = (

@@ -9,16 +9,21 @@ chunking layer's business.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 from ..areas import MemoryAddress, element_size
 from ..codec import Reader
 from ..errors import AddressError, CommandError, DecodeError
-from ._base import Request, expect_no_data
-
-T = TypeVar("T")
+from ._base import (
+    Request,
+    _decode_fields,
+    _decoded,
+    _Rejected,
+    _RejectedAddress,
+    expect_no_data,
+)
 
 #: 01 01: elements per command on a 2012-byte frame (manual 5-2-2 table, Ethernet/CLK).
 MAX_READ_ELEMENTS = 999
@@ -44,29 +49,8 @@ _BIT_ALWAYS_ZERO = frozenset({0x09, 0x49, 0x01, 0x41, 0x06, 0x46, 0x07})
 _NOT_WORD_AREA = frozenset({0xBC, 0x9C})
 
 
-class _Rejected(CommandError):
-    """A :class:`CommandError` that also names the end code a PLC answers for it."""
-
-    def __init__(self, message: str, end_code: int) -> None:
-        super().__init__(message)
-        self.end_code = end_code
-
-
-class _RejectedAddress(AddressError):
-    """An :class:`AddressError` that also names the end code a PLC answers for it."""
-
-    def __init__(self, message: str, end_code: int) -> None:
-        super().__init__(message)
-        self.end_code = end_code
-
-
-def _decoded(op: type[Request[Any]], build: Callable[[], T], end_code: int = 0x110C) -> T:
-    """Run a builder on decoded fields; argument errors become :class:`DecodeError`."""
-    try:
-        return build()
-    except (CommandError, AddressError) as exc:
-        code = getattr(exc, "end_code", end_code)
-        raise DecodeError(f"{op.NAME}: {exc}", end_code=code) from exc
+def _read_address(r: Reader) -> MemoryAddress:
+    return MemoryAddress.decode(r.take(4))
 
 
 def _size_of(address: MemoryAddress) -> int:
@@ -214,11 +198,7 @@ class MemoryAreaRead(Request[MemoryAreaReadResult]):
 
     @classmethod
     def decode(cls, params: bytes) -> MemoryAreaRead:
-        r = Reader(params, cls.NAME)
-        address = MemoryAddress.decode(r.take(4))
-        count = r.u16()
-        r.end()
-        return _decoded(cls, lambda: cls(address, count))
+        return _decode_fields(cls, params, _read_address, Reader.u16)
 
     def decode_response(self, data: bytes) -> MemoryAreaReadResult:
         size = self.element_size
@@ -286,7 +266,7 @@ class MemoryAreaWrite(Request[None]):
     @classmethod
     def decode(cls, params: bytes) -> MemoryAreaWrite:
         r = Reader(params, cls.NAME)
-        address = MemoryAddress.decode(r.take(4))
+        address = _read_address(r)
         count = r.u16()
         data = r.rest()
         size = _decoded(cls, lambda: _check_writable(address))
@@ -325,12 +305,7 @@ class MemoryAreaFill(Request[None]):
 
     @classmethod
     def decode(cls, params: bytes) -> MemoryAreaFill:
-        r = Reader(params, cls.NAME)
-        address = MemoryAddress.decode(r.take(4))
-        count = r.u16()
-        value = r.u16()
-        r.end()
-        return _decoded(cls, lambda: cls(address, count, value))
+        return _decode_fields(cls, params, _read_address, Reader.u16, Reader.u16)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)
@@ -452,12 +427,7 @@ class MemoryAreaTransfer(Request[None]):
 
     @classmethod
     def decode(cls, params: bytes) -> MemoryAreaTransfer:
-        r = Reader(params, cls.NAME)
-        source = MemoryAddress.decode(r.take(4))
-        destination = MemoryAddress.decode(r.take(4))
-        count = r.u16()
-        r.end()
-        return _decoded(cls, lambda: cls(source, destination, count))
+        return _decode_fields(cls, params, _read_address, _read_address, Reader.u16)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -11,12 +11,8 @@ from enum import IntEnum
 from typing import Any, ClassVar
 
 from ..codec import Reader
-from ..errors import DecodeError
-from ._base import Request, expect_no_data
-from .memory import _decoded, _Rejected
-
-#: The only program number of CS/CJ/CP/NSJ CPU Units.
-PROGRAM_NUMBER = 0xFFFF
+from ._base import Request, _decoded, _member, expect_no_data
+from .program import PROGRAM_NUMBER, _read_program_number
 
 
 # manual wins: CV's 01 DEBUG mode (wire-format notes) is not a CS/CJ mode (manual 5-3-13).
@@ -29,11 +25,8 @@ class RunMode(IntEnum):
 
 def _program_number(r: Reader, name: str) -> None:
     """Read the optional program number (absent, or exactly ``FFFF``)."""
-    if not r.remaining:
-        return
-    number = r.u16()
-    if number != PROGRAM_NUMBER:
-        raise DecodeError(f"{name}: program number {number:04X} is not FFFF", end_code=0x1106)
+    if r.remaining:
+        _read_program_number(r, name)
 
 
 @dataclass(frozen=True)
@@ -48,12 +41,7 @@ class Run(Request[None]):
     mode: int = RunMode.MONITOR
 
     def __post_init__(self) -> None:
-        try:
-            mode = RunMode(self.mode)
-        except ValueError:
-            raise _Rejected(
-                f"mode {self.mode!r} not one of 02 (MONITOR), 04 (RUN)", 0x110C
-            ) from None
+        mode = _member(RunMode, self.mode, "mode", "02 (MONITOR), 04 (RUN)")
         object.__setattr__(self, "mode", mode)
 
     def encode(self) -> bytes:

@@ -14,8 +14,7 @@ from typing import Any, ClassVar
 
 from ..codec import Reader
 from ..errors import CommandError, DecodeError
-from ._base import Request, expect_no_data
-from .memory import _decoded, _Rejected
+from ._base import Request, _decoded, _Rejected, expect_no_data
 
 #: Words per 02 01 / 02 02 command (manual 5-3-7, 5-3-8).
 MAX_PARAMETER_WORDS = 498
@@ -89,6 +88,22 @@ def _bytes_words(data: bytes) -> tuple[int, ...]:
     return tuple(int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2))
 
 
+def _head(area_code: int, begin_word: int, count: int) -> bytes:
+    """Parameter area code, beginning word, number of words: two bytes each."""
+    return b"".join(v.to_bytes(2, "big") for v in (area_code, begin_word, count))
+
+
+def _read_head(r: Reader) -> tuple[int, int, int]:
+    """Read what :func:`_head` writes (the number of words keeps its bit 15)."""
+    return r.u16(), r.u16(), r.u16()
+
+
+def _block(area_code: int, begin_word: int, words: tuple[int, ...], last: bool | None) -> bytes:
+    """The head with bit 15 of the number of words set for ``last``, then the words."""
+    count = len(words) | (_LAST_WORD if last else 0)
+    return _head(area_code, begin_word, count) + _words_bytes(words)
+
+
 @dataclass(frozen=True, slots=True)
 class ParameterAreaReadResult:
     """Data of 02 01: echoed area code and beginning word, the words, the last-word flag."""
@@ -108,13 +123,7 @@ class ParameterAreaReadResult:
         _check_words(self.words)
 
     def encode(self) -> bytes:
-        count = len(self.words) | (_LAST_WORD if self.last else 0)
-        return (
-            self.area_code.to_bytes(2, "big")
-            + self.begin_word.to_bytes(2, "big")
-            + count.to_bytes(2, "big")
-            + _words_bytes(self.words)
-        )
+        return _block(self.area_code, self.begin_word, self.words, self.last)
 
 
 @dataclass(frozen=True)
@@ -135,18 +144,12 @@ class ParameterAreaRead(Request[ParameterAreaReadResult]):
         _check_span(self.area_code, self.begin_word, self.count, MAX_PARAMETER_WORDS)
 
     def encode(self) -> bytes:
-        return (
-            self.area_code.to_bytes(2, "big")
-            + self.begin_word.to_bytes(2, "big")
-            + self.count.to_bytes(2, "big")
-        )
+        return _head(self.area_code, self.begin_word, self.count)
 
     @classmethod
     def decode(cls, params: bytes) -> ParameterAreaRead:
         r = Reader(params, cls.NAME)
-        area_code = r.u16()
-        begin_word = r.u16()
-        count = r.u16()
+        area_code, begin_word, count = _read_head(r)
         r.end()
         if count & _LAST_WORD:
             raise DecodeError(
@@ -156,9 +159,7 @@ class ParameterAreaRead(Request[ParameterAreaReadResult]):
 
     def decode_response(self, data: bytes) -> ParameterAreaReadResult:
         r = Reader(data, f"{self.NAME} response")
-        area_code = r.u16()
-        begin_word = r.u16()
-        count = r.u16()
+        area_code, begin_word, count = _read_head(r)
         words = _bytes_words(r.take(2 * (count & 0x7FFF)))
         r.end()
         return ParameterAreaReadResult(area_code, begin_word, words, bool(count & _LAST_WORD))
@@ -197,20 +198,12 @@ class ParameterAreaWrite(Request[None]):
         return len(self.words)
 
     def encode(self) -> bytes:
-        count = len(self.words) | (_LAST_WORD if self.last else 0)
-        return (
-            self.area_code.to_bytes(2, "big")
-            + self.begin_word.to_bytes(2, "big")
-            + count.to_bytes(2, "big")
-            + _words_bytes(self.words)
-        )
+        return _block(self.area_code, self.begin_word, self.words, self.last)
 
     @classmethod
     def decode(cls, params: bytes) -> ParameterAreaWrite:
         r = Reader(params, cls.NAME)
-        area_code = r.u16()
-        begin_word = r.u16()
-        count = r.u16()
+        area_code, begin_word, count = _read_head(r)
         data = r.rest()
         words = count & 0x7FFF
         if len(data) != 2 * words:
@@ -249,14 +242,12 @@ class ParameterAreaClear(Request[None]):
 
     def encode(self) -> bytes:
         count = self.count or 0
-        return self.area_code.to_bytes(2, "big") + b"\0\0" + count.to_bytes(2, "big") + b"\0\0"
+        return _head(self.area_code, 0, count) + b"\0\0"
 
     @classmethod
     def decode(cls, params: bytes) -> ParameterAreaClear:
         r = Reader(params, cls.NAME)
-        area_code = r.u16()
-        begin_word = r.u16()
-        count = r.u16()
+        area_code, begin_word, count = _read_head(r)
         data = r.u16()
         r.end()
         if begin_word != 0:

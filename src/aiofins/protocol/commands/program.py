@@ -14,8 +14,7 @@ from typing import Any, ClassVar
 
 from ..codec import Reader
 from ..errors import CommandError, DecodeError
-from ._base import Request, expect_no_data
-from .memory import _decoded, _Rejected
+from ._base import Request, _decoded, _member, _Rejected, expect_no_data
 
 #: Bytes per 03 06 command (manual 5-3-10).
 MAX_PROGRAM_READ_BYTES = 992
@@ -57,6 +56,27 @@ def _read_program_number(r: Reader, name: str) -> None:
         raise DecodeError(f"{name}: program number {number:04X} is not FFFF", end_code=0x1106)
 
 
+def _read_head(r: Reader, name: str | None = None) -> tuple[int, int]:
+    """Read what :func:`_head` writes; return the beginning address and number of bytes.
+
+    With ``name`` (a command being decoded) the program number must be FFFF (else 1106); a
+    response's echoed program number is not checked. Bit 15 of the number of bytes is kept.
+    """
+    if name is None:
+        r.u16()
+    else:
+        _read_program_number(r, name)
+    return r.u32(), r.u16()
+
+
+def _check_echo(address: int, byte_count: int) -> None:
+    """Range checks of a response's echoed beginning address and number of bytes."""
+    if not isinstance(address, int) or not 0 <= address <= 0xFFFFFFFF:
+        raise CommandError(f"beginning address {address!r} out of range 0..0xFFFFFFFF")
+    if not isinstance(byte_count, int) or not 0 <= byte_count <= 0x7FFF:
+        raise CommandError(f"number of bytes {byte_count!r} out of range 0..32767")
+
+
 def _head(address: int, count: int, last: bool) -> bytes:
     return (
         PROGRAM_NUMBER.to_bytes(2, "big")
@@ -75,10 +95,7 @@ class ProgramAreaReadResult:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", bytes(self.data))
-        if not isinstance(self.address, int) or not 0 <= self.address <= 0xFFFFFFFF:
-            raise CommandError(f"beginning address {self.address!r} out of range 0..0xFFFFFFFF")
-        if len(self.data) > 0x7FFF:
-            raise CommandError(f"number of bytes {len(self.data)} out of range 0..32767")
+        _check_echo(self.address, len(self.data))
 
     def encode(self) -> bytes:
         return _head(self.address, len(self.data), self.last) + self.data
@@ -109,9 +126,7 @@ class ProgramAreaRead(Request[ProgramAreaReadResult]):
     @classmethod
     def decode(cls, params: bytes) -> ProgramAreaRead:
         r = Reader(params, cls.NAME)
-        _read_program_number(r, cls.NAME)
-        address = r.u32()
-        count = r.u16()
+        address, count = _read_head(r, cls.NAME)
         r.end()
         if count & _LAST:
             raise DecodeError(
@@ -121,9 +136,7 @@ class ProgramAreaRead(Request[ProgramAreaReadResult]):
 
     def decode_response(self, data: bytes) -> ProgramAreaReadResult:
         r = Reader(data, f"{self.NAME} response")
-        r.u16()  # program number, echoed
-        address = r.u32()
-        count = r.u16()
+        address, count = _read_head(r)
         body = r.take(count & 0x7FFF)
         r.end()
         return ProgramAreaReadResult(address, body, bool(count & _LAST))
@@ -138,10 +151,7 @@ class ProgramAreaWriteResult:
     last: bool
 
     def __post_init__(self) -> None:
-        if not isinstance(self.address, int) or not 0 <= self.address <= 0xFFFFFFFF:
-            raise CommandError(f"beginning address {self.address!r} out of range 0..0xFFFFFFFF")
-        if not isinstance(self.byte_count, int) or not 0 <= self.byte_count <= 0x7FFF:
-            raise CommandError(f"number of bytes {self.byte_count!r} out of range 0..32767")
+        _check_echo(self.address, self.byte_count)
 
     def encode(self) -> bytes:
         return _head(self.address, self.byte_count, self.last)
@@ -182,9 +192,7 @@ class ProgramAreaWrite(Request[ProgramAreaWriteResult]):
     @classmethod
     def decode(cls, params: bytes) -> ProgramAreaWrite:
         r = Reader(params, cls.NAME)
-        _read_program_number(r, cls.NAME)
-        address = r.u32()
-        count = r.u16()
+        address, count = _read_head(r, cls.NAME)
         data = r.rest()
         if len(data) != count & 0x7FFF:
             raise DecodeError(
@@ -195,9 +203,7 @@ class ProgramAreaWrite(Request[ProgramAreaWriteResult]):
 
     def decode_response(self, data: bytes) -> ProgramAreaWriteResult:
         r = Reader(data, f"{self.NAME} response")
-        r.u16()  # program number, echoed
-        address = r.u32()
-        count = r.u16()
+        address, count = _read_head(r)
         r.end()
         return ProgramAreaWriteResult(address, count & 0x7FFF, bool(count & _LAST))
 
@@ -216,14 +222,8 @@ class ProgramAreaClear(Request[None]):
     clear_code: int = ProgramClearCode.WITHOUT_INTERRUPT_TASKS
 
     def __post_init__(self) -> None:
-        try:
-            code = ProgramClearCode(self.clear_code)
-        except ValueError:
-            raise _Rejected(
-                f"clear code {self.clear_code!r} not one of 00 (without interrupt tasks), "
-                "10 (with interrupt tasks)",
-                0x110C,
-            ) from None
+        choices = "00 (without interrupt tasks), 10 (with interrupt tasks)"
+        code = _member(ProgramClearCode, self.clear_code, "clear code", choices)
         object.__setattr__(self, "clear_code", code)
 
     def encode(self) -> bytes:
