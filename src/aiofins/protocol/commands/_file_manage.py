@@ -24,16 +24,7 @@ from ..files import (
     read_file_name,
 )
 from ..header import MAX_PARAMETER_SIZE
-from ._base import Request, expect_no_data
-
-
-def _set(obj: object, name: str, value: object) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _u16(value: int) -> bytes:
-    return value.to_bytes(2, "big")
-
+from ._file_common import FileCommand, FileOperation, finish, read_number, set_field, u16
 
 # --------------------------------------------------------------------------- 2205
 
@@ -48,21 +39,17 @@ class FileDeleteResult:
         check_u("number of files deleted", self.deleted, 16)
 
     def encode(self) -> bytes:
-        return _u16(self.deleted)
+        return u16(self.deleted)
 
     @classmethod
     def decode(cls, data: bytes) -> FileDeleteResult:
-        r = Reader(data, "FILE DELETE response")
-        deleted = r.u16()
-        r.end()
-        return cls(deleted)
+        return cls(read_number(data, "FILE DELETE response"))
 
 
 @dataclass(frozen=True)
-class FileDelete(Request[FileDeleteResult]):
+class FileDelete(FileCommand[FileDeleteResult]):
     """2205: delete the named files of one directory."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x05
     NAME: ClassVar[str] = "FILE DELETE"
     METHOD: ClassVar[str] = "file_delete"
@@ -72,21 +59,21 @@ class FileDelete(Request[FileDeleteResult]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         if isinstance(self.names, str):
             raise CommandError("names must be a sequence of file names, not one str")
-        _set(self, "names", tuple(self.names))
+        set_field(self, "names", tuple(self.names))
         for name in self.names:
             check_file_name(name)
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
         most = (MAX_PARAMETER_SIZE - 6 - len(self.directory)) // 12
         if not 1 <= len(self.names) <= most:
             raise CommandError(f"number of files {len(self.names)} out of range 1..{most}")
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
-            + _u16(len(self.names))
+            u16(self.disk)
+            + u16(len(self.names))
             + b"".join(encode_file_name(n) for n in self.names)
             + encode_directory(self.directory)
         )
@@ -96,10 +83,7 @@ class FileDelete(Request[FileDeleteResult]):
         r = Reader(params, cls.NAME)
         disk = read_disk(r)
         names = tuple(read_file_name(r) for _ in range(r.u16()))
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(disk, names, directory)
+        return finish(cls, r, disk, names, read_directory(r))
 
     def decode_response(self, data: bytes) -> FileDeleteResult:
         return FileDeleteResult.decode(data)
@@ -109,10 +93,9 @@ class FileDelete(Request[FileDeleteResult]):
 
 
 @dataclass(frozen=True)
-class FileCopy(Request[None]):
+class FileCopy(FileOperation):
     """2207: copy a file, possibly to the other file memory; the copy keeps the date."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x07
     NAME: ClassVar[str] = "FILE COPY"
     METHOD: ClassVar[str] = "file_copy"
@@ -125,12 +108,16 @@ class FileCopy(Request[None]):
     destination_directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "source_disk", check_disk(self.source_disk, what="source disk"))
-        _set(self, "destination_disk", check_disk(self.destination_disk, what="destination disk"))
+        set_field(self, "source_disk", check_disk(self.source_disk, what="source disk"))
+        set_field(
+            self, "destination_disk", check_disk(self.destination_disk, what="destination disk")
+        )
         check_file_name(self.source_name, "source file name")
         check_file_name(self.destination_name, "destination file name")
-        _set(self, "source_directory", check_directory(self.source_directory, "source directory"))
-        _set(
+        set_field(
+            self, "source_directory", check_directory(self.source_directory, "source directory")
+        )
+        set_field(
             self,
             "destination_directory",
             check_directory(self.destination_directory, "destination directory"),
@@ -138,9 +125,9 @@ class FileCopy(Request[None]):
 
     def encode(self) -> bytes:
         return (
-            _u16(self.source_disk)
+            u16(self.source_disk)
             + encode_file_name(self.source_name)
-            + _u16(self.destination_disk)
+            + u16(self.destination_disk)
             + encode_file_name(self.destination_name)
             + encode_directory(self.source_directory)
             + encode_directory(self.destination_directory)
@@ -149,35 +136,28 @@ class FileCopy(Request[None]):
     @classmethod
     def decode(cls, params: bytes) -> FileCopy:
         r = Reader(params, cls.NAME)
-        source_disk = read_disk(r)
-        source_name = read_file_name(r)
-        destination_disk = read_disk(r)
-        destination_name = read_file_name(r)
-        source_directory = read_directory(r)
-        destination_directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(
-                source_disk,
-                source_name,
-                destination_disk,
-                destination_name,
-                source_directory,
-                destination_directory,
-            )
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
+        source_disk, source_name = read_disk(r), read_file_name(r)
+        destination_disk, destination_name = read_disk(r), read_file_name(r)
+        source_directory, destination_directory = read_directory(r), read_directory(r)
+        return finish(
+            cls,
+            r,
+            source_disk,
+            source_name,
+            destination_disk,
+            destination_name,
+            source_directory,
+            destination_directory,
+        )
 
 
 # --------------------------------------------------------------------------- 2208
 
 
 @dataclass(frozen=True)
-class FileNameChange(Request[None]):
+class FileNameChange(FileOperation):
     """2208: rename a file or a directory; the date stays."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x08
     NAME: ClassVar[str] = "FILE NAME CHANGE"
     METHOD: ClassVar[str] = "file_name_change"
@@ -188,14 +168,14 @@ class FileNameChange(Request[None]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         check_file_name(self.old_name, "old file name")
         check_file_name(self.new_name, "new file name")
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
+            u16(self.disk)
             + encode_file_name(self.old_name)
             + encode_file_name(self.new_name)
             + encode_directory(self.directory)
@@ -207,23 +187,16 @@ class FileNameChange(Request[None]):
         disk = read_disk(r)
         old_name = read_file_name(r, "old file name")
         new_name = read_file_name(r, "new file name")
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(disk, old_name, new_name, directory)
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
+        return finish(cls, r, disk, old_name, new_name, read_directory(r))
 
 
 # --------------------------------------------------------------------------- 2215
 
 
 @dataclass(frozen=True)
-class CreateDeleteDirectory(Request[None]):
+class CreateDeleteDirectory(FileOperation):
     """2215: create or delete directory ``name`` inside ``directory`` (its parent)."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x15
     NAME: ClassVar[str] = "CREATE/DELETE DIRECTORY"
     METHOD: ClassVar[str] = "create_delete_directory"
@@ -234,16 +207,16 @@ class CreateDeleteDirectory(Request[None]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         op = coerce_enum(DirectoryOperation, self.operation, "directory parameter")
-        _set(self, "operation", op)
+        set_field(self, "operation", op)
         check_file_name(self.name, "directory name")
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
-            + _u16(self.operation)
+            u16(self.disk)
+            + u16(self.operation)
             + encode_file_name(self.name, "directory name")
             + encode_directory(self.directory)
         )
@@ -256,10 +229,4 @@ class CreateDeleteDirectory(Request[None]):
         with decoding("parameter"):
             operation = coerce_enum(DirectoryOperation, value, "directory parameter")
         name = read_file_name(r, "directory name")
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(disk, operation, name, directory)
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
+        return finish(cls, r, disk, operation, name, read_directory(r))

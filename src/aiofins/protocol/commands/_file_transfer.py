@@ -4,7 +4,7 @@ file transfers and the CP-series Memory Cassette. Exported through :mod:`.file`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from ..areas import MemoryAddress
 from ..codec import Reader
@@ -29,7 +29,8 @@ from ..files import (
     read_disk,
     read_file_name,
 )
-from ._base import Request, expect_no_data
+from ._base import expect_no_data
+from ._file_common import FileCommand, finish, read_number, set_field, u16, u32
 
 #: Memory area codes 220A accepts (word data only): CIO/W/H/A, T/C PV, DM, EM banks 0..18
 #: (A0..AF; 50..5F on CJ2; 60..68), current EM bank.
@@ -45,23 +46,8 @@ FILE_TRANSFER_PARAMETER_AREAS: frozenset[int] = frozenset({0x8000, 0x8002, 0x801
 #: The only program number the CPU accepts (end code 1106 otherwise).
 PROGRAM_NUMBER = 0xFFFF
 
-
-def _set(obj: object, name: str, value: object) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _u16(value: int) -> bytes:
-    return value.to_bytes(2, "big")
-
-
-def _u32(value: int) -> bytes:
-    return value.to_bytes(4, "big")
-
-
-def _read_mode(r: Reader) -> FileTransferMode:
-    value = r.u16()
-    with decoding("parameter code"):
-        return coerce_enum(FileTransferMode, value, "transfer parameter code")
+R = TypeVar("R")
+T = TypeVar("T", bound="_AreaFileTransfer[Any]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,14 +60,11 @@ class FileTransferResult:
         check_u("number of items", self.count, 16)
 
     def encode(self) -> bytes:
-        return _u16(self.count)
+        return u16(self.count)
 
     @classmethod
     def decode(cls, data: bytes, what: str = "transfer response") -> FileTransferResult:
-        r = Reader(data, what)
-        count = r.u16()
-        r.end()
-        return cls(count)
+        return cls(read_number(data, what))
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,24 +77,69 @@ class ProgramAreaFileTransferResult:
         check_u("data length", self.length, 32)
 
     def encode(self) -> bytes:
-        return _u32(self.length)
+        return u32(self.length)
 
     @classmethod
     def decode(cls, data: bytes) -> ProgramAreaFileTransferResult:
-        r = Reader(data, "PROGRAM AREA-FILE TRANSFER response")
-        length = r.u32()
-        r.end()
-        return cls(length)
+        return cls(read_number(data, "PROGRAM AREA-FILE TRANSFER response", 4))
+
+
+class _AreaFileTransfer(FileCommand[R]):
+    """The layout 220A/220B/220C share: parameter code (``mode``), what to transfer (each
+    command's own fields: ``_check_area``, ``_encode_area``, ``_read_area``), disk, file name,
+    directory."""
+
+    mode: FileTransferMode
+    disk: Disk
+    name: str
+    directory: str
+
+    def __post_init__(self) -> None:
+        mode = coerce_enum(FileTransferMode, self.mode, "transfer parameter code")
+        set_field(self, "mode", mode)
+        self._check_area()
+        set_field(self, "disk", check_disk(self.disk))
+        check_file_name(self.name)
+        set_field(self, "directory", check_directory(self.directory))
+
+    def _check_area(self) -> None:
+        raise NotImplementedError
+
+    def _encode_area(self) -> bytes:
+        raise NotImplementedError
+
+    @classmethod
+    def _read_area(cls, r: Reader) -> dict[str, Any]:
+        """The command's own fields, by name; :class:`DecodeError` for values a PLC rejects."""
+        raise NotImplementedError
+
+    def encode(self) -> bytes:
+        return (
+            u16(self.mode)
+            + self._encode_area()
+            + u16(self.disk)
+            + encode_file_name(self.name)
+            + encode_directory(self.directory)
+        )
+
+    @classmethod
+    def decode(cls: type[T], params: bytes) -> T:
+        r = Reader(params, cls.NAME)
+        value = r.u16()
+        with decoding("parameter code"):
+            mode = coerce_enum(FileTransferMode, value, "transfer parameter code")
+        area = cls._read_area(r)
+        disk, name, directory = read_disk(r), read_file_name(r), read_directory(r)
+        return finish(cls, r, mode=mode, disk=disk, name=name, directory=directory, **area)
 
 
 # --------------------------------------------------------------------------- 220A
 
 
 @dataclass(frozen=True)
-class MemoryAreaFileTransfer(Request[FileTransferResult]):
+class MemoryAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
     """220A: transfer ``count`` words from ``address`` to a file, back, or compare them."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x0A
     NAME: ClassVar[str] = "MEMORY AREA-FILE TRANSFER"
     METHOD: ClassVar[str] = "memory_area_file_transfer"
@@ -123,8 +151,7 @@ class MemoryAreaFileTransfer(Request[FileTransferResult]):
     name: str
     directory: str = ""
 
-    def __post_init__(self) -> None:
-        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+    def _check_area(self) -> None:
         if self.address.area_code not in FILE_TRANSFER_AREA_CODES:
             raise AddressError(
                 f"memory area code {self.address.area_code:02X} cannot be transferred to a file "
@@ -133,36 +160,18 @@ class MemoryAreaFileTransfer(Request[FileTransferResult]):
         if self.address.bit:
             raise AddressError(f"bit number {self.address.bit} must be 0 (word transfer)")
         check_u("number of items", self.count, 16, low=1)
-        _set(self, "disk", check_disk(self.disk))
-        check_file_name(self.name)
-        _set(self, "directory", check_directory(self.directory))
 
-    def encode(self) -> bytes:
-        return (
-            _u16(self.mode)
-            + self.address.encode()
-            + _u16(self.count)
-            + _u16(self.disk)
-            + encode_file_name(self.name)
-            + encode_directory(self.directory)
-        )
+    def _encode_area(self) -> bytes:
+        return self.address.encode() + u16(self.count)
 
     @classmethod
-    def decode(cls, params: bytes) -> MemoryAreaFileTransfer:
-        r = Reader(params, cls.NAME)
-        mode = _read_mode(r)
+    def _read_area(cls, r: Reader) -> dict[str, Any]:
         address = MemoryAddress.decode(r.take(4))
         if address.area_code not in FILE_TRANSFER_AREA_CODES:
             raise DecodeError(f"memory area code {address.area_code:02X}", end_code=0x1101)
         if address.bit:
             raise DecodeError(f"bit number {address.bit} in a word transfer", end_code=0x1103)
-        count = r.u16()
-        disk = read_disk(r)
-        name = read_file_name(r)
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(mode, address, count, disk, name, directory)
+        return {"address": address, "count": r.u16()}
 
     def decode_response(self, data: bytes) -> FileTransferResult:
         return FileTransferResult.decode(data, f"{self.NAME} response")
@@ -172,13 +181,12 @@ class MemoryAreaFileTransfer(Request[FileTransferResult]):
 
 
 @dataclass(frozen=True)
-class ParameterAreaFileTransfer(Request[FileTransferResult]):
+class ParameterAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
     """220B: transfer a parameter area to a file, back, or compare them.
 
     The manual specifies ``begin`` 0000 and ``count`` FFFF (the whole area).
     """
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x0B
     NAME: ClassVar[str] = "PARAMETER AREA-FILE TRANSFER"
     METHOD: ClassVar[str] = "parameter_area_file_transfer"
@@ -191,42 +199,22 @@ class ParameterAreaFileTransfer(Request[FileTransferResult]):
     count: int = 0xFFFF
     directory: str = ""
 
-    def __post_init__(self) -> None:
-        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+    def _check_area(self) -> None:
         if self.area_code not in FILE_TRANSFER_PARAMETER_AREAS:
             codes = ", ".join(f"{c:04X}" for c in sorted(FILE_TRANSFER_PARAMETER_AREAS))
             raise CommandError(f"parameter area code {self.area_code!r} is not one of {codes}")
         check_u("beginning word", self.begin, 16)
         check_u("number of words", self.count, 16)
-        _set(self, "disk", check_disk(self.disk))
-        check_file_name(self.name)
-        _set(self, "directory", check_directory(self.directory))
 
-    def encode(self) -> bytes:
-        return (
-            _u16(self.mode)
-            + _u16(self.area_code)
-            + _u16(self.begin)
-            + _u16(self.count)
-            + _u16(self.disk)
-            + encode_file_name(self.name)
-            + encode_directory(self.directory)
-        )
+    def _encode_area(self) -> bytes:
+        return u16(self.area_code) + u16(self.begin) + u16(self.count)
 
     @classmethod
-    def decode(cls, params: bytes) -> ParameterAreaFileTransfer:
-        r = Reader(params, cls.NAME)
-        mode = _read_mode(r)
+    def _read_area(cls, r: Reader) -> dict[str, Any]:
         area_code = r.u16()
         if area_code not in FILE_TRANSFER_PARAMETER_AREAS:
             raise DecodeError(f"parameter area code {area_code:04X}", end_code=0x1101)
-        begin, count = r.u16(), r.u16()
-        disk = read_disk(r)
-        name = read_file_name(r)
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(mode, area_code, disk, name, begin, count, directory)
+        return {"area_code": area_code, "begin": r.u16(), "count": r.u16()}
 
     def decode_response(self, data: bytes) -> FileTransferResult:
         return FileTransferResult.decode(data, f"{self.NAME} response")
@@ -236,13 +224,12 @@ class ParameterAreaFileTransfer(Request[FileTransferResult]):
 
 
 @dataclass(frozen=True)
-class ProgramAreaFileTransfer(Request[ProgramAreaFileTransferResult]):
+class ProgramAreaFileTransfer(_AreaFileTransfer[ProgramAreaFileTransferResult]):
     """220C: transfer the user program to a file, back (PROGRAM mode), or compare them.
 
     The manual fixes program number FFFF, beginning word 00000000, bytes FFFFFFFF.
     """
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x0C
     NAME: ClassVar[str] = "PROGRAM AREA-FILE TRANSFER"
     METHOD: ClassVar[str] = "program_area_file_transfer"
@@ -253,45 +240,25 @@ class ProgramAreaFileTransfer(Request[ProgramAreaFileTransferResult]):
     program_number: int = PROGRAM_NUMBER
     begin_word: int = 0
     byte_count: int = 0xFFFFFFFF
+    # The manual's text labels the directory "(response)" for 220C; it names the file's
+    # location, so it travels in the command like in every other 22xx command.
     directory: str = ""
 
-    def __post_init__(self) -> None:
-        _set(self, "mode", coerce_enum(FileTransferMode, self.mode, "transfer parameter code"))
+    def _check_area(self) -> None:
         if self.program_number != PROGRAM_NUMBER:
             raise CommandError(f"program number {self.program_number!r} must be FFFF hex")
         check_u("beginning word", self.begin_word, 32)
         check_u("number of bytes", self.byte_count, 32)
-        _set(self, "disk", check_disk(self.disk))
-        check_file_name(self.name)
-        _set(self, "directory", check_directory(self.directory))
 
-    def encode(self) -> bytes:
-        # The manual's text labels the directory "(response)" for 220C; it names the file's
-        # location, so it travels in the command like in every other 22xx command.
-        return (
-            _u16(self.mode)
-            + _u16(self.program_number)
-            + _u32(self.begin_word)
-            + _u32(self.byte_count)
-            + _u16(self.disk)
-            + encode_file_name(self.name)
-            + encode_directory(self.directory)
-        )
+    def _encode_area(self) -> bytes:
+        return u16(self.program_number) + u32(self.begin_word) + u32(self.byte_count)
 
     @classmethod
-    def decode(cls, params: bytes) -> ProgramAreaFileTransfer:
-        r = Reader(params, cls.NAME)
-        mode = _read_mode(r)
+    def _read_area(cls, r: Reader) -> dict[str, Any]:
         program_number = r.u16()
         if program_number != PROGRAM_NUMBER:
             raise DecodeError(f"program number {program_number:04X}", end_code=0x1106)
-        begin_word, byte_count = r.u32(), r.u32()
-        disk = read_disk(r)
-        name = read_file_name(r)
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(mode, disk, name, program_number, begin_word, byte_count, directory)
+        return {"program_number": program_number, "begin_word": r.u32(), "byte_count": r.u32()}
 
     def decode_response(self, data: bytes) -> ProgramAreaFileTransferResult:
         return ProgramAreaFileTransferResult.decode(data)
@@ -311,18 +278,15 @@ class MemoryCassetteDataType:
         object.__setattr__(self, "contents", CassetteContents(self.contents))
 
     def encode(self) -> bytes:
-        return _u16(int(self.contents))
+        return u16(int(self.contents))
 
     @classmethod
     def decode(cls, data: bytes) -> MemoryCassetteDataType:
-        r = Reader(data, "MEMORY CASSETTE TRANSFER response")
-        value = r.u16()
-        r.end()
-        return cls(CassetteContents(value))
+        return cls(CassetteContents(read_number(data, "MEMORY CASSETTE TRANSFER response")))
 
 
 @dataclass(frozen=True)
-class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
+class MemoryCassetteTransfer(FileCommand[MemoryCassetteDataType | None]):
     """2220 (CP1H/CP1L): transfer, verify or initialise the Memory Cassette, or read which
     data it holds (:attr:`CassetteOperation.READ_DATA_TYPE`, the only one with a result).
 
@@ -331,7 +295,6 @@ class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
     parameter, then the data type designation except for READ_DATA_TYPE.
     """
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x20
     NAME: ClassVar[str] = "MEMORY CASSETTE TRANSFER"
     METHOD: ClassVar[str] = "memory_cassette_transfer"
@@ -342,8 +305,8 @@ class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
 
     def __post_init__(self) -> None:
         op = coerce_enum(CassetteOperation, self.operation, "memory cassette parameter")
-        _set(self, "operation", op)
-        _set(self, "disk", check_disk(self.disk, frozenset({Disk.MEMORY_CASSETTE})))
+        set_field(self, "operation", op)
+        set_field(self, "disk", check_disk(self.disk, frozenset({Disk.MEMORY_CASSETTE})))
         value = int(self.areas)
         check_u("data type designation", value, 16)
         if value & ~(CASSETTE_AREA_BITS | CassetteArea.INDIVIDUAL):
@@ -356,12 +319,12 @@ class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
             )
         if op is CassetteOperation.READ_DATA_TYPE and value:
             raise CommandError("READ_DATA_TYPE takes no data type designation")
-        _set(self, "areas", CassetteArea(value))
+        set_field(self, "areas", CassetteArea(value))
 
     def encode(self) -> bytes:
-        out = _u16(self.disk) + _u16(self.operation)
+        out = u16(self.disk) + u16(self.operation)
         if self.operation is not CassetteOperation.READ_DATA_TYPE:
-            out += _u16(int(self.areas))
+            out += u16(int(self.areas))
         return out
 
     @classmethod
@@ -372,9 +335,7 @@ class MemoryCassetteTransfer(Request[MemoryCassetteDataType | None]):
             disk = check_disk(disk_value, frozenset({Disk.MEMORY_CASSETTE}))
             operation = coerce_enum(CassetteOperation, op_value, "memory cassette parameter")
         areas = 0 if operation is CassetteOperation.READ_DATA_TYPE else r.u16()
-        r.end()
-        with decoding(cls.NAME):
-            return cls(operation, CassetteArea(areas), disk)
+        return finish(cls, r, operation, CassetteArea(areas), disk)
 
     def decode_response(self, data: bytes) -> MemoryCassetteDataType | None:
         if self.operation is CassetteOperation.READ_DATA_TYPE:

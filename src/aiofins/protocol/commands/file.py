@@ -28,7 +28,8 @@ from ..files import (
     read_file_name,
 )
 from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
-from ._base import Request, expect_no_data
+from ._base import Request
+from ._file_common import FileCommand, FileOperation, finish, set_field, u16, u32
 from ._file_manage import (
     CreateDeleteDirectory,
     FileCopy,
@@ -58,29 +59,16 @@ _WRITE_OVERHEAD = 2 + 2 + 12 + 4 + 2 + 2
 MAX_FILE_WRITE = MAX_PARAMETER_SIZE - _WRITE_OVERHEAD
 
 
-def _set(obj: object, name: str, value: object) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _u16(value: int) -> bytes:
-    return value.to_bytes(2, "big")
-
-
-def _u32(value: int) -> bytes:
-    return value.to_bytes(4, "big")
-
-
 # --------------------------------------------------------------------------- 2201
 
 
 @dataclass(frozen=True)
-class FileNameRead(Request[FileNameReadResult]):
+class FileNameRead(FileCommand[FileNameReadResult]):
     """2201: disk data and up to 20 file entries of a directory, from ``first_file`` on.
 
     ``first_file=0, count=0`` reads the disk data only.
     """
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x01
     NAME: ClassVar[str] = "FILE NAME READ"
     METHOD: ClassVar[str] = "file_name_read"
@@ -92,30 +80,25 @@ class FileNameRead(Request[FileNameReadResult]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         check_u("beginning file position", self.first_file, 16)
         check_u("number of files", self.count, 16)
         if self.count > MAX_FILE_NAMES:
             raise CommandError(f"number of files {self.count} out of range 0..{MAX_FILE_NAMES}")
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
-            + _u16(self.first_file)
-            + _u16(self.count)
+            u16(self.disk)
+            + u16(self.first_file)
+            + u16(self.count)
             + encode_directory(self.directory)
         )
 
     @classmethod
     def decode(cls, params: bytes) -> FileNameRead:
         r = Reader(params, cls.NAME)
-        disk = read_disk(r)
-        first, count = r.u16(), r.u16()
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(disk, first, count, directory)
+        return finish(cls, r, read_disk(r), r.u16(), r.u16(), read_directory(r))
 
     def decode_response(self, data: bytes) -> FileNameReadResult:
         return FileNameReadResult.decode(data)
@@ -142,7 +125,7 @@ class SingleFileReadResult:
 
     def encode(self) -> bytes:
         length = len(self.data) | (0x8000 if self.last else 0)
-        return _u32(self.file_capacity) + _u32(self.position) + _u16(length) + self.data
+        return u32(self.file_capacity) + u32(self.position) + u16(length) + self.data
 
     @classmethod
     def decode(cls, data: bytes) -> SingleFileReadResult:
@@ -154,10 +137,9 @@ class SingleFileReadResult:
 
 
 @dataclass(frozen=True)
-class SingleFileRead(Request[SingleFileReadResult]):
+class SingleFileRead(FileCommand[SingleFileReadResult]):
     """2202: read ``length`` bytes of a file from byte ``position`` (0, 0 = existence check)."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x02
     NAME: ClassVar[str] = "SINGLE FILE READ"
     METHOD: ClassVar[str] = "single_file_read"
@@ -170,33 +152,27 @@ class SingleFileRead(Request[SingleFileReadResult]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         check_file_name(self.name)
         check_u("file position", self.position, 32)
         check_u("data length", self.length, 16)
         if self.length > MAX_FILE_READ:
             raise CommandError(f"data length {self.length} out of range 0..{MAX_FILE_READ}")
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
+            u16(self.disk)
             + encode_file_name(self.name)
-            + _u32(self.position)
-            + _u16(self.length)
+            + u32(self.position)
+            + u16(self.length)
             + encode_directory(self.directory)
         )
 
     @classmethod
     def decode(cls, params: bytes) -> SingleFileRead:
         r = Reader(params, cls.NAME)
-        disk = read_disk(r)
-        name = read_file_name(r)
-        position, length = r.u32(), r.u16()
-        directory = read_directory(r)
-        r.end()
-        with decoding(cls.NAME):
-            return cls(disk, name, position, length, directory)
+        return finish(cls, r, read_disk(r), read_file_name(r), r.u32(), r.u16(), read_directory(r))
 
     def decode_response(self, data: bytes) -> SingleFileReadResult:
         return SingleFileReadResult.decode(data)
@@ -206,14 +182,13 @@ class SingleFileRead(Request[SingleFileReadResult]):
 
 
 @dataclass(frozen=True)
-class SingleFileWrite(Request[None]):
+class SingleFileWrite(FileOperation):
     """2203: write ``data`` to a file; ``mode`` picks new / new-overwrite / append / overwrite.
 
     ``position`` (byte offset) only matters for :attr:`FileWriteMode.OVERWRITE`; the manual
     requires 0 for the other modes.
     """
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x03
     NAME: ClassVar[str] = "SINGLE FILE WRITE"
     METHOD: ClassVar[str] = "single_file_write"
@@ -226,16 +201,16 @@ class SingleFileWrite(Request[None]):
     directory: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
         check_file_name(self.name)
-        _set(self, "data", bytes(self.data))
-        _set(self, "mode", coerce_enum(FileWriteMode, self.mode, "file write parameter code"))
+        set_field(self, "data", bytes(self.data))
+        set_field(self, "mode", coerce_enum(FileWriteMode, self.mode, "file write parameter code"))
         check_u("file position", self.position, 32)
         if self.position and self.mode is not FileWriteMode.OVERWRITE:
             raise CommandError(
                 f"file position must be 0 for {self.mode.name} (only OVERWRITE takes one)"
             )
-        _set(self, "directory", check_directory(self.directory))
+        set_field(self, "directory", check_directory(self.directory))
         size = _WRITE_OVERHEAD + len(self.data) + len(self.directory)
         if size > MAX_PARAMETER_SIZE:
             room = MAX_PARAMETER_SIZE - _WRITE_OVERHEAD - len(self.directory)
@@ -245,11 +220,11 @@ class SingleFileWrite(Request[None]):
 
     def encode(self) -> bytes:
         return (
-            _u16(self.disk)
-            + _u16(self.mode)
+            u16(self.disk)
+            + u16(self.mode)
             + encode_file_name(self.name)
-            + _u32(self.position)
-            + _u16(len(self.data))
+            + u32(self.position)
+            + u16(len(self.data))
             + self.data
             + encode_directory(self.directory)
         )
@@ -268,18 +243,14 @@ class SingleFileWrite(Request[None]):
             write_mode = coerce_enum(FileWriteMode, mode, "file write parameter code")
             return cls(disk, name, data, write_mode, position, directory)
 
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
-
 
 # --------------------------------------------------------------------------- 2204
 
 
 @dataclass(frozen=True)
-class FileMemoryFormat(Request[None]):
+class FileMemoryFormat(FileOperation):
     """2204: format (initialise) a file memory; every file on it is lost."""
 
-    MRC: ClassVar[int] = 0x22
     SRC: ClassVar[int] = 0x04
     NAME: ClassVar[str] = "FILE MEMORY FORMAT"
     METHOD: ClassVar[str] = "file_memory_format"
@@ -287,20 +258,15 @@ class FileMemoryFormat(Request[None]):
     disk: Disk
 
     def __post_init__(self) -> None:
-        _set(self, "disk", check_disk(self.disk))
+        set_field(self, "disk", check_disk(self.disk))
 
     def encode(self) -> bytes:
-        return _u16(self.disk)
+        return u16(self.disk)
 
     @classmethod
     def decode(cls, params: bytes) -> FileMemoryFormat:
         r = Reader(params, cls.NAME)
-        disk = read_disk(r)
-        r.end()
-        return cls(disk)
-
-    def decode_response(self, data: bytes) -> None:
-        expect_no_data(self, data)
+        return finish(cls, r, read_disk(r))
 
 
 OPERATIONS: tuple[type[Request[Any]], ...] = (

@@ -11,7 +11,7 @@ views (``node``, ``slave_address``, ...).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from ..errors import CommandError, DecodeError
 from ..files import decoding
@@ -54,15 +54,6 @@ def _check_size(what: str, payload: bytes, low: int, high: int) -> bytes:
     return payload
 
 
-def _read_payload(cls: type[Any], params: bytes, minimum: int) -> Any:
-    if len(params) < minimum:
-        raise DecodeError(
-            f"{cls.NAME}: {len(params)} parameter bytes, at least {minimum}", end_code=0x1002
-        )
-    with decoding(cls.NAME):
-        return cls(params)
-
-
 @dataclass(frozen=True, slots=True)
 class GatewayResponse:
     """Response data of a serial gateway command: the serial device's reply, raw."""
@@ -85,6 +76,36 @@ class GatewayResponse:
             return cls(data)
         except CommandError as exc:
             raise DecodeError(f"{what} response: {exc}") from exc
+
+
+class _ModbusFields:
+    """Slave address, function code and data of a Modbus payload: binary (RTU) or, with
+    ``_ASCII``, as pairs of hex characters."""
+
+    __slots__ = ()
+
+    _ASCII: ClassVar[bool] = False
+    payload: bytes
+
+    def _byte(self, index: int) -> int:
+        if self._ASCII:
+            return int(self.payload[2 * index : 2 * index + 2], 16)
+        return self.payload[index]
+
+    @property
+    def slave_address(self) -> int:
+        return self._byte(0)
+
+    @property
+    def function_code(self) -> int:
+        return self._byte(1)
+
+    @property
+    def data(self) -> bytes:
+        """The data after the function code (Modbus-ASCII: converted from hex to bytes)."""
+        if self._ASCII:
+            return bytes.fromhex(self.payload[4:].decode("ascii"))
+        return self.payload[2:]
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,22 +143,8 @@ class CompowayFResponse(GatewayResponse):
 
 
 @dataclass(frozen=True, slots=True)
-class ModbusRtuResponse(GatewayResponse):
-    """2804 response: slave address, function code, data (binary, CRC removed)."""
-
-    MINIMUM: ClassVar[int] = 2
-
-    @property
-    def slave_address(self) -> int:
-        return self.payload[0]
-
-    @property
-    def function_code(self) -> int:
-        return self.payload[1]
-
-    @property
-    def data(self) -> bytes:
-        return self.payload[2:]
+class _ModbusResponse(_ModbusFields, GatewayResponse):
+    """The part the 2804/2805 responses share."""
 
     @property
     def is_exception(self) -> bool:
@@ -146,39 +153,63 @@ class ModbusRtuResponse(GatewayResponse):
 
 
 @dataclass(frozen=True, slots=True)
-class ModbusAsciiResponse(GatewayResponse):
+class ModbusRtuResponse(_ModbusResponse):
+    """2804 response: slave address, function code, data (binary, CRC removed)."""
+
+    MINIMUM: ClassVar[int] = 2
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusAsciiResponse(_ModbusResponse):
     """2805 response: slave address, function code and data as hex characters."""
 
     MINIMUM: ClassVar[int] = 4
+    _ASCII: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "payload", bytes(self.payload))
+        GatewayResponse.__post_init__(self)
         if len(self.payload) % 2 or not set(self.payload) <= _HEX_ANY:
             raise CommandError(f"Modbus-ASCII reply {self.payload!r} is not pairs of hex digits")
 
-    @property
-    def slave_address(self) -> int:
-        return int(self.payload[0:2], 16)
 
-    @property
-    def function_code(self) -> int:
-        return int(self.payload[2:4], 16)
+R = TypeVar("R", bound=GatewayResponse)
+G = TypeVar("G", bound="_GatewayCommand[Any]")
+M = TypeVar("M", bound="_ModbusCommand[Any]")
 
-    @property
-    def data(self) -> bytes:
-        """The data after the function code, converted from hex to bytes."""
-        return bytes.fromhex(self.payload[4:].decode("ascii"))
 
-    @property
-    def is_exception(self) -> bool:
-        return bool(self.function_code & 0x80)
+@dataclass(frozen=True)
+class _GatewayCommand(Request[R]):
+    """The part 2803/2804/2805 share: the parameters are the raw ``payload``."""
+
+    #: Shortest payload; shorter parameters are answered with end code 1002.
+    _MINIMUM: ClassVar[int]
+    _RESPONSE: ClassVar[type[GatewayResponse]]
+
+    payload: bytes
+
+    def encode(self) -> bytes:
+        return self.payload
+
+    @classmethod
+    def decode(cls: type[G], params: bytes) -> G:
+        if len(params) < cls._MINIMUM:
+            raise DecodeError(
+                f"{cls.NAME}: {len(params)} parameter bytes, at least {cls._MINIMUM}",
+                end_code=0x1002,
+            )
+        with decoding(cls.NAME):
+            return cls(params)
+
+    def decode_response(self, data: bytes) -> R:
+        result: R = self._RESPONSE._decode_checked(data, self.NAME)
+        return result
 
 
 # --------------------------------------------------------------------------- 2803
 
 
 @dataclass(frozen=True)
-class ConvertToCompowayFCommand(Request[CompowayFResponse]):
+class ConvertToCompowayFCommand(_GatewayCommand[CompowayFResponse]):
     """2803: send a CompoWay/F command through a serial port (send to its unit address).
 
     ``payload`` (ASCII): node number (2: ``"00"``..``"99"`` or ``"XX"`` broadcast),
@@ -190,11 +221,11 @@ class ConvertToCompowayFCommand(Request[CompowayFResponse]):
     SRC: ClassVar[int] = 0x03
     NAME: ClassVar[str] = "CONVERT TO COMPOWAY/F COMMAND"
     METHOD: ClassVar[str] = "convert_to_compoway_f_command"
-
-    payload: bytes
+    _MINIMUM: ClassVar[int] = 9
+    _RESPONSE: ClassVar[type[GatewayResponse]] = CompowayFResponse
 
     def __post_init__(self) -> None:
-        p = _check_size("CompoWay/F command", self.payload, 9, MAX_PARAMETER_SIZE)
+        p = _check_size("CompoWay/F command", self.payload, self._MINIMUM, MAX_PARAMETER_SIZE)
         object.__setattr__(self, "payload", p)
         if not _printable(p):
             raise CommandError(f"CompoWay/F command {p!r} must be printable ASCII")
@@ -244,24 +275,28 @@ class ConvertToCompowayFCommand(Request[CompowayFResponse]):
     def text(self) -> bytes:
         return self.payload[9:]
 
-    def encode(self) -> bytes:
-        return self.payload
 
-    @classmethod
-    def decode(cls, params: bytes) -> ConvertToCompowayFCommand:
-        result: ConvertToCompowayFCommand = _read_payload(cls, params, 9)
-        return result
-
-    def decode_response(self, data: bytes) -> CompowayFResponse:
-        result: CompowayFResponse = CompowayFResponse._decode_checked(data, self.NAME)
-        return result
-
-
-# --------------------------------------------------------------------------- 2804
+# --------------------------------------------------------------------------- 2804, 2805
 
 
 @dataclass(frozen=True)
-class ConvertToModbusRtuCommand(Request[ModbusRtuResponse]):
+class _ModbusCommand(_ModbusFields, _GatewayCommand[R]):
+    """The part 2804/2805 share: ``payload`` is slave address, function code, data."""
+
+    @classmethod
+    def build(cls: type[M], slave_address: int, function_code: int, data: bytes = b"") -> M:
+        """``build(1, 3, bytes.fromhex("00000002"))``: read 2 holding registers of slave 1
+        (Modbus-ASCII: payload ``b"010300000002"``)."""
+        if not 0 <= slave_address <= 0xFF or not 0 <= function_code <= 0xFF:
+            raise CommandError(
+                f"slave address {slave_address} / function code {function_code} not bytes"
+            )
+        raw = bytes((slave_address, function_code)) + bytes(data)
+        return cls(raw.hex().upper().encode("ascii") if cls._ASCII else raw)
+
+
+@dataclass(frozen=True)
+class ConvertToModbusRtuCommand(_ModbusCommand[ModbusRtuResponse]):
     """2804: send a Modbus-RTU command through a serial port (the port adds the CRC).
 
     ``payload``: slave address (01..F7), function code (01..FF), data; :meth:`build`.
@@ -271,58 +306,20 @@ class ConvertToModbusRtuCommand(Request[ModbusRtuResponse]):
     SRC: ClassVar[int] = 0x04
     NAME: ClassVar[str] = "CONVERT TO MODBUS-RTU COMMAND"
     METHOD: ClassVar[str] = "convert_to_modbus_rtu_command"
-
-    payload: bytes
+    _MINIMUM: ClassVar[int] = 2
+    _RESPONSE: ClassVar[type[GatewayResponse]] = ModbusRtuResponse
 
     def __post_init__(self) -> None:
-        p = _check_size("Modbus-RTU command", self.payload, 2, MAX_MODBUS_RTU_PAYLOAD)
+        p = _check_size("Modbus-RTU command", self.payload, self._MINIMUM, MAX_MODBUS_RTU_PAYLOAD)
         object.__setattr__(self, "payload", p)
         if not 1 <= p[0] <= 0xF7:
             raise CommandError(f"Modbus slave address {p[0]} out of range 1..247")
         if p[1] == 0:
             raise CommandError("Modbus function code 0 out of range 1..255")
 
-    @classmethod
-    def build(
-        cls, slave_address: int, function_code: int, data: bytes = b""
-    ) -> ConvertToModbusRtuCommand:
-        """``build(1, 3, bytes.fromhex("00000002"))``: read 2 holding registers of slave 1."""
-        if not 0 <= slave_address <= 0xFF or not 0 <= function_code <= 0xFF:
-            raise CommandError(
-                f"slave address {slave_address} / function code {function_code} not bytes"
-            )
-        return cls(bytes((slave_address, function_code)) + bytes(data))
-
-    @property
-    def slave_address(self) -> int:
-        return self.payload[0]
-
-    @property
-    def function_code(self) -> int:
-        return self.payload[1]
-
-    @property
-    def data(self) -> bytes:
-        return self.payload[2:]
-
-    def encode(self) -> bytes:
-        return self.payload
-
-    @classmethod
-    def decode(cls, params: bytes) -> ConvertToModbusRtuCommand:
-        result: ConvertToModbusRtuCommand = _read_payload(cls, params, 2)
-        return result
-
-    def decode_response(self, data: bytes) -> ModbusRtuResponse:
-        result: ModbusRtuResponse = ModbusRtuResponse._decode_checked(data, self.NAME)
-        return result
-
-
-# --------------------------------------------------------------------------- 2805
-
 
 @dataclass(frozen=True)
-class ConvertToModbusAsciiCommand(Request[ModbusAsciiResponse]):
+class ConvertToModbusAsciiCommand(_ModbusCommand[ModbusAsciiResponse]):
     """2805: send a Modbus-ASCII command through a serial port (it adds ``:``, LRC, CRLF).
 
     ``payload``: uppercase hex characters: slave address (``"01"``..``"F7"``), function
@@ -333,11 +330,14 @@ class ConvertToModbusAsciiCommand(Request[ModbusAsciiResponse]):
     SRC: ClassVar[int] = 0x05
     NAME: ClassVar[str] = "CONVERT TO MODBUS-ASCII COMMAND"
     METHOD: ClassVar[str] = "convert_to_modbus_ascii_command"
-
-    payload: bytes
+    _ASCII: ClassVar[bool] = True
+    _MINIMUM: ClassVar[int] = 4
+    _RESPONSE: ClassVar[type[GatewayResponse]] = ModbusAsciiResponse
 
     def __post_init__(self) -> None:
-        p = _check_size("Modbus-ASCII command", self.payload, 4, MAX_MODBUS_ASCII_PAYLOAD)
+        p = _check_size(
+            "Modbus-ASCII command", self.payload, self._MINIMUM, MAX_MODBUS_ASCII_PAYLOAD
+        )
         object.__setattr__(self, "payload", p)
         if len(p) % 2 or not set(p) <= _HEX_UPPER:
             raise CommandError(f"Modbus-ASCII command {p!r} must be pairs of hex digits 0-9A-F")
@@ -345,43 +345,6 @@ class ConvertToModbusAsciiCommand(Request[ModbusAsciiResponse]):
             raise CommandError(f"Modbus slave address {p[0:2]!r} out of range 01..F7")
         if p[2:4] == b"00":
             raise CommandError("Modbus function code 00 out of range 01..FF")
-
-    @classmethod
-    def build(
-        cls, slave_address: int, function_code: int, data: bytes = b""
-    ) -> ConvertToModbusAsciiCommand:
-        """``build(1, 3, bytes.fromhex("00000002"))`` → ``b"010300000002"``."""
-        if not 0 <= slave_address <= 0xFF or not 0 <= function_code <= 0xFF:
-            raise CommandError(
-                f"slave address {slave_address} / function code {function_code} not bytes"
-            )
-        raw = bytes((slave_address, function_code)) + bytes(data)
-        return cls(raw.hex().upper().encode("ascii"))
-
-    @property
-    def slave_address(self) -> int:
-        return int(self.payload[0:2], 16)
-
-    @property
-    def function_code(self) -> int:
-        return int(self.payload[2:4], 16)
-
-    @property
-    def data(self) -> bytes:
-        """The data after the function code, converted from hex to bytes."""
-        return bytes.fromhex(self.payload[4:].decode("ascii"))
-
-    def encode(self) -> bytes:
-        return self.payload
-
-    @classmethod
-    def decode(cls, params: bytes) -> ConvertToModbusAsciiCommand:
-        result: ConvertToModbusAsciiCommand = _read_payload(cls, params, 4)
-        return result
-
-    def decode_response(self, data: bytes) -> ModbusAsciiResponse:
-        result: ModbusAsciiResponse = ModbusAsciiResponse._decode_checked(data, self.NAME)
-        return result
 
 
 OPERATIONS: tuple[type[Request[Any]], ...] = (
