@@ -9,6 +9,7 @@ route's limits and send the chunks pipelined.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
@@ -280,27 +281,48 @@ class Client(CommandMethods):
     ) -> dict[str, Value]:
         """Read a tag list (``{"temp": "D100:float32", "run": "CIO 0.01"}``) in few frames."""
         plan = tags if isinstance(tags, ReadPlan) else self.compile_tags(tags)
-        run_words: list[Sequence[int]] = [()] * len(plan.runs)
+        n_runs = len(plan.runs)
+        if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
+            return plan.decode((await self._read_run(plan, 0, timeout),), ())
+        run_words: list[Sequence[int]] = [()] * n_runs
         multi: list[Sequence[int]] = [()] * len(plan.multiple)
 
-        async def run(i: int) -> None:
-            r = plan.runs[i]
-            result = await self.call(
-                MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count), timeout=timeout
-            )
-            run_words[i] = result.values
-
-        async def many(i: int) -> None:
-            result = await self.multiple_memory_area_read(plan.multiple[i], timeout=timeout)
-            multi[i] = [item.value for item in result.items]
-
-        n_runs = len(plan.runs)
-
         async def frame(i: int) -> None:
-            await (run(i) if i < n_runs else many(i - n_runs))
+            if i < n_runs:
+                run_words[i] = await self._read_run(plan, i, timeout)
+            else:
+                result = await self.multiple_memory_area_read(
+                    plan.multiple[i - n_runs], timeout=timeout
+                )
+                multi[i - n_runs] = [item.value for item in result.items]
 
         await _all(frame, n_runs + len(plan.multiple))
         return plan.decode(run_words, multi)
+
+    async def _read_run(self, plan: ReadPlan, i: int, timeout: float | None) -> Sequence[int]:
+        """The words of the plan's run ``i``: ``call(MemoryAreaRead(...))``, its request built
+        once per plan and its words unpacked in one step."""
+        reads: list[Any] | None = plan.cache.get("reads")
+        if reads is None:
+            reads = plan.cache["reads"] = [None] * len(plan.runs)
+        read = reads[i]
+        if read is None:
+            r = plan.runs[i]
+            new = MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count)
+            unpack = struct.Struct(f">{r.count}H").unpack if new.element_size == 2 else None
+            read = reads[i] = (new, new.encode(), unpack)
+        request: MemoryAreaRead = read[0]
+        params: bytes = read[1]
+        unpack = read[2]
+        response = await self.execute(
+            request.MRC, request.SRC, params, timeout=timeout, idempotent=request.IDEMPOTENT
+        )
+        data = response.data
+        if unpack is None or len(data) != 2 * request.count:
+            values: tuple[int, ...] = request.decode_response(data).values  # raises if short
+            return values
+        words: tuple[int, ...] = unpack(data)
+        return words
 
 
 async def _all(job: Callable[[int], Awaitable[None]], count: int) -> None:

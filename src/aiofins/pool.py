@@ -25,8 +25,9 @@ Safe to open in a FastAPI lifespan::
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+import asyncio
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
@@ -39,6 +40,17 @@ from .connection import connect, default_addresses
 from .endpoint import parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError
 from .protocol.header import FinsAddress
+from .transport.base import is_asyncio
+
+
+def event_loop_clock() -> Callable[[], float]:
+    """``anyio.current_time`` as a direct call: the running asyncio loop's ``time``.
+
+    (The same clock; anyio looks up the backend on every call. Other backends keep anyio's.)
+    """
+    if is_asyncio():
+        return asyncio.get_running_loop().time
+    return anyio.current_time
 
 
 @dataclass(eq=False)
@@ -73,6 +85,37 @@ class EndpointStats:
     latency_p99: float = 0.0
 
 
+def _users(entry: _Entry) -> int:
+    return entry.users
+
+
+class _Lease:
+    """``async with pool.client(url) as client``: one use of an endpoint's client."""
+
+    __slots__ = ("entry", "pool", "url")
+
+    def __init__(self, pool: Pool, url: str) -> None:
+        self.pool = pool
+        self.url = url
+        self.entry: _Entry | None = None
+
+    async def __aenter__(self) -> Client:
+        pool = self.pool
+        entry = pool._ready_entry(self.url)
+        if entry is None:
+            entry = await pool._acquire(self.url)
+        self.entry = entry
+        assert entry.client is not None
+        return entry.client
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        entry = self.entry
+        if entry is not None:
+            self.entry = None
+            entry.users -= 1
+            entry.last_used = self.pool._now()
+
+
 class Pool:
     """Clients keyed by endpoint URL; see the module docstring."""
 
@@ -101,8 +144,10 @@ class Pool:
         self._stats: dict[str, EndpointStats] = {}
         self._tg: TaskGroup | None = None
         self._lock = anyio.Lock()
+        self._now = anyio.current_time
 
     async def __aenter__(self) -> Pool:
+        self._now = event_loop_clock()
         self._tg = anyio.create_task_group()
         await self._tg.__aenter__()
         self._tg.start_soon(self._maintain)
@@ -133,16 +178,9 @@ class Pool:
 
     # -- lending ------------------------------------------------------------------------
 
-    @asynccontextmanager
-    async def client(self, url: str) -> AsyncIterator[Client]:
+    def client(self, url: str) -> AbstractAsyncContextManager[Client]:
         """Lend the client of ``url``'s endpoint for the ``async with`` block."""
-        entry = await self._acquire(url)
-        try:
-            assert entry.client is not None
-            yield entry.client
-        finally:
-            entry.users -= 1
-            entry.last_used = anyio.current_time()
+        return _Lease(self, url)
 
     def stats(self, url: str | None = None) -> dict[str, EndpointStats]:
         """Per-endpoint counters (all endpoints, or the one of ``url``)."""
@@ -171,20 +209,27 @@ class Pool:
             out[key] = agg
         return out
 
+    def _ready_entry(self, url: str) -> _Entry | None:
+        """The fast path of lending: a ready session with no reason to open another one."""
+        entries = self._by_url.get(url)
+        if not entries or self._tg is None:
+            return None
+        best = entries[0] if len(entries) == 1 else min(entries, key=_users)
+        if (
+            best.client is not None
+            and not best.closing.is_set()
+            and (best.users == 0 or len(entries) >= self.max_per_endpoint)
+        ):
+            best.users += 1
+            return best
+        return None
+
     async def _acquire(self, url: str) -> _Entry:
         if self._tg is None:
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
-        entries = self._by_url.get(url)
-        if entries:
-            # Fast path: a ready session with no waiters to open another one.
-            best = min(entries, key=lambda e: e.users)
-            if (
-                best.client is not None
-                and not best.closing.is_set()
-                and (best.users == 0 or len(entries) >= self.max_per_endpoint)
-            ):
-                best.users += 1
-                return best
+        lent = self._ready_entry(url)
+        if lent is not None:
+            return lent
         endpoint = parse_endpoint(url)
         key = endpoint.key
         async with self._lock:

@@ -15,13 +15,16 @@ compile once, execute every scan.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+import struct
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from itertools import chain
+from typing import Any
 
 from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress
 from .protocol.errors import CommandError, DecodeError
-from .protocol.values import Value, ValueType, parse_value_type
+from .protocol.values import Value, ValueType, WordOrder, parse_value_type
 
 #: Bit area code → the word area code holding the same bits (CS/CJ codes).
 BIT_TO_WORD_AREA: dict[int, int] = {
@@ -99,6 +102,10 @@ class ReadPlan:
     tags: tuple[Tag, ...]
     runs: tuple[WordRun, ...]
     multiple: tuple[tuple[MemoryAddress, ...], ...]
+    #: Work done once per plan (the decoder; the client's requests), built on first use.
+    cache: dict[str, Any] = field(
+        default_factory=dict, init=False, repr=False, compare=False, hash=False
+    )
 
     @property
     def frame_count(self) -> int:
@@ -118,16 +125,52 @@ class ReadPlan:
         """Values by tag name from each frame's results, in plan order."""
         if len(run_words) != len(self.runs) or len(multiple_values) != len(self.multiple):
             raise DecodeError("results do not match the plan's frames")
-        words: dict[tuple[int, int], int] = {}
         for run, values in zip(self.runs, run_words, strict=True):
             if len(values) != run.count:
                 raise DecodeError(f"{run}: expected {run.count} words, got {len(values)}")
+        for frame, values in zip(self.multiple, multiple_values, strict=True):
+            if len(values) != len(frame):
+                raise DecodeError("0104 result has the wrong number of elements")
+        cache = self.cache
+        if "steps" not in cache:
+            cache["steps"] = _compile_steps(self)
+        steps: list[_Step] | None = cache["steps"]
+        if steps is None:
+            return self._decode_by_address(run_words, multiple_values)
+        flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
+        out: dict[str, Value] = {}
+        for name, op, at, arg in steps:
+            if op is _BIT:
+                out[name] = bool((flat[at] >> arg) & 1)
+            elif op is _UINT16:
+                word = flat[at]
+                out[name] = word if 0 <= word <= 0xFFFF else arg.decode([word])
+            elif op is _NUMBER:
+                try:
+                    if len(at) == 2:  # 32-bit values: no list
+                        out[name] = arg[1](arg[0](flat[at[0]], flat[at[1]]))[0]
+                    else:
+                        out[name] = arg[1](arg[0](*[flat[i] for i in at]))[0]
+                except struct.error:  # a word out of range: let the type say so
+                    out[name] = arg[2].decode([flat[i] for i in arg[3]])
+            elif op is _FLAG:
+                out[name] = bool(flat[at] & 1)
+            else:
+                out[name] = arg.decode([flat[i] for i in at])
+        return out
+
+    def _decode_by_address(
+        self,
+        run_words: Sequence[Sequence[int]],
+        multiple_values: Sequence[Sequence[int]],
+    ) -> dict[str, Value]:
+        """The general decoder (a plan whose words cannot all be found fails here)."""
+        words: dict[tuple[int, int], int] = {}
+        for run, values in zip(self.runs, run_words, strict=True):
             for i, v in enumerate(values):
                 words[(run.area_code, run.word + i)] = v
         elements: dict[MemoryAddress, int] = {}
         for frame, values in zip(self.multiple, multiple_values, strict=True):
-            if len(values) != len(frame):
-                raise DecodeError("0104 result has the wrong number of elements")
             elements.update(zip(frame, values, strict=True))
         out: dict[str, Value] = {}
         for tag in self.tags:
@@ -145,6 +188,95 @@ class ReadPlan:
             ]
             out[tag.name] = tag.vtype.decode(span)
         return out
+
+
+# Decoding steps: (tag name, op, index or indices into the flat results, argument).
+_BIT, _FLAG, _UINT16, _NUMBER, _OTHER = "bit", "flag", "uint16", "number", "other"
+#: struct codes of the numeric kinds of :class:`ValueType` (value bytes, most significant first).
+_STRUCT_CODES = {
+    "int16": "h",
+    "uint16": "H",
+    "int32": "i",
+    "uint32": "I",
+    "int64": "q",
+    "uint64": "Q",
+    "float32": "f",
+    "float64": "d",
+}
+_Step = tuple[str, str, Any, Any]
+
+
+def _compile_steps(plan: ReadPlan) -> list[_Step] | None:
+    """Where each tag's words sit in the flat results, and how to decode them.
+
+    The same precedence as the general decoder: a word from the last 0101 run holding it,
+    else from the last 0104 element naming it. ``None`` if some word is in no frame.
+    """
+    index: dict[tuple[int, int], int] = {}
+    at = 0
+    for run in plan.runs:
+        for i in range(run.count):
+            index[(run.area_code, run.word + i)] = at + i
+        at += run.count
+    elements: dict[MemoryAddress, int] = {}
+    for frame in plan.multiple:
+        for address in frame:
+            elements[address] = at
+            at += 1
+
+    def word_at(area: int, word: int) -> int | None:
+        got = index.get((area, word))
+        return got if got is not None else elements.get(MemoryAddress(area, word, 0))
+
+    steps: list[_Step] = []
+    for tag in plan.tags:
+        area, vtype = tag.word_area, tag.vtype
+        if area is None:
+            flag = elements.get(tag.address)
+            if flag is None:
+                return None
+            steps.append((tag.name, _FLAG, flag, None))
+            continue
+        spots = [
+            word_at(area, tag.address.word + i)
+            for i in range(1 if vtype.kind == "bit" else vtype.words)
+        ]
+        if None in spots:
+            return None
+        where = [i for i in spots if i is not None]
+        if vtype.kind == "bit":
+            steps.append((tag.name, _BIT, where[0], tag.address.bit))
+        elif vtype.kind == "uint16" and vtype.word_order in _UNSWAPPED:
+            steps.append((tag.name, _UINT16, where[0], vtype))
+        elif vtype.kind in _STRUCT_CODES:
+            codec = (*_codec(vtype), tuple(where))
+            steps.append((tag.name, _NUMBER, tuple(_value_order(where, vtype)), codec))
+        else:
+            steps.append((tag.name, _OTHER, tuple(where), vtype))
+    return steps
+
+
+_UNSWAPPED = (WordOrder.LOW_FIRST, WordOrder.HIGH_FIRST)
+
+
+def _value_order(spots: list[int], vtype: ValueType) -> list[int]:
+    """The word positions in value order (most significant first)."""
+    low_first = vtype.word_order in (WordOrder.LOW_FIRST, WordOrder.LOW_FIRST_SWAPPED)
+    return spots[::-1] if low_first else spots
+
+
+def _codec(
+    vtype: ValueType,
+) -> tuple[Callable[..., bytes], Callable[[bytes], tuple[Any, ...]], ValueType]:
+    """Pack words (in value order) into the value's bytes, unpack those into the value.
+
+    (Then the type itself, and the words in memory order, to report a word out of range.)
+    """
+    n = vtype.words
+    swapped = vtype.word_order not in _UNSWAPPED  # bytes swapped inside each word
+    pack = struct.Struct(f"{'<' if swapped else '>'}{n}H").pack
+    unpack = struct.Struct(">" + _STRUCT_CODES[vtype.kind]).unpack
+    return pack, unpack, vtype
 
 
 def _word_value(

@@ -11,8 +11,8 @@ one watcher task sleeps until the earliest deadline of the heap.
 from __future__ import annotations
 
 import asyncio
-import heapq
 import math
+import struct
 from time import monotonic
 from types import TracebackType
 from typing import Any
@@ -32,7 +32,9 @@ from ..protocol.errors import (
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
-from .response import RING_MASK, Response, SessionStats
+from .deadlines import Deadlines
+from .matching import count_unmatched, match_relay_error, match_wildcard
+from .response import RING_MASK, Response, SessionStats, new_response
 from .slots import (
     AsyncioPending,
     DestState,
@@ -44,6 +46,8 @@ from .slots import (
 
 _NORMAL = EndCode(0)
 _BUSY_CODES = (0x2604, 0x2605)
+#: The header of a command: the 9-byte prefix of its destination, then SID, MRC, SRC.
+_pack_head = struct.Struct("9sBBB").pack
 
 
 class Session:
@@ -99,8 +103,8 @@ class Session:
         self._slots: dict[Any, SlotQueue] = {}
         self._last_dest: FinsAddress | None = None
         self._last_state: Any = None
-        self._heap: list[tuple[float, int, Pending]] = []
-        self._seq = 0
+        self._deadlines = Deadlines()
+        self._fifo = self._deadlines.fifo  # the in-order part, appended to inline
         self._timer_at = math.inf
         self._timer_scope: anyio.CancelScope | None = None
         self._tg: TaskGroup | None = None
@@ -112,6 +116,8 @@ class Session:
         self._backoff = 0.0
         self._lost_exc: BaseException | None = None
         self.stats = SessionStats(self._pending)
+        #: Requests awaiting a reply (read by datagram transports to stop draining early).
+        self.replies_awaited = self._pending
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -207,13 +213,14 @@ class Session:
             self.stats.malformed += 1
             return
         key = (frame[6] << 24) | (frame[7] << 16) | (frame[8] << 8) | frame[9]
-        p = self._pending.get(key)
+        pending = self._pending
+        p = pending.get(key)
         if p is None:
-            p = self._match_wildcard(key)
+            p = match_wildcard(pending, key)
             if p is None and frame[12] & 0x80 and len(frame) >= 16:
-                p = self._match_relay_error(frame)
+                p = match_relay_error(pending, frame)
             if p is None:
-                self._unmatched(key)
+                count_unmatched(self.stats, self._quarantine, self._recent, key)
                 return
             key = p.key
         if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
@@ -222,59 +229,35 @@ class Session:
         if frame[12] & 0x80 and len(frame) < 16:
             self.stats.malformed += 1
             return
-        del self._pending[key]
+        del pending[key]
         self._recent[key] = None
         p.done = True
-        p.wake(frame)
+        fut = p.fut
+        if fut is None:
+            p.wake(frame)
+        else:
+            try:  # noqa: SIM105 (contextlib.suppress costs a context manager per reply)
+                fut.set_result(frame)
+            except asyncio.InvalidStateError:  # cancelled: the caller cleans up as it resumes
+                pass
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         latency = monotonic() - p.sent_at
         n = stats._lat_count
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
-        heap = self._heap
-        while heap and heap[0][2].done:
-            heapq.heappop(heap)
-        if len(heap) > 64 + 4 * len(self._pending):
-            # A slow request at the top keeps completed ones below it: compact, O(n) rarely.
-            heap[:] = [entry for entry in heap if not entry[2].done]
-            heapq.heapify(heap)
-
-    def _match_wildcard(self, key: int) -> Pending | None:
-        # A request to network 0 (local) or node 0 may be answered with the real numbers.
-        pending = self._pending
-        for mask in (0x00FFFFFF, 0xFF00FFFF, 0x0000FFFF):
-            p = pending.get(key & mask)
-            if p is not None:
-                return p
-        return None
-
-    def _match_relay_error(self, frame: bytes) -> Pending | None:
-        """A relay error comes from the relay point, not from the destination we asked.
-
-        Match it on SID and command code alone when exactly one request fits (preferring the
-        one whose destination network the reply names); never guess between several.
-        """
-        sid, mrc, src = frame[9], frame[10], frame[11]
-        fits = [
-            p for k, p in self._pending.items() if k & 0xFF == sid and p.mrc == mrc and p.src == src
-        ]
-        if len(fits) > 1:
-            fits = [p for p in fits if p.key >> 24 == frame[6]]
-        return fits[0] if len(fits) == 1 else None
-
-    def _unmatched(self, key: int) -> None:
-        stats = self.stats
-        q = self._quarantine
-        for k in (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF):
-            if k in q:
-                stats.late_replies += 1
-                return
-        for k in (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF):
-            if k in self._recent:
-                stats.duplicates += 1
-                return
-        stats.unsolicited += 1
+        fifo = self._fifo
+        if fifo:
+            if fifo[0].done:
+                popleft = fifo.popleft
+                popleft()
+                while fifo and fifo[0].done:
+                    popleft()
+            elif len(fifo) > 64 + 4 * len(pending):
+                # A slow request at the front keeps answered ones behind it: compact, rarely.
+                self._deadlines.prune(len(pending))
+        if self._deadlines.heap:
+            self._deadlines.prune(len(pending))
 
     def frame_dropped(self, reason: str) -> None:
         self.stats.malformed += 1
@@ -296,7 +279,7 @@ class Session:
         for p in pending:
             p.done = True
             p.fail(exc)
-        self._heap.clear()
+        self._deadlines.clear()
 
     # ----------------------------------------------------------------- deadlines
 
@@ -304,8 +287,7 @@ class Session:
         """The only timer: sleeps until the earliest deadline in the heap, expires what is due."""
         while True:
             self._expire(monotonic())
-            heap = self._heap
-            at = heap[0][0] if heap else math.inf
+            at = self._deadlines.earliest()
             with anyio.CancelScope() as scope:
                 self._timer_scope = scope
                 self._timer_at = at
@@ -321,18 +303,18 @@ class Session:
             scope.deadline = anyio.current_time() + (deadline - monotonic())
 
     def _expire(self, now: float) -> None:
-        heap = self._heap
-        while heap:
-            deadline, _, p = heap[0]
-            if not p.done:
-                if deadline > now:
-                    return
-                self._pending.pop(p.key, None)
-                p.done = True
-                self._quarantine[p.key] = now + self.quarantine_factor * (deadline - p.sent_at)
-                self.stats.timeouts += 1
-                p.fail(FinsTimeout("request timed out"))
-            heapq.heappop(heap)
+        for p in self._deadlines.due(now):
+            self._pending.pop(p.key, None)
+            p.done = True
+            self._quarantine[p.key] = now + self.quarantine_factor * (p.deadline - p.sent_at)
+            self.stats.timeouts += 1
+            p.fail(FinsTimeout("request timed out"))
+
+    @property
+    def _heap(self) -> Deadlines:
+        """The deadlines of the requests in flight (``len()`` counts answered ones not yet
+        dropped; kept under its old name for the tests that bound it)."""
+        return self._deadlines
 
     # ----------------------------------------------------------------- requests
 
@@ -407,8 +389,64 @@ class Session:
             )
         attempt = busy = 0
         while True:
+            # One attempt with a fresh SID, inlined (one coroutine per request, not two).
             try:
-                frame = await self._attempt(dest, mrc, src, params, timeout)
+                transport = self.transport
+                if transport.fast_send is None and not transport.is_open:
+                    await self._ensure_open()
+                state = self._last_state if dest is self._last_dest else self._dest_state(dest)
+                slots = state.slots
+                if slots.in_flight < slots.limit and not slots.waiters:
+                    slots.in_flight += 1
+                else:
+                    await slots.acquire(timeout, f"{dest}")
+                try:
+                    pending = self._pending
+                    key = state.base | state.cursor
+                    if key in pending or key in self._quarantine:
+                        key = await self._wait_for_sid(state, timeout)
+                    else:
+                        state.cursor = (key + 1) & 0xFF
+                    now = monotonic()
+                    deadline = now + timeout
+                    fut: asyncio.Future[bytes] | None = None
+                    if self._asyncio:
+                        fut = self._loop.create_future()
+                        p: Pending = AsyncioPending(key, mrc, src, fut, now, deadline)
+                    else:
+                        p = EventPending(key, mrc, src)
+                        p.sent_at = now
+                        p.deadline = deadline
+                    pending[key] = p
+                    fifo = self._fifo
+                    if not fifo or deadline >= fifo[-1].deadline:
+                        fifo.append(p)
+                    else:
+                        self._deadlines.add(p)
+                    if deadline < self._timer_at:
+                        self._arm(deadline)
+                    frame = _pack_head(state.prefix, key & 0xFF, mrc, src) + params
+                    try:
+                        fast_send = transport.fast_send
+                        if fast_send is not None:
+                            fast_send(frame)
+                        else:
+                            await transport.send(frame)
+                        frame = await (p.wait() if fut is None else fut)
+                    except FinsTimeout:
+                        raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
+                    except BaseException:
+                        if not p.done:  # cancelled or failed to send: the reply may still come
+                            p.done = True
+                            pending.pop(key, None)
+                            self._quarantine[key] = monotonic() + self.quarantine_factor * timeout
+                            self.stats.cancelled += 1
+                        raise
+                finally:
+                    if slots.waiters:
+                        slots.release()  # hands the slot to the first waiter
+                    else:
+                        slots.in_flight -= 1
             except FinsTimeout as exc:
                 if attempt >= retries or isinstance(exc, SlotTimeout):
                     raise
@@ -418,7 +456,7 @@ class Session:
             raw = (frame[12] << 8) | frame[13]
             if not raw & 0xFF3F:
                 self.stats.completed += 1
-                return Response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
+                return new_response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
             end_code = EndCode(raw)
             if end_code.code in _BUSY_CODES and busy < self.busy_retries:
                 self.stats.busy_retries += 1
@@ -437,57 +475,13 @@ class Session:
                 )
             raise error_for_end_code(end_code, command_code=command_code, data=frame[14:])
 
-    async def _attempt(
-        self, dest: FinsAddress, mrc: int, src: int, params: bytes, timeout: float
-    ) -> bytes:
-        """One attempt with a fresh SID; returns the matched reply frame."""
-        transport = self.transport
-        if not transport.is_open:
-            await self._ensure_open()
-        state = self._last_state if dest is self._last_dest else self._dest_state(dest)
-        slots = state.slots
-        if slots.in_flight < slots.limit and not slots.waiters:
-            slots.in_flight += 1
-        else:
-            await slots.acquire(timeout, f"{dest}")
-        try:
+    async def _wait_for_sid(self, state: DestState, timeout: float) -> int:
+        """A free SID; while all 256 are busy or quarantined, wait for the first release."""
+        key = self._allocate_sid(state)
+        while key is None:
+            await anyio.sleep(min(0.01, timeout))
             key = self._allocate_sid(state)
-            while key is None:  # all 256 SIDs busy or quarantined: wait for the first release
-                await anyio.sleep(min(0.01, timeout))
-                key = self._allocate_sid(state)
-            if self._asyncio:
-                fut = self._loop.create_future()
-                p: Pending = AsyncioPending(key, mrc, src, fut)
-            else:
-                p = EventPending(key, mrc, src)
-            p.sent_at = now = monotonic()
-            p.deadline = deadline = now + timeout
-            self._pending[key] = p
-            self._seq += 1
-            heapq.heappush(self._heap, (deadline, self._seq, p))
-            if deadline < self._timer_at:
-                self._arm(deadline)
-            frame = state.prefix + bytes((key & 0xFF, mrc, src)) + params
-            try:
-                fast_send = transport.fast_send
-                if fast_send is not None:
-                    fast_send(frame)
-                else:
-                    await transport.send(frame)
-                if self._asyncio:
-                    return await fut  # type: ignore[no-any-return]
-                return await p.wait()
-            except FinsTimeout:
-                raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
-            except BaseException:
-                if not p.done:  # cancelled or failed to send: the reply may still come
-                    p.done = True
-                    self._pending.pop(key, None)
-                    self._quarantine[key] = monotonic() + self.quarantine_factor * timeout
-                    self.stats.cancelled += 1
-                raise
-        finally:
-            slots.release()
+        return key
 
     def _timeout_message(self, dest: FinsAddress, mrc: int, src: int, timeout: float) -> str:
         s = self.source

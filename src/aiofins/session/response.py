@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..protocol.endcodes import EndCode
 from ..protocol.header import Header
@@ -57,6 +57,26 @@ class Response:
     def non_fatal_cpu_error(self) -> bool:
         """End code bit 6 (0040): the PLC has a non-fatal CPU error; the command worked."""
         return self.end_code.non_fatal_cpu_error
+
+
+_new = object.__new__
+_slot: dict[str, Any] = dict(vars(Response))  # the member descriptors of the slots
+_set_end_code = _slot["end_code"].__set__
+_set_data = _slot["data"].__set__
+_set_frame = _slot["frame"].__set__
+
+
+def new_response(end_code: EndCode, data: bytes, frame: bytes) -> Response:
+    """``Response(end_code, data, frame)`` at half the cost (the session's hot path).
+
+    Fills the slots directly instead of through the frozen dataclass's ``__init__``
+    (three ``object.__setattr__`` calls); the result is the same in every respect.
+    """
+    response: Response = _new(Response)
+    _set_end_code(response, end_code)
+    _set_data(response, data)
+    _set_frame(response, frame)
+    return response
 
 
 class SessionStats:

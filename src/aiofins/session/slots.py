@@ -13,9 +13,13 @@ from ..protocol.header import FinsAddress
 
 
 class Pending:
-    """One request on the wire: what its reply must carry and how to wake its caller."""
+    """One request on the wire: what its reply must carry and how to wake its caller.
 
-    __slots__ = ("deadline", "done", "key", "mrc", "sent_at", "src")
+    ``fut`` is the asyncio future the caller awaits (the session resolves it inline), or
+    ``None`` for subclasses that wake their caller through :meth:`wake`.
+    """
+
+    __slots__ = ("deadline", "done", "fut", "key", "mrc", "sent_at", "src")
 
     def __init__(self, key: int, mrc: int, src: int) -> None:
         self.key = key
@@ -24,6 +28,7 @@ class Pending:
         self.done = False
         self.deadline = 0.0
         self.sent_at = 0.0
+        self.fut: asyncio.Future[bytes] | None = None
 
     def wake(self, frame: bytes) -> None:
         raise NotImplementedError
@@ -38,14 +43,26 @@ class Pending:
 class AsyncioPending(Pending):
     """Waits on a bare asyncio future: the cheapest wake-up asyncio has."""
 
-    __slots__ = ("fut",)
+    __slots__ = ()
 
-    def __init__(self, key: int, mrc: int, src: int, fut: asyncio.Future[bytes]) -> None:
+    fut: asyncio.Future[bytes]
+
+    def __init__(
+        self,
+        key: int,
+        mrc: int,
+        src: int,
+        fut: asyncio.Future[bytes],
+        sent_at: float = 0.0,
+        deadline: float = 0.0,
+    ) -> None:
         self.key = key
         self.mrc = mrc
         self.src = src
         self.done = False
         self.fut = fut
+        self.sent_at = sent_at
+        self.deadline = deadline
 
     def wake(self, frame: bytes) -> None:
         if not self.fut.done():

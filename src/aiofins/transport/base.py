@@ -13,14 +13,20 @@ it with the spawner (task group) the session gives to :meth:`Transport.open`.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sized
 from typing import Any, Protocol
 
 from ..protocol.errors import FinsError
 
 
 class FrameSink(Protocol):
-    """What a transport reports to (implemented by the session)."""
+    """What a transport reports to (implemented by the session).
+
+    A sink may also have ``replies_awaited``: a sized collection, empty while no request
+    awaits a reply. A datagram transport then stops draining its socket after the last
+    awaited reply instead of paying one more ``recv()`` that fails (a stray datagram is read
+    at the next readiness callback: the readiness is level-triggered).
+    """
 
     def frame_received(self, frame: bytes, _addr: object = None, /) -> None:
         """One whole FINS frame (10-byte header first) arrived."""
@@ -74,6 +80,16 @@ class Transport(ABC):
     @abstractmethod
     async def aclose(self) -> None:
         """Close the link and release the socket (idempotent)."""
+
+
+#: What :func:`replies_awaited` answers for a sink without ``replies_awaited``: never empty.
+_ALWAYS: Sized = (None,)
+
+
+def replies_awaited(sink: FrameSink) -> Sized:
+    """The sink's ``replies_awaited`` collection, or one that is never empty."""
+    awaited: Sized = getattr(sink, "replies_awaited", _ALWAYS)
+    return awaited
 
 
 def is_asyncio() -> bool:

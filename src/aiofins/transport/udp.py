@@ -21,7 +21,14 @@ from typing import Any
 import anyio
 
 from ..protocol.errors import ConnectionLost
-from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+from .base import (
+    FrameSink,
+    TaskSpawner,
+    Transport,
+    is_asyncio,
+    replies_awaited,
+    wrap_os_error,
+)
 
 DEFAULT_PORT = 9600
 #: Receive buffer asked for: room for 50 in-flight 999-word replies many times over.
@@ -53,11 +60,13 @@ class _AsyncioSocket:
         self.owner = owner
         self.sink = sink
         self.backlog: deque[bytes] = deque()
+        self.awaited = replies_awaited(sink)
         loop.add_reader(sock.fileno(), self._readable)
 
     def _readable(self) -> None:
         recv = self.sock.recv
         received = self.sink.frame_received
+        awaited = self.awaited
         for _ in range(_BATCH):
             try:
                 data = recv(_RECV_SIZE)
@@ -70,6 +79,8 @@ class _AsyncioSocket:
                 self.owner._lost(self, exc)
                 return
             received(data)
+            if not awaited:  # no other reply awaited: skip the recv() that would fail
+                return
 
     def send(self, frame: bytes) -> None:
         if self.backlog:
@@ -133,6 +144,10 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
             self._raw_send(frame)
         except (BlockingIOError, InterruptedError):
             self.transport.sendto(frame)
+        except ConnectionRefusedError as exc:  # an earlier ICMP error surfacing here
+            self.sink.frame_dropped(f"socket error: {exc}")
+        except OSError as exc:
+            raise ConnectionLost(f"cannot send to {self.owner.description}: {exc}") from exc
 
     def error_received(self, exc: Exception) -> None:
         self.sink.frame_dropped(f"socket error: {exc}")  # ICMP unreachable: not fatal
@@ -234,6 +249,7 @@ class UdpTransport(Transport):
         """The anyio driver: wait until readable, then drain every queued datagram."""
         received = sink.frame_received
         recv = sock.recv
+        awaited = replies_awaited(sink)
         exc: BaseException | None = None
         try:
             while True:
@@ -247,6 +263,8 @@ class UdpTransport(Transport):
                         sink.frame_dropped(f"socket error: {err}")
                         continue
                     received(data)
+                    if not awaited:  # no other reply awaited: skip the recv() that would fail
+                        break
         except (anyio.ClosedResourceError, ValueError):
             pass  # closed locally (ValueError: fileno -1)
         except OSError as err:

@@ -1,0 +1,47 @@
+"""Replies that do not carry the exact key of a request: wildcards, relay errors, strays."""
+
+from __future__ import annotations
+
+from .response import SessionStats
+from .slots import Pending
+
+
+def match_wildcard(pending: dict[int, Pending], key: int) -> Pending | None:
+    """A request to network 0 (local) or node 0 may be answered with the real numbers."""
+    for mask in (0x00FFFFFF, 0xFF00FFFF, 0x0000FFFF):
+        p = pending.get(key & mask)
+        if p is not None:
+            return p
+    return None
+
+
+def match_relay_error(pending: dict[int, Pending], frame: bytes) -> Pending | None:
+    """A relay error comes from the relay point, not from the destination we asked.
+
+    Match it on SID and command code alone when exactly one request fits (preferring the
+    one whose destination network the reply names); never guess between several.
+    """
+    sid, mrc, src = frame[9], frame[10], frame[11]
+    fits = [p for k, p in pending.items() if k & 0xFF == sid and p.mrc == mrc and p.src == src]
+    if len(fits) > 1:
+        fits = [p for p in fits if p.key >> 24 == frame[6]]
+    return fits[0] if len(fits) == 1 else None
+
+
+def count_unmatched(
+    stats: SessionStats,
+    quarantine: dict[int, float],
+    recent: dict[int, None],
+    key: int,
+) -> None:
+    """Count a reply no request waits for: late (timed out), duplicate, or unsolicited."""
+    keys = (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF)
+    for k in keys:
+        if k in quarantine:
+            stats.late_replies += 1
+            return
+    for k in keys:
+        if k in recent:
+            stats.duplicates += 1
+            return
+    stats.unsolicited += 1
