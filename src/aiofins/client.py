@@ -10,17 +10,15 @@ route's limits and send the chunks pipelined.
 from __future__ import annotations
 
 import struct
-from collections.abc import Awaitable, Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
-
-import anyio
 
 from ._commands import CommandMethods
 from .chunking import plan_memory
 from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress
 from .protocol.commands import Request
-from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite
+from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
 from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, EndCodeError
 from .protocol.header import FinsAddress
@@ -109,6 +107,32 @@ class Client(CommandMethods):
         self.last_end_code = response.end_code
         return response
 
+    async def execute_many(
+        self,
+        commands: Sequence[tuple[int, int, bytes]],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        idempotent: bool = False,
+    ) -> list[Response]:
+        """Send raw commands pipelined from this one task; their responses in order.
+
+        See :meth:`Session.request_many`; the first error is raised as by :meth:`execute`.
+        """
+        target = dest or self.dest
+        try:
+            responses = await self.session.request_many(
+                commands, dest=target, timeout=timeout, idempotent=idempotent, retries=retries
+            )
+        except EndCodeError as exc:
+            if exc.end_code.code in _ADDRESSING_END_CODES:
+                exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
+            raise
+        if responses:
+            self.last_end_code = responses[-1].end_code
+        return responses
+
     async def call(
         self,
         request: Request[R],
@@ -169,20 +193,19 @@ class Client(CommandMethods):
                 retries=retries,
             )
             return list(result.values)
-        parts: list[tuple[int, ...]] = [()] * len(chunks)
-
-        async def one(i: int) -> None:
-            chunk = chunks[i]
-            result = await self.call(
-                MemoryAreaRead(chunk.address, chunk.count),
-                dest=dest,
-                timeout=timeout,
-                retries=retries,
-            )
-            parts[i] = result.values
-
-        await _all(one, len(chunks))
-        return [v for part in parts for v in part]
+        requests = [MemoryAreaRead(chunk.address, chunk.count) for chunk in chunks]
+        responses = await self.execute_many(
+            [(r.MRC, r.SRC, r.encode()) for r in requests],
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+            idempotent=True,
+        )
+        return [
+            v
+            for request, response in zip(requests, responses, strict=True)
+            for v in request.decode_response(response.data).values
+        ]
 
     async def write(
         self,
@@ -284,24 +307,24 @@ class Client(CommandMethods):
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
             return plan.decode((await self._read_run(plan, 0, timeout),), ())
-        run_words: list[Sequence[int]] = [()] * n_runs
-        multi: list[Sequence[int]] = [()] * len(plan.multiple)
-
-        async def frame(i: int) -> None:
-            if i < n_runs:
-                run_words[i] = await self._read_run(plan, i, timeout)
-            else:
-                result = await self.multiple_memory_area_read(
-                    plan.multiple[i - n_runs], timeout=timeout
-                )
-                multi[i - n_runs] = [item.value for item in result.items]
-
-        await _all(frame, n_runs + len(plan.multiple))
+        multiple: list[MultipleMemoryAreaRead] | None = plan.cache.get("multiple")
+        if multiple is None:
+            multiple = plan.cache["multiple"] = [
+                MultipleMemoryAreaRead(addresses=addresses) for addresses in plan.multiple
+            ]
+        commands = [self._run_read(plan, i)[:3] for i in range(n_runs)]
+        commands += [(m.MRC, m.SRC, m.encode()) for m in multiple]
+        responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
+        run_words = [self._run_words(plan, i, responses[i]) for i in range(n_runs)]
+        multi: list[Sequence[int]] = [
+            [item.value for item in m.decode_response(response.data).items]
+            for m, response in zip(multiple, responses[n_runs:], strict=True)
+        ]
         return plan.decode(run_words, multi)
 
-    async def _read_run(self, plan: ReadPlan, i: int, timeout: float | None) -> Sequence[int]:
-        """The words of the plan's run ``i``: ``call(MemoryAreaRead(...))``, its request built
-        once per plan and its words unpacked in one step."""
+    def _run_read(self, plan: ReadPlan, i: int) -> tuple[int, int, bytes, MemoryAreaRead, Any]:
+        """The 0101 command of the plan's run ``i`` (MRC, SRC, parameters, request, unpacker),
+        built once per plan."""
         reads: list[Any] | None = plan.cache.get("reads")
         if reads is None:
             reads = plan.cache["reads"] = [None] * len(plan.runs)
@@ -310,13 +333,13 @@ class Client(CommandMethods):
             r = plan.runs[i]
             new = MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count)
             unpack = struct.Struct(f">{r.count}H").unpack if new.element_size == 2 else None
-            read = reads[i] = (new, new.encode(), unpack)
-        request: MemoryAreaRead = read[0]
-        params: bytes = read[1]
-        unpack = read[2]
-        response = await self.execute(
-            request.MRC, request.SRC, params, timeout=timeout, idempotent=request.IDEMPOTENT
-        )
+            read = reads[i] = (new.MRC, new.SRC, new.encode(), new, unpack)
+        return read  # type: ignore[no-any-return]
+
+    def _run_words(self, plan: ReadPlan, i: int, response: Response) -> Sequence[int]:
+        """The words of the plan's run ``i`` from its response, unpacked in one step."""
+        request: MemoryAreaRead
+        _, _, _, request, unpack = self._run_read(plan, i)
         data = response.data
         if unpack is None or len(data) != 2 * request.count:
             values: tuple[int, ...] = request.decode_response(data).values  # raises if short
@@ -324,31 +347,13 @@ class Client(CommandMethods):
         words: tuple[int, ...] = unpack(data)
         return words
 
-
-async def _all(job: Callable[[int], Awaitable[None]], count: int) -> None:
-    """Run ``job(0..count-1)`` concurrently (the session paces them); the first error wins.
-
-    The first failure cancels the others and is raised as itself, not inside an exception
-    group, so callers see the same :class:`FinsError` as for a single frame.
-    """
-    if count == 1:
-        await job(0)
-        return
-    errors: list[Exception] = []
-
-    async def guarded(i: int, scope: anyio.CancelScope) -> None:
-        try:
-            await job(i)
-        except Exception as exc:
-            if not errors:
-                errors.append(exc)
-            scope.cancel()
-
-    async with anyio.create_task_group() as tg:
-        for i in range(count):
-            tg.start_soon(guarded, i, tg.cancel_scope)
-    if errors:
-        raise errors[0]
+    async def _read_run(self, plan: ReadPlan, i: int, timeout: float | None) -> Sequence[int]:
+        """The words of the plan's run ``i``: one 0101 frame."""
+        mrc, src, params, request, _ = self._run_read(plan, i)
+        response = await self.execute(
+            mrc, src, params, timeout=timeout, idempotent=request.IDEMPOTENT
+        )
+        return self._run_words(plan, i, response)
 
 
 def _address(address: AddressLike) -> MemoryAddress:

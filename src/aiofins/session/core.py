@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import math
 import struct
+from collections.abc import Sequence
 from time import monotonic
 from types import TracebackType
 from typing import Any
@@ -32,6 +33,7 @@ from ..protocol.errors import (
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
+from .batch import request_many
 from .deadlines import Deadlines
 from .matching import count_unmatched, match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
@@ -474,6 +476,34 @@ class Session:
                     data=frame[16:],
                 )
             raise error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+
+    async def request_many(
+        self,
+        requests: Sequence[tuple[int, int, bytes]],
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        window: int | None = None,
+    ) -> list[Response]:
+        """Send many commands ``(mrc, src, params)`` pipelined; their responses in order.
+
+        Up to ``window`` (default and at most: the destination's in-flight cap) are on the
+        wire at once. Under asyncio the replies are handled in the receive callback, which
+        sends the next command, so the caller wakes once for the whole batch. Each command
+        keeps the guarantees of :meth:`request` (timeouts per attempt, retries, busy end
+        codes); the first error is raised after the rest are abandoned (SIDs quarantined).
+        """
+        return await request_many(
+            self,
+            requests,
+            dest=dest,
+            timeout=timeout,
+            idempotent=idempotent,
+            retries=retries,
+            window=window,
+        )
 
     async def _wait_for_sid(self, state: DestState, timeout: float) -> int:
         """A free SID; while all 256 are busy or quarantined, wait for the first release."""

@@ -1,0 +1,417 @@
+"""Pipelined bulk requests: many commands from one caller, one wake-up for the whole batch.
+
+Under asyncio with a transport that sends synchronously (``fast_send``), the batch keeps up
+to ``window`` requests on the wire. Each reply is handled in the session's receive callback,
+which stores the result and sends the batch's next command in the same step; the caller
+awaits one future that resolves when every result is in or the first error occurs. Under
+other backends (trio) the batch runs as ``window`` concurrent :meth:`Session.request` loops.
+
+Every guarantee of ``request`` holds per command: SIDs are allocated and quarantined the same
+way, the destination's in-flight cap bounds the window, deadlines sit in the session's one
+deadline structure, timeouts of idempotent commands are retried with a fresh SID, busy end
+codes (2604/2605) are retried after the same growing pause, other end codes raise the same
+exceptions. The first error cancels the rest: their SIDs are quarantined, their slots freed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+from collections.abc import Sequence
+from time import monotonic
+from typing import TYPE_CHECKING
+
+import anyio
+
+from ..protocol.endcodes import EndCode
+from ..protocol.errors import (
+    CommandError,
+    ConnectionLost,
+    FinsError,
+    FinsTimeout,
+    RelayError,
+    error_for_end_code,
+)
+from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
+from .response import Response, new_response
+from .slots import DestState, Pending
+
+if TYPE_CHECKING:
+    from .core import Session
+
+_NORMAL = EndCode(0)
+_BUSY_CODES = (0x2604, 0x2605)
+_pack_head = struct.Struct("9sBBB").pack
+#: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
+_SID_WAIT = 0.01
+
+#: One command of a batch: (MRC, SRC, parameter bytes).
+Command = tuple[int, int, bytes]
+
+
+def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:
+    """The exception for a reply with a non-normal end code (relay errors name the relay)."""
+    end_code = EndCode((frame[12] << 8) | frame[13])
+    command_code = (mrc << 8) | src
+    if end_code.relay_error:
+        return RelayError(
+            end_code, network=frame[14], node=frame[15], command_code=command_code, data=frame[16:]
+        )
+    return error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+
+
+def check_command(mrc: int, src: int, params: bytes) -> None:
+    if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
+        raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
+    if len(params) > MAX_PARAMETER_SIZE:
+        raise CommandError(
+            f"{len(params)} parameter bytes exceed the FINS limit of {MAX_PARAMETER_SIZE}"
+        )
+
+
+class BatchPending(Pending):
+    """One command of a batch on the wire; the receive callback hands its reply to the batch."""
+
+    __slots__ = ("attempt", "batch", "busy", "index")
+
+    def __init__(
+        self, key: int, mrc: int, src: int, batch: Batch, index: int, attempt: int, busy: int
+    ) -> None:
+        self.key = key
+        self.mrc = mrc
+        self.src = src
+        self.done = False
+        self.fut = None
+        self.batch = batch
+        self.index = index
+        self.attempt = attempt
+        self.busy = busy
+
+    def wake(self, frame: bytes) -> None:
+        self.batch.replied(self, frame)
+
+    def fail(self, exc: BaseException) -> None:
+        self.batch.failed(self, exc)
+
+
+class Batch:
+    """The state of one :func:`request_many` call on the asyncio fast path."""
+
+    __slots__ = (
+        "commands",
+        "dest",
+        "error",
+        "flush_handle",
+        "fut",
+        "handles",
+        "held",
+        "live",
+        "next",
+        "outbox",
+        "remaining",
+        "results",
+        "retries",
+        "session",
+        "state",
+        "timeout",
+        "window",
+    )
+
+    def __init__(
+        self,
+        session: Session,
+        commands: Sequence[Command],
+        state: DestState,
+        timeout: float,
+        retries: int,
+        window: int,
+    ) -> None:
+        self.session = session
+        self.commands = commands
+        self.state = state
+        self.dest = state.address
+        self.timeout = timeout
+        self.retries = retries
+        self.window = window
+        self.results: list[Response | None] = [None] * len(commands)
+        self.remaining = len(commands)
+        self.next = 0  # the next command not yet sent
+        self.held = 0  # slots of the destination this batch holds
+        self.live: dict[BatchPending, None] = {}  # sent, not yet answered (or given up)
+        self.handles: set[asyncio.TimerHandle] = set()
+        self.error: BaseException | None = None
+        self.outbox: list[tuple[BatchPending, bytes]] = []
+        self.flush_handle: asyncio.Handle | None = None
+        self.fut: asyncio.Future[None] = session._loop.create_future()
+
+    # -- sending ------------------------------------------------------------------------
+
+    def send(self, index: int, attempt: int = 0, busy: int = 0) -> None:
+        """Send command ``index`` on a slot this batch holds (with a fresh SID)."""
+        if self.fut.done():
+            return
+        session = self.session
+        state = self.state
+        pending = session._pending
+        key = state.base | state.cursor
+        if key in pending or key in session._quarantine:
+            found = session._allocate_sid(state)
+            if found is None:  # every SID in use: try again shortly, keeping the slot
+                self.later(_SID_WAIT, index, attempt, busy)
+                return
+            key = found
+        else:
+            state.cursor = (key + 1) & 0xFF
+        mrc, src, params = self.commands[index]
+        p = BatchPending(key, mrc, src, self, index, attempt, busy)
+        now = monotonic()
+        p.sent_at = now
+        deadline = p.deadline = now + self.timeout
+        pending[key] = p
+        self.live[p] = None
+        fifo = session._fifo
+        if not fifo or deadline >= fifo[-1].deadline:
+            fifo.append(p)
+        else:
+            session._deadlines.add(p)
+        if deadline < session._timer_at:
+            scope = session._timer_scope
+            if scope is not None:
+                session._timer_at = deadline
+                scope.deadline = session._loop.time() + (deadline - now)
+        # Sent at the end of this event-loop step, together with the other frames queued in
+        # it: the peer then gets a burst instead of a wake-up per frame.
+        self.outbox.append((p, _pack_head(state.prefix, key & 0xFF, mrc, src) + params))
+        if self.flush_handle is None:
+            self.flush_handle = session._loop.call_soon(self.flush)
+
+    def flush(self) -> None:
+        """Send the frames queued in this event-loop step."""
+        self.flush_handle = None
+        outbox = self.outbox
+        if not outbox:
+            return
+        self.outbox = []
+        fast_send = self.session.transport.fast_send
+        for p, frame in outbox:
+            if p.done or self.fut.done():
+                continue
+            try:
+                if fast_send is None:
+                    raise ConnectionLost(f"{self.session.transport.description} is closed")
+                fast_send(frame)
+            except BaseException as exc:
+                self.abandon(p)
+                self.finish(exc)
+
+    def later(self, delay: float, index: int, attempt: int, busy: int) -> None:
+        handle: asyncio.TimerHandle
+
+        def fire() -> None:
+            self.handles.discard(handle)
+            self.send(index, attempt, busy)
+
+        handle = self.session._loop.call_later(delay, fire)
+        self.handles.add(handle)
+
+    def start(self) -> None:
+        """Send the first commands on the slots held (the caller holds at least one)."""
+        slots = self.state.slots
+        while self.held < self.window and slots.try_acquire():
+            self.held += 1
+        while self.next < len(self.commands) and self.next < self.held:
+            self.next += 1
+            self.send(self.next - 1)
+        self.flush()
+
+    def slot_free(self, grow_only: bool = False) -> None:
+        """A command of this batch completed: its slot goes to the next command, if any.
+
+        Other callers waiting for the destination get the slot first (keeping one for the
+        batch). ``grow_only``: the slot was reused already; only take more free ones.
+        """
+        slots = self.state.slots
+        n = len(self.commands)
+        if grow_only or (self.next < n and not (slots.waiters and self.held > 1)):
+            if not grow_only:
+                self.next += 1
+                self.send(self.next - 1)
+            while self.held < self.window and self.next < n and slots.try_acquire():
+                self.held += 1
+                self.next += 1
+                self.send(self.next - 1)
+        else:
+            self.held -= 1
+            slots.release()  # to the first waiter of the destination, if any
+
+    # -- receiving ----------------------------------------------------------------------
+
+    def replied(self, p: BatchPending, frame: bytes) -> None:
+        """The receive callback matched a reply to ``p`` (already out of the pending table)."""
+        self.live.pop(p, None)
+        if self.fut.done():
+            return
+        session = self.session
+        raw = (frame[12] << 8) | frame[13]
+        if not raw & 0xFF3F:
+            session.stats.completed += 1
+            self.results[p.index] = new_response(
+                _NORMAL if not raw else EndCode(raw), frame[14:], frame
+            )
+            self.remaining -= 1
+            if not self.remaining:
+                self.finish(None)
+            elif self.next < len(self.commands) and not self.state.slots.waiters:
+                self.next += 1  # the freed slot carries the next command
+                self.send(self.next - 1)
+                if self.held < self.window:
+                    self.slot_free(grow_only=True)
+            else:
+                self.slot_free()
+            return
+        if (raw & 0x7F3F) in _BUSY_CODES and p.busy < session.busy_retries:
+            session.stats.busy_retries += 1
+            self.later(session.busy_backoff * (2**p.busy), p.index, p.attempt, p.busy + 1)
+            return
+        session.stats.end_code_errors += 1
+        self.finish(end_code_error(frame, p.mrc, p.src))
+
+    def failed(self, p: BatchPending, exc: BaseException) -> None:
+        """``p`` timed out (already quarantined) or the link failed."""
+        self.live.pop(p, None)
+        if self.fut.done():
+            return
+        session = self.session
+        if isinstance(exc, FinsTimeout) and not session._closed:
+            if p.attempt < self.retries:
+                session.stats.retries += 1
+                self.send(p.index, p.attempt + 1, p.busy)
+                return
+            exc = FinsTimeout(session._timeout_message(self.dest, p.mrc, p.src, self.timeout))
+        self.finish(exc)
+
+    # -- ending -------------------------------------------------------------------------
+
+    def finish(self, error: BaseException | None) -> None:
+        if not self.fut.done():
+            self.error = error
+            self.fut.set_result(None)
+
+    def abandon(self, p: BatchPending) -> None:
+        """Give up on ``p``: out of the pending table, its SID quarantined."""
+        self.live.pop(p, None)
+        if not p.done:
+            session = self.session
+            p.done = True
+            session._pending.pop(p.key, None)
+            session._quarantine[p.key] = monotonic() + session.quarantine_factor * self.timeout
+            session.stats.cancelled += 1
+
+    def cleanup(self) -> None:
+        """After the caller resumed (done, failed or cancelled): nothing of the batch left."""
+        if not self.fut.done():
+            self.fut.cancel()
+        for handle in self.handles:
+            handle.cancel()
+        self.handles.clear()
+        if self.flush_handle is not None:
+            self.flush_handle.cancel()
+            self.flush_handle = None
+        self.outbox.clear()
+        for p in list(self.live):
+            self.abandon(p)
+        slots = self.state.slots
+        while self.held:
+            self.held -= 1
+            slots.release()
+
+
+async def request_many(
+    session: Session,
+    commands: Sequence[Command],
+    *,
+    dest: FinsAddress | None,
+    timeout: float | None,
+    idempotent: bool,
+    retries: int | None,
+    window: int | None,
+) -> list[Response]:
+    """See :meth:`Session.request_many`."""
+    if dest is None:
+        dest = session.dest
+    if timeout is None:
+        timeout = session.timeout
+    if retries is None:
+        retries = session.retries if idempotent else 0
+    for mrc, src, params in commands:
+        check_command(mrc, src, params)
+    if window is not None and window < 1:
+        raise CommandError(f"window {window} must be at least 1")
+    if not commands:
+        return []
+    transport = session.transport
+    if transport.fast_send is None and not transport.is_open:
+        await session._ensure_open()
+    state = session._dest_state(dest)
+    limit = state.slots.limit
+    width = min(limit if window is None else min(window, limit), len(commands))
+    if not session._asyncio or transport.fast_send is None or len(commands) == 1:
+        return await _concurrent(session, commands, dest, timeout, idempotent, retries, width)
+    await state.slots.acquire(timeout, f"{dest}")
+    batch = Batch(session, commands, state, timeout, retries, width)
+    batch.held = 1
+    try:
+        batch.start()
+        await batch.fut
+    finally:
+        batch.cleanup()
+    if batch.error is not None:
+        raise batch.error
+    results: list[Response] = batch.results  # type: ignore[assignment]  # all filled
+    return results
+
+
+async def _concurrent(
+    session: Session,
+    commands: Sequence[Command],
+    dest: FinsAddress,
+    timeout: float,
+    idempotent: bool,
+    retries: int,
+    width: int,
+) -> list[Response]:
+    """The portable path: ``width`` loops of :meth:`Session.request`; the first error wins."""
+    results: list[Response | None] = [None] * len(commands)
+    if width == 1:
+        for i, (mrc, src, params) in enumerate(commands):
+            results[i] = await session.request(
+                mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent, retries=retries
+            )
+        return results  # type: ignore[return-value]
+    errors: list[Exception] = []
+    cursor = iter(range(len(commands)))
+
+    async def worker(scope: anyio.CancelScope) -> None:
+        try:
+            for i in cursor:
+                mrc, src, params = commands[i]
+                results[i] = await session.request(
+                    mrc,
+                    src,
+                    params,
+                    dest=dest,
+                    timeout=timeout,
+                    idempotent=idempotent,
+                    retries=retries,
+                )
+        except Exception as exc:
+            if not errors:
+                errors.append(exc)
+            scope.cancel()
+
+    async with anyio.create_task_group() as tg:
+        for _ in range(width):
+            tg.start_soon(worker, tg.cancel_scope)
+    if errors:
+        raise errors[0]
+    return results  # type: ignore[return-value]

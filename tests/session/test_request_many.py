@@ -1,0 +1,288 @@
+"""Session.request_many over real loopback UDP (asyncio fast path, trio fallback, uvloop)."""
+
+from __future__ import annotations
+
+import anyio
+import pytest
+
+from aiofins.protocol.errors import CommandError, FinsTimeout, ParameterError
+from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
+
+from .test_session_udp import (
+    PLC,
+    Reply,
+    Responder,
+    answer,
+    read_params,
+    reply,
+    session_for,
+    udp_responder,
+    word_data,
+)
+
+
+def reads(words: range) -> list[tuple[int, int, bytes]]:
+    return [(0x01, 0x01, read_params(w)) for w in words]
+
+
+def expected(word: int, node: int = PLC.node) -> bytes:
+    return (((node << 12) ^ word) & 0xFFFF).to_bytes(2, "big")
+
+
+def word_of(cmd: bytes) -> int:
+    return int.from_bytes(cmd[13:15], "big")
+
+
+def key_of(cmd: bytes) -> int:
+    """The in-flight key of a command: DNA DA1 DA2 SID."""
+    return (cmd[3] << 24) | (cmd[4] << 16) | (cmd[5] << 8) | cmd[9]
+
+
+def local_addr(session: Session) -> tuple[str, int]:
+    return ("127.0.0.1", session.transport.local_address[1])  # type: ignore[attr-defined]
+
+
+def assert_idle(session: Session) -> None:
+    """Nothing of a batch left behind: no pending entry, every slot free."""
+    assert session.stats.in_flight == 0
+    assert all(state.slots.in_flight == 0 for state in session._dests.values())
+    assert all(not state.slots.waiters for state in session._dests.values())
+
+
+@pytest.mark.anyio
+async def test_results_come_back_in_order_of_the_commands() -> None:
+    held: list[bytes] = []
+    most = 0
+
+    def reverse_in_fours(cmd: bytes) -> list[Reply]:
+        nonlocal most
+        held.append(cmd)
+        most = max(most, len(held))
+        if len(held) < 4:
+            return []
+        batch = [(0.0, reply(c, 0, word_data(c))) for c in reversed(held)]
+        held.clear()
+        return batch
+
+    async with udp_responder(reverse_in_fours) as peer, session_for(peer, max_in_flight=8) as s:
+        results = await s.request_many(reads(range(200, 400)), window=4, timeout=5)
+        assert [r.data for r in results] == [expected(w) for w in range(200, 400)]
+        assert [word_of(c) for c in peer.received] == list(range(200, 400))
+        assert most == 4  # never more than the window on the wire
+        assert s.stats.completed == 200
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_window_is_capped_by_the_destinations_in_flight_limit() -> None:
+    held: list[bytes] = []
+    most = 0
+
+    def pairs(cmd: bytes) -> list[Reply]:
+        nonlocal most
+        held.append(cmd)
+        most = max(most, len(held))
+        if len(held) < 3:
+            return []
+        out = [(0.0, reply(c, 0, word_data(c))) for c in held]
+        held.clear()
+        return out
+
+    async with udp_responder(pairs) as peer, session_for(peer, max_in_flight=3) as s:
+        results = await s.request_many(reads(range(30)), window=50, timeout=5)
+        assert [r.data for r in results] == [expected(w) for w in range(30)]
+        assert most == 3
+        assert await s.request_many([]) == []
+        with pytest.raises(CommandError):
+            await s.request_many(reads(range(2)), window=0)
+        with pytest.raises(CommandError):
+            await s.request_many([(0x100, 0x01, b"")])
+
+
+@pytest.mark.anyio
+async def test_thousand_commands_with_reordered_duplicated_and_dropped_replies() -> None:
+    """Replies come back reversed in batches; some twice, some after the timeout, some never.
+
+    Every result must be the data of its own command: a late reply to a timed-out command
+    (its SID quarantined) or a duplicate must never complete another command.
+    """
+    held: list[bytes] = []
+    count = 0
+    dropped: set[int] = set()
+
+    def chaos(cmd: bytes) -> list[Reply]:
+        nonlocal count
+        count += 1
+        word = word_of(cmd)
+        if count % 41 == 0 and word not in dropped:
+            dropped.add(word)  # lost in time: answered after the timeout, to a quarantined SID
+            return [(0.4, reply(cmd, 0, word_data(cmd)))] if count % 2 else []
+        held.append(cmd)
+        if len(held) < 6:
+            return []
+        out = [(0.0, reply(c, 0, word_data(c))) for c in reversed(held)]
+        out += [(0.0, reply(c, 0, word_data(c))) for c in held[::5]]  # duplicates
+        held.clear()
+        return out
+
+    async def flush_stragglers(peer: Responder, addr: tuple[str, int]) -> None:
+        while True:
+            await anyio.sleep(0.01)
+            cmds = list(held)
+            held.clear()
+            for c in cmds:
+                peer.send(reply(c, 0, word_data(c)), addr)
+
+    options = {"max_in_flight": 50, "timeout": 0.3, "quarantine_factor": 4.0}
+    async with udp_responder(chaos) as peer, session_for(peer, **options) as s:
+        peer.tg.start_soon(flush_stragglers, peer, local_addr(s))
+        nodes = [FinsAddress(0, n, 0) for n in (1, 2)]
+        for node in nodes:
+            results = await s.request_many(
+                reads(range(1000)), dest=node, idempotent=True, retries=3
+            )
+            assert [r.data for r in results] == [expected(w, node.node) for w in range(1000)]
+        assert dropped
+        # Every drop timed out and was retried (a slow machine may time out a few more).
+        assert s.stats.timeouts == s.stats.retries >= len(dropped)
+        assert s.stats.completed == 2000
+        assert s.stats.duplicates > 0
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_timeout_raises_fins_timeout_and_quarantines_every_sid() -> None:
+    async with (
+        udp_responder(lambda cmd: []) as peer,
+        session_for(peer, max_in_flight=3, quarantine_factor=50.0) as s,
+    ):
+        with pytest.raises(FinsTimeout) as info:
+            await s.request_many(reads(range(5)), timeout=0.05)
+        assert "no response to command 0101" in str(info.value)
+        assert len(peer.received) == 3  # the first error stops the batch
+        assert {key_of(c) for c in peer.received} <= set(s._quarantine)
+        assert s.stats.timeouts >= 1
+        assert_idle(s)
+        # Idempotent commands are retried with a fresh SID before giving up.
+        peer.received.clear()
+        with pytest.raises(FinsTimeout):
+            await s.request_many(reads(range(1)), timeout=0.05, idempotent=True, retries=2)
+        assert len({c[9] for c in peer.received}) == 3
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_end_code_error_is_raised_and_the_rest_abandoned() -> None:
+    seven: list[bytes] = []
+
+    def bad_word_7(cmd: bytes) -> list[Reply]:
+        word = word_of(cmd)
+        if word == 7:
+            seven.append(cmd)  # failed once 8, 9 and 10 are on the wire
+            return []
+        if word == 10:
+            return [(0.0, reply(seven[0], 0x1101))]
+        if word > 7:
+            return []  # never answered: abandoned when word 7 fails
+        return answer(cmd)
+
+    async with (
+        udp_responder(bad_word_7) as peer,
+        session_for(peer, max_in_flight=4, quarantine_factor=50.0) as s,
+    ):
+        with pytest.raises(ParameterError) as info:
+            await s.request_many(reads(range(20)), timeout=5)
+        assert info.value.code == 0x1101 and info.value.command_code == 0x0101
+        assert s.stats.end_code_errors == 1
+        unanswered = {key_of(c) for c in peer.received if word_of(c) > 7}
+        assert unanswered and unanswered <= set(s._quarantine)
+        assert_idle(s)
+        peer.handler = answer
+        results = await s.request_many(reads(range(100, 110)))
+        assert [r.data for r in results] == [expected(w) for w in range(100, 110)]
+
+
+@pytest.mark.anyio
+async def test_busy_end_codes_are_retried_with_a_fresh_sid() -> None:
+    busy_words: dict[int, int] = {}
+
+    def busy_twice(cmd: bytes) -> list[Reply]:
+        word = word_of(cmd)
+        if word % 3 == 0 and busy_words.get(word, 0) < 2:
+            busy_words[word] = busy_words.get(word, 0) + 1
+            return [(0.0, reply(cmd, 0x2604))]
+        return answer(cmd)
+
+    async with udp_responder(busy_twice) as peer, session_for(peer, busy_backoff=0.001) as s:
+        results = await s.request_many(reads(range(12)))
+        assert [r.data for r in results] == [expected(w) for w in range(12)]
+        assert s.stats.busy_retries == 8
+        sids = [c[9] for c in peer.received if word_of(c) == 3]
+        assert len(sids) == 3 and len(set(sids)) == 3
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_cancellation_frees_slots_and_quarantines_sids() -> None:
+    arrived = anyio.Event()
+
+    def hold(cmd: bytes) -> list[Reply]:
+        if len(peer.received) == 4:
+            arrived.set()
+        return []
+
+    async with (
+        udp_responder(hold) as peer,
+        session_for(peer, max_in_flight=4, quarantine_factor=50.0) as s,
+    ):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(s.request_many, reads(range(10)))
+            await arrived.wait()
+            tg.cancel_scope.cancel()
+        held = list(peer.received)
+        assert len(held) == 4
+        assert {key_of(c) for c in held} <= set(s._quarantine)
+        assert s.stats.cancelled == 4
+        assert_idle(s)
+        # Their replies come late now: counted, never delivered to the next batch.
+        addr = local_addr(s)
+        for c in held:
+            peer.send(reply(c, 0, b"\xde\xad"), addr)
+        peer.handler = answer
+        results = await s.request_many(reads(range(50, 60)))
+        assert [r.data for r in results] == [expected(w) for w in range(50, 60)]
+        assert s.stats.late_replies == 4
+        assert_idle(s)
+
+
+def test_under_uvloop() -> None:
+    pytest.importorskip("uvloop")
+
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer, max_in_flight=20) as s:
+            results = await s.request_many(reads(range(500)))
+            assert [r.data for r in results] == [expected(w) for w in range(500)]
+            peer.handler = lambda cmd: []
+            with pytest.raises(FinsTimeout):
+                await s.request_many(reads(range(3)), timeout=0.05)
+            assert_idle(s)
+
+    anyio.run(main, backend="asyncio", backend_options={"use_uvloop": True})
+
+
+@pytest.mark.anyio
+async def test_other_callers_share_the_destinations_slots_with_a_batch() -> None:
+    async with udp_responder() as peer, session_for(peer, max_in_flight=4) as s:
+        singles: dict[int, bytes] = {}
+
+        async def single(word: int) -> None:
+            singles[word] = (await s.request(0x01, 0x01, read_params(word), timeout=5)).data
+
+        async with anyio.create_task_group() as tg:
+            for word in range(1000, 1020):
+                tg.start_soon(single, word)
+            results = await s.request_many(reads(range(300)), timeout=5)
+        assert [r.data for r in results] == [expected(w) for w in range(300)]
+        assert singles == {w: expected(w) for w in range(1000, 1020)}
+        assert_idle(s)
