@@ -14,7 +14,13 @@ from collections.abc import Callable
 
 from .chunking import plan_parameter, plan_program
 from .client import Client
-from .protocol.commands.file import MAX_FILE_NAMES, MAX_FILE_READ, MAX_FILE_WRITE
+from .protocol.commands.file import (
+    FILE_READ_OVERHEAD,
+    FILE_WRITE_OVERHEAD,
+    MAX_FILE_NAMES,
+    MAX_FILE_READ,
+    MAX_FILE_WRITE,
+)
 from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
 from .protocol.commands.status import CpuMode
 from .protocol.errors import CommandError, DecodeError
@@ -107,11 +113,6 @@ async def restore_parameters(
 
 # -- file memory ---------------------------------------------------------------------------
 
-#: Parameter bytes of 2203 besides the file data and the directory path (manual 5-3-27).
-_FILE_WRITE_OVERHEAD = 24
-#: Response bytes of 2202 besides the file data.
-_FILE_READ_OVERHEAD = 10
-
 
 async def list_files(client: Client, disk: Disk, directory: str = "") -> list[FileEntry]:
     """Every file entry of a directory (2201, 20 names a frame)."""
@@ -131,7 +132,7 @@ async def download_file(
     progress: Progress | None = None,
 ) -> bytes:
     """A whole file from file memory (2202 in blocks as large as the route allows)."""
-    limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - _FILE_READ_OVERHEAD)
+    limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - FILE_READ_OVERHEAD)
     out = bytearray()
     while True:
         result = await client.single_file_read(disk, name, len(out), limit, directory)
@@ -152,7 +153,7 @@ async def upload_file(
     overwrite: bool = True,
 ) -> None:
     """Write a whole file (2203: a new file, then appends), replacing it if ``overwrite``."""
-    room = client.limits.max_parameter_bytes - _FILE_WRITE_OVERHEAD - len(directory)
+    room = client.limits.max_parameter_bytes - FILE_WRITE_OVERHEAD - len(directory)
     limit = min(MAX_FILE_WRITE - len(directory), room)
     if limit < 1:
         raise CommandError(f"directory {directory!r} leaves no room for file data")

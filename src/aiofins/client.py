@@ -23,7 +23,14 @@ from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, EndCodeError
 from .protocol.header import FinsAddress
 from .protocol.limits import RouteLimits, limits_for
-from .protocol.values import Value, ValueType, WordOrder, parse_value_type
+from .protocol.values import (
+    Value,
+    ValueType,
+    WordOrder,
+    parse_value_type,
+    values_to_words,
+    words_to_values,
+)
 from .session import Response, Session
 from .tags import ReadPlan, compile_tags
 
@@ -101,8 +108,7 @@ class Client(CommandMethods):
                 retries=retries,
             )
         except EndCodeError as exc:
-            if exc.end_code.code in _ADDRESSING_END_CODES:
-                exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
+            self._add_addressing_hint(exc, target)
             raise
         self.last_end_code = response.end_code
         return response
@@ -126,12 +132,16 @@ class Client(CommandMethods):
                 commands, dest=target, timeout=timeout, idempotent=idempotent, retries=retries
             )
         except EndCodeError as exc:
-            if exc.end_code.code in _ADDRESSING_END_CODES:
-                exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
+            self._add_addressing_hint(exc, target)
             raise
         if responses:
             self.last_end_code = responses[-1].end_code
         return responses
+
+    def _add_addressing_hint(self, exc: EndCodeError, target: FinsAddress) -> None:
+        """End codes that usually mean wrong node addressing say which addresses to check."""
+        if exc.end_code.code in _ADDRESSING_END_CODES:
+            exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
 
     async def call(
         self,
@@ -224,7 +234,6 @@ class Client(CommandMethods):
         midway leaves a partial write. It is refused unless ``allow_split=True``.
         """
         start = _address(address)
-        size = start.element_size
         chunks = plan_memory(start, len(values), self.limits.memory_write_words)
         if len(chunks) > 1 and not allow_split:
             raise CommandError(
@@ -239,7 +248,7 @@ class Client(CommandMethods):
         for chunk in chunks:
             part = values[chunk.offset : chunk.offset + chunk.count]
             await self.call(
-                MemoryAreaWrite(chunk.address, _element_bytes(part, size)),
+                MemoryAreaWrite.from_values(chunk.address, part),
                 dest=dest,
                 timeout=timeout,
                 retries=retries,
@@ -252,11 +261,7 @@ class Client(CommandMethods):
     # -- typed values -------------------------------------------------------------------
 
     def _type(self, vtype: str | ValueType) -> ValueType:
-        if isinstance(vtype, ValueType):
-            return vtype
-        if ":" in vtype and vtype.split(":")[-1].isalpha() and len(vtype.split(":")[-1]) == 4:
-            return parse_value_type(vtype)
-        return parse_value_type(vtype, word_order=self.word_order)
+        return parse_value_type(vtype, default_word_order=self.word_order)
 
     async def read_value(
         self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
@@ -269,8 +274,7 @@ class Client(CommandMethods):
     ) -> list[Value]:
         """Read ``count`` consecutive typed values."""
         t = self._type(vtype)
-        words = await self.read(address, t.words * count, **kw)
-        return [t.decode(words[i : i + t.words]) for i in range(0, len(words), t.words)]
+        return words_to_values(t, await self.read(address, t.words * count, **kw))
 
     async def write_value(
         self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
@@ -282,11 +286,7 @@ class Client(CommandMethods):
         self, address: AddressLike, values: Sequence[Value], vtype: str | ValueType, **kw: Any
     ) -> None:
         """Write consecutive typed values."""
-        t = self._type(vtype)
-        words: list[int] = []
-        for v in values:
-            words.extend(t.encode(v))
-        await self.write(address, words, **kw)
+        await self.write(address, values_to_words(self._type(vtype), values), **kw)
 
     # -- tag lists ----------------------------------------------------------------------
 
@@ -358,12 +358,3 @@ class Client(CommandMethods):
 
 def _address(address: AddressLike) -> MemoryAddress:
     return address if isinstance(address, MemoryAddress) else parse_address(address)
-
-
-def _element_bytes(values: Sequence[int], size: int) -> bytes:
-    out = bytearray()
-    for v in values:
-        if not 0 <= v < (1 << (8 * size)):
-            raise CommandError(f"value {v} does not fit in a {size}-byte element")
-        out += v.to_bytes(size, "big")
-    return bytes(out)

@@ -122,3 +122,12 @@ async def test_addressing_end_codes_say_what_to_check(sim: Simulator, url: str) 
             await plc.read("D0")
         assert info.value.end_code.code == 0x1005
         assert "Check the FINS addresses: destination 0.1.0" in str(info.value)
+
+
+async def test_client_word_order_is_the_default_for_typed_values(url: str) -> None:
+    async with connect(url, timeout=1, word_order="ABCD") as plc:
+        await plc.write_value("D500", 0x12345678, "uint32")
+        assert await plc.read("D500", 2) == [0x1234, 0x5678]
+        await plc.write_value("D502", 0x12345678, "uint32:CDAB")  # the spec's order wins
+        assert await plc.read("D502", 2) == [0x5678, 0x1234]
+        assert await plc.read_value("D500", "uint32") == 0x12345678

@@ -162,3 +162,14 @@ def test_runs_of_values() -> None:
     words = values_to_words(vtype, [1, -1])
     assert words == [1, 0, 0xFFFF, 0xFFFF]
     assert words_to_values(vtype, words) == [1, -1]
+
+
+def test_default_word_order_applies_only_when_the_spec_names_none() -> None:
+    assert parse_value_type("uint32", default_word_order="ABCD").encode(0x12345678) == (
+        0x1234,
+        0x5678,
+    )
+    assert parse_value_type("uint32:CDAB", default_word_order="ABCD").encode(0x12345678) == (
+        0x5678,
+        0x1234,
+    )

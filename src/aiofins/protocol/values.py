@@ -18,7 +18,6 @@ A :class:`ValueType` converts between Python values and a tuple of word values (
 
 from __future__ import annotations
 
-import math
 import re
 import struct
 from collections.abc import Sequence
@@ -236,10 +235,16 @@ class ValueType:
 _SPEC = re.compile(r"^\s*([A-Za-z]+[0-9]*)\s*(?::\s*([0-9]+))?\s*(?::\s*([A-Za-z]{4}))?\s*$")
 
 
-def parse_value_type(spec: str | ValueType, word_order: WordOrder | str | None = None) -> ValueType:
+def parse_value_type(
+    spec: str | ValueType,
+    word_order: WordOrder | str | None = None,
+    *,
+    default_word_order: WordOrder | str = WordOrder.LOW_FIRST,
+) -> ValueType:
     """``"float32"``, ``"int32:ABCD"``, ``"string:16"``, ``"bcd8"``, ``"real"`` → a type.
 
-    ``word_order`` overrides the order written in the spec (default: Omron's CDAB).
+    ``word_order`` overrides the order written in the spec; ``default_word_order`` applies
+    when the spec names none (Omron's CDAB unless given).
     """
     if isinstance(spec, ValueType):
         return spec
@@ -253,7 +258,7 @@ def parse_value_type(spec: str | ValueType, word_order: WordOrder | str | None =
         raise CommandError("a string type needs its length in bytes, e.g. string:16")
     if name != "string" and length:
         raise CommandError(f"{name} takes no length")
-    order = WordOrder.LOW_FIRST
+    order = WordOrder.parse(default_word_order)
     if m.group(3):
         order = WordOrder.parse(m.group(3))
     if word_order is not None:
@@ -275,13 +280,6 @@ def values_to_words(vtype: ValueType, values: Sequence[Value]) -> list[int]:
     for v in values:
         out.extend(vtype.encode(v))
     return out
-
-
-def is_nan_safe_equal(a: Value, b: Value) -> bool:
-    """Equality that treats two NaNs as equal (for round-trip checks of floats)."""
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
-    return a == b
 
 
 __all__ = [

@@ -52,11 +52,13 @@ from ._file_transfer import (
 #: Most file names 2201 reads at once (0014 hex).
 MAX_FILE_NAMES = 20
 #: Most bytes 2202 can return in one response (1998 - 10 bytes of header fields).
-MAX_FILE_READ = MAX_RESPONSE_DATA_SIZE - 10
+#: Response bytes of 2202 besides the file data.
+FILE_READ_OVERHEAD = 10
+MAX_FILE_READ = MAX_RESPONSE_DATA_SIZE - FILE_READ_OVERHEAD
 #: Parameter bytes of 2203 besides the data and the directory path.
-_WRITE_OVERHEAD = 2 + 2 + 12 + 4 + 2 + 2
+FILE_WRITE_OVERHEAD = 2 + 2 + 12 + 4 + 2 + 2
 #: Most file data 2203 can carry with the root directory (2000 - 24).
-MAX_FILE_WRITE = MAX_PARAMETER_SIZE - _WRITE_OVERHEAD
+MAX_FILE_WRITE = MAX_PARAMETER_SIZE - FILE_WRITE_OVERHEAD
 
 
 # --------------------------------------------------------------------------- 2201
@@ -211,9 +213,9 @@ class SingleFileWrite(FileOperation):
                 f"file position must be 0 for {self.mode.name} (only OVERWRITE takes one)"
             )
         set_field(self, "directory", check_directory(self.directory))
-        size = _WRITE_OVERHEAD + len(self.data) + len(self.directory)
+        size = FILE_WRITE_OVERHEAD + len(self.data) + len(self.directory)
         if size > MAX_PARAMETER_SIZE:
-            room = MAX_PARAMETER_SIZE - _WRITE_OVERHEAD - len(self.directory)
+            room = MAX_PARAMETER_SIZE - FILE_WRITE_OVERHEAD - len(self.directory)
             raise CommandError(
                 f"{len(self.data)} bytes of file data do not fit one command (at most {room})"
             )
@@ -285,8 +287,10 @@ OPERATIONS: tuple[type[Request[Any]], ...] = (
 )
 
 __all__ = [
+    "FILE_READ_OVERHEAD",
     "FILE_TRANSFER_AREA_CODES",
     "FILE_TRANSFER_PARAMETER_AREAS",
+    "FILE_WRITE_OVERHEAD",
     "MAX_FILE_NAMES",
     "MAX_FILE_READ",
     "MAX_FILE_WRITE",
