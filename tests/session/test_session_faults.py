@@ -384,6 +384,6 @@ async def test_deadline_heap_stays_small_behind_a_slow_request() -> None:
             await anyio.wait_all_tasks_blocked()
             for word in range(1, 400):
                 await session.request(0x01, 0x01, read_params(word))
-            assert len(session._heap) <= 64 + 4 * session.stats.in_flight
+            assert len(session._deadlines) <= 64 + 4 * session.stats.in_flight
             peer.send(reply(first[0], 0, b"\x00\x00"), addr_of(session))
         assert session.stats.completed == 400

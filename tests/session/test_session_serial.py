@@ -7,11 +7,8 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
-from pathlib import Path
 
 import anyio
 import pytest
@@ -37,27 +34,6 @@ def fcs(chars: bytes) -> int:
     for c in chars:
         value ^= c
     return value
-
-
-@pytest.fixture
-def pty_pair(tmp_path: Path) -> Iterator[tuple[str, str]]:
-    a, b = tmp_path / "plc", tmp_path / "host"
-    proc = subprocess.Popen(
-        ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    try:
-        for _ in range(200):  # socat creates both links within milliseconds
-            if a.exists() and b.exists():
-                break
-            time.sleep(0.01)
-        else:
-            pytest.skip("socat did not create the pty pair")
-        yield str(a), str(b)
-    finally:
-        proc.terminate()
-        proc.wait(timeout=5)
 
 
 def read_reply(line: bytes) -> bytes:

@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 
 _NORMAL = EndCode(0)
 _BUSY_CODES = (0x2604, 0x2605)
+#: The header of a command: the 9-byte prefix of its destination, then SID, MRC, SRC.
 _pack_head = struct.Struct("9sBBB").pack
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
 _SID_WAIT = 0.01
@@ -61,6 +62,7 @@ def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:
 
 
 def check_command(mrc: int, src: int, params: bytes) -> None:
+    """Refuse a command code or parameter block no FINS frame can carry, before sending."""
     if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
         raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
     if len(params) > MAX_PARAMETER_SIZE:
@@ -224,18 +226,17 @@ class Batch:
             self.send(self.next - 1)
         self.flush()
 
-    def slot_free(self, grow_only: bool = False) -> None:
+    def slot_free(self) -> None:
         """A command of this batch completed: its slot goes to the next command, if any.
 
         Other callers waiting for the destination get the slot first (keeping one for the
-        batch). ``grow_only``: the slot was reused already; only take more free ones.
+        batch); otherwise free slots are taken up to the window.
         """
         slots = self.state.slots
         n = len(self.commands)
-        if grow_only or (self.next < n and not (slots.waiters and self.held > 1)):
-            if not grow_only:
-                self.next += 1
-                self.send(self.next - 1)
+        if self.next < n and not (slots.waiters and self.held > 1):
+            self.next += 1  # the freed slot carries the next command
+            self.send(self.next - 1)
             while self.held < self.window and self.next < n and slots.try_acquire():
                 self.held += 1
                 self.next += 1
@@ -261,11 +262,6 @@ class Batch:
             self.remaining -= 1
             if not self.remaining:
                 self.finish(None)
-            elif self.next < len(self.commands) and not self.state.slots.waiters:
-                self.next += 1  # the freed slot carries the next command
-                self.send(self.next - 1)
-                if self.held < self.window:
-                    self.slot_free(grow_only=True)
             else:
                 self.slot_free()
             return

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import struct
 from collections.abc import Sequence
 from time import monotonic
 from types import TracebackType
@@ -27,13 +26,11 @@ from ..protocol.errors import (
     ConnectionLost,
     FinsError,
     FinsTimeout,
-    RelayError,
-    error_for_end_code,
 )
-from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
+from ..protocol.header import DEFAULT_GCT, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
-from .batch import request_many
+from .batch import _BUSY_CODES, _NORMAL, _pack_head, check_command, end_code_error, request_many
 from .deadlines import Deadlines
 from .matching import count_unmatched, match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
@@ -45,11 +42,6 @@ from .slots import (
     SlotQueue,
     SlotTimeout,
 )
-
-_NORMAL = EndCode(0)
-_BUSY_CODES = (0x2604, 0x2605)
-#: The header of a command: the 9-byte prefix of its destination, then SID, MRC, SRC.
-_pack_head = struct.Struct("9sBBB").pack
 
 
 class Session:
@@ -116,7 +108,6 @@ class Session:
         self._closed = False
         self._open_lock: anyio.Lock | None = None
         self._backoff = 0.0
-        self._lost_exc: BaseException | None = None
         self.stats = SessionStats(self._pending)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
@@ -196,7 +187,6 @@ class Session:
                     f"cannot connect to {self.transport.description}: {exc}"
                 ) from exc
             self._backoff = 0.0
-            self._lost_exc = None
             self.stats.connects += 1
             node = self.transport.local_node
             if node is not None and node != self.source.node:
@@ -272,7 +262,6 @@ class Session:
         else:
             err = ConnectionLost(f"connection to {self.transport.description} lost: {exc}")
             err.__cause__ = exc
-        self._lost_exc = err
         self._fail_all(err)
 
     def _fail_all(self, exc: BaseException) -> None:
@@ -311,12 +300,6 @@ class Session:
             self._quarantine[p.key] = now + self.quarantine_factor * (p.deadline - p.sent_at)
             self.stats.timeouts += 1
             p.fail(FinsTimeout("request timed out"))
-
-    @property
-    def _heap(self) -> Deadlines:
-        """The deadlines of the requests in flight (``len()`` counts answered ones not yet
-        dropped; kept under its old name for the tests that bound it)."""
-        return self._deadlines
 
     # ----------------------------------------------------------------- requests
 
@@ -383,12 +366,7 @@ class Session:
             timeout = self.timeout
         if retries is None:
             retries = self.retries if idempotent else 0
-        if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
-            raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
-        if len(params) > MAX_PARAMETER_SIZE:
-            raise CommandError(
-                f"{len(params)} parameter bytes exceed the FINS limit of {MAX_PARAMETER_SIZE}"
-            )
+        check_command(mrc, src, params)
         attempt = busy = 0
         while True:
             # One attempt with a fresh SID, inlined (one coroutine per request, not two).
@@ -466,16 +444,7 @@ class Session:
                 busy += 1
                 continue
             self.stats.end_code_errors += 1
-            command_code = (mrc << 8) | src
-            if end_code.relay_error:
-                raise RelayError(
-                    end_code,
-                    network=frame[14],
-                    node=frame[15],
-                    command_code=command_code,
-                    data=frame[16:],
-                )
-            raise error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+            raise end_code_error(frame, mrc, src)
 
     async def request_many(
         self,

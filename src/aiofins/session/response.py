@@ -124,13 +124,6 @@ class SessionStats:
         """Requests sent and not yet answered, timed out or cancelled."""
         return len(self._pending)
 
-    def record_latency(self, seconds: float) -> None:
-        """Add one round-trip time (the session inlines the same steps on its hot path)."""
-        n = self._lat_count
-        self._lat_count = n + 1
-        self._lat_sum += seconds
-        self._lat_ring[n & RING_MASK] = seconds
-
     @property
     def latency_mean(self) -> float:
         """Mean round-trip time in seconds over every completed request (0.0 if none)."""
