@@ -24,6 +24,7 @@ from typing import Protocol, TextIO
 import anyio
 from anyio.abc import TaskGroup
 
+from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG
 from ..protocol.errors import DecodeError
 from ..protocol.header import CommandFrame, ResponseFrame
 
@@ -33,7 +34,7 @@ BUSY_END_CODE = 0x2604
 DEFAULT_MAX_CONCURRENT = 5
 _HEX_DIGITS = b"0123456789ABCDEF"
 _logger = logging.getLogger(__name__)
-_CPU_FLAGS = 0x00C0
+_CPU_FLAGS = FATAL_CPU_ERROR_FLAG | NON_FATAL_CPU_ERROR_FLAG
 
 
 def _check_probability(name: str, value: float) -> None:

@@ -16,7 +16,12 @@ from datetime import datetime
 from typing import Any
 
 from ..protocol.commands import Request, operation_for
-from ..protocol.endcodes import EndCode
+from ..protocol.endcodes import (
+    FATAL_CPU_ERROR_FLAG,
+    NON_FATAL_CPU_ERROR_FLAG,
+    RELAY_ERROR_FLAG,
+    EndCode,
+)
 from ..protocol.errors import DecodeError
 from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
 from . import restrictions
@@ -253,7 +258,7 @@ class VirtualPLC:
             self.frames_ignored += 1
             if self.relay_error is None or not header.response_required:
                 return None
-            return self._reply(command, 0x8000 | self.relay_error, b"", relay=True)
+            return self._reply(command, RELAY_ERROR_FLAG | self.relay_error, b"", relay=True)
         if dest.node not in (self.address.node, LOCAL_NODE, BROADCAST_NODE):
             self.frames_ignored += 1
             return None
@@ -272,9 +277,9 @@ class VirtualPLC:
         reply = Header(h.source, me, sid=h.sid, icf=0xC0, rsv=h.rsv, gct=h.gct)
         if not relay:
             if self.fatal_errors:
-                end_code |= 0x0080
+                end_code |= FATAL_CPU_ERROR_FLAG
             if self.non_fatal_errors:
-                end_code |= 0x0040
+                end_code |= NON_FATAL_CPU_ERROR_FLAG
         trailer = (self.address.network, self.address.node) if relay else None
         return ResponseFrame(reply, command.mrc, command.src, EndCode(end_code), data, trailer)
 
@@ -315,12 +320,11 @@ class VirtualPLC:
         except DecodeError as exc:
             if (code, exc.end_code) not in _HANDLER_DECIDES:
                 return exc.end_code or COMMAND_TOO_SHORT, b""
-        if restrictions.is_write_command(code, params):
+        row = restrictions.restriction_for(code, params)
+        if restrictions.is_write_row(row):
             # manual 5-3-30: the log keeps every FINS write access, whatever the setting
             self.log_write(source, code)
-        refused = restrictions.check(
-            code, params, self.conditions(source, from_network=from_network)
-        )
+        refused = restrictions.check_row(row, self.conditions(source, from_network=from_network))
         if refused is not None:
             holder = self.access_holder
             if code == 0x0C01 and refused == restrictions.ACCESS_RIGHT_HELD and holder:

@@ -142,7 +142,11 @@ def restriction_for(command_code: int, params: bytes = b"") -> Restriction | Non
 
 def is_write_command(command_code: int, params: bytes = b"") -> bool:
     """A "FINS write command": one refused under network write protection (5-1-2 note 5)."""
-    row = restriction_for(command_code, params)
+    return is_write_row(restriction_for(command_code, params))
+
+
+def is_write_row(row: Restriction | None) -> bool:
+    """:func:`is_write_command` for a row already looked up."""
     return row is not None and not row.network_write
 
 
@@ -159,7 +163,11 @@ class Conditions:
 
 def check(command_code: int, params: bytes, conditions: Conditions) -> int | None:
     """The end code refusing the command under ``conditions``, or ``None`` if it may run."""
-    row = restriction_for(command_code, params)
+    return check_row(restriction_for(command_code, params), conditions)
+
+
+def check_row(row: Restriction | None, conditions: Conditions) -> int | None:
+    """:func:`check` for a row already looked up (``None``: a code outside the table)."""
     if row is None:
         return None
     if conditions.network_write_refused and not row.network_write:

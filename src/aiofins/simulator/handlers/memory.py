@@ -14,7 +14,7 @@ from ...protocol.commands.memory import (
     MultipleMemoryAreaReadItem,
     MultipleMemoryAreaReadResult,
 )
-from ..memory import FILL_AREAS, MULTIPLE_READ_AREAS, READ_AREAS, WRITE_AREAS
+from ..memory import MULTIPLE_READ_AREAS, READ_AREAS, WRITE_AREAS
 from ._call import Call, Handler, request_of
 
 if TYPE_CHECKING:
@@ -55,7 +55,6 @@ def multiple_memory_area_read(plc: VirtualPLC, call: Call) -> bytes:
 def memory_area_transfer(plc: VirtualPLC, call: Call) -> bytes:
     req = request_of(call, MemoryAreaTransfer)
     s, d = req.source, req.destination
-    plc.memory.area(s.area_code, FILL_AREAS)
     plc.memory.transfer((s.area_code, s.word, s.bit), (d.area_code, d.word, d.bit), req.count)
     return b""
 
