@@ -10,9 +10,7 @@ import anyio
 from anyio.abc import TaskGroup, TaskStatus, UDPSocket
 
 from ..protocol.tcp import DEFAULT_PORT
-from .faults import Dispatcher, FaultRule
-
-_NO_FAULTS = FaultRule()
+from .faults import Dispatcher
 
 
 def _under_asyncio() -> bool:
@@ -35,26 +33,12 @@ class _FastProtocol(asyncio.DatagramProtocol):
         self.transport = cast(asyncio.DatagramTransport, transport)
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
-        dispatcher = self.server.dispatcher
-        plan = dispatcher.plan
         transport = self.transport
         assert transport is not None
-        if (
-            plan.rule == _NO_FAULTS
-            and not plan.per_command
-            and plan.max_concurrent is None
-            and plan.log is None
-            and dispatcher.held_count == 0
-        ):
-            # No fault can apply: skip the decision machinery (the common, fast case).
-            plan.counters.requests += 1
-            try:
-                reply = dispatcher.plc.handle_frame(data)
-            except Exception:
-                plan.counters.handler_errors += 1
-                return
+        dispatcher = self.server.dispatcher
+        if dispatcher.quiet:  # no fault can apply: answer from this callback (the fast case)
+            reply = dispatcher.answer_now(data)
             if reply is not None:
-                plan.counters.responses += 1
                 transport.sendto(reply, addr)
             return
 
