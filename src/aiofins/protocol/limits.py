@@ -12,20 +12,25 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from enum import Enum
 
+from . import hostlink
+from .commands.memory import MAX_MULTIPLE_READ_ELEMENTS, MAX_READ_ELEMENTS, MAX_WRITE_ELEMENTS
+from .commands.parameter import MAX_PARAMETER_WORDS
+from .commands.program import MAX_PROGRAM_READ_BYTES, MAX_PROGRAM_WRITE_BYTES
 from .errors import CommandError
+from .header import MAX_FRAME_SIZE, MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
 
 #: Largest FINS frame on Ethernet and Controller Link: 10-byte header + 2-byte command code +
 #: 2,000 parameter bytes (W421 §7; wire-format §1.2 and §7).
-MAX_FRAME = 2012
+MAX_FRAME = MAX_FRAME_SIZE
 
 #: Host Link FINS frames (W342 §3-5; wire-format §4): whole command line in characters.
-HOST_LINK_MAX_COMMAND_CHARS = 1114
+HOST_LINK_MAX_COMMAND_CHARS = hostlink.MAX_COMMAND_CHARS
 #: Whole response line in characters.
-HOST_LINK_MAX_RESPONSE_CHARS = 1115
+HOST_LINK_MAX_RESPONSE_CHARS = hostlink.MAX_RESPONSE_CHARS
 #: Parameter bytes after the command code of one Host Link command (1,080 characters).
-HOST_LINK_MAX_PARAMETER_BYTES = 540
+HOST_LINK_MAX_PARAMETER_BYTES = hostlink.MAX_PARAMETER_BYTES
 #: Data bytes after the end code of one Host Link response (1,076 characters).
-HOST_LINK_MAX_RESPONSE_DATA_BYTES = 538
+HOST_LINK_MAX_RESPONSE_DATA_BYTES = hostlink.MAX_RESPONSE_DATA_BYTES
 
 
 class NetworkType(Enum):
@@ -54,17 +59,17 @@ class RouteLimits:
     #: 0104 MULTIPLE MEMORY AREA READ, elements per command.
     multiple_read_elements: int
     #: 0201 PARAMETER AREA READ, words per command.
-    parameter_read_words: int = 498
+    parameter_read_words: int = MAX_PARAMETER_WORDS
     #: 0202 PARAMETER AREA WRITE, words per command.
-    parameter_write_words: int = 498
+    parameter_write_words: int = MAX_PARAMETER_WORDS
     #: 0306 PROGRAM AREA READ, bytes per command (a multiple of 4).
-    program_read_bytes: int = 992
+    program_read_bytes: int = MAX_PROGRAM_READ_BYTES
     #: 0307 PROGRAM AREA WRITE, bytes per command (a multiple of 4).
-    program_write_bytes: int = 996
+    program_write_bytes: int = MAX_PROGRAM_WRITE_BYTES
     #: Parameter bytes after the command code of one command frame.
-    max_parameter_bytes: int = MAX_FRAME - 12
+    max_parameter_bytes: int = MAX_PARAMETER_SIZE
     #: Data bytes after the end code of one response frame.
-    max_response_data_bytes: int = MAX_FRAME - 14
+    max_response_data_bytes: int = MAX_RESPONSE_DATA_SIZE
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -87,9 +92,9 @@ class RouteLimits:
 # SYSMAC LINK/DeviceNet. Manual 5-3-7/5-3-8: 498 words per 0201/0202 on every network.
 # Manual 5-3-10/5-3-11: 992 bytes per 0306, 996 bytes per 0307.
 _LARGE_FRAME = RouteLimits(
-    memory_read_words=999,
-    memory_write_words=997,
-    multiple_read_elements=167,
+    memory_read_words=MAX_READ_ELEMENTS,
+    memory_write_words=MAX_WRITE_ELEMENTS,
+    multiple_read_elements=MAX_MULTIPLE_READ_ELEMENTS,
 )
 # SYSMAC LINK, DeviceNet (and SYSWAY, Host Link) carry 540 parameter bytes after the command
 # code and 538 response data bytes (W227 p.6; wire-format §7): 269 words = 538 bytes read,

@@ -31,6 +31,7 @@ from ..files import (
 )
 from ._base import expect_no_data
 from ._file_common import FileCommand, finish, read_number, set_field, u16, u32
+from .program import PROGRAM_NUMBER
 
 #: Memory area codes 220A accepts (word data only): CIO/W/H/A, T/C PV, DM, EM banks 0..18
 #: (A0..AF; 50..5F on CJ2; 60..68), current EM bank.
@@ -43,8 +44,6 @@ FILE_TRANSFER_AREA_CODES: frozenset[int] = frozenset(
 #: Parameter area codes 220B accepts: whole area, CPU Bus Unit setup, PLC Setup,
 #: I/O table registration, routing tables.
 FILE_TRANSFER_PARAMETER_AREAS: frozenset[int] = frozenset({0x8000, 0x8002, 0x8010, 0x8012, 0x8013})
-#: The only program number the CPU accepts (end code 1106 otherwise).
-PROGRAM_NUMBER = 0xFFFF
 
 R = TypeVar("R")
 T = TypeVar("T", bound="_AreaFileTransfer[Any]")

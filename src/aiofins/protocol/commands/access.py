@@ -12,9 +12,7 @@ from typing import Any, ClassVar, TypeVar
 
 from ..codec import Reader, check_range
 from ._base import R, Request, expect_no_data
-
-#: The program number CS/CJ-series CPU Units require.
-PROGRAM_NUMBER = 0xFFFF
+from .program import PROGRAM_NUMBER
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 from ..areas import MemoryAddress, element_size
 from ..codec import Reader
 from ..errors import AddressError, CommandError, DecodeError
+from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
 from ._base import (
     Request,
     _decode_fields,
@@ -32,9 +33,9 @@ MAX_WRITE_ELEMENTS = 997
 #: 01 04: elements per command on Ethernet / Controller Link (89 on SYSMAC LINK, DeviceNet).
 MAX_MULTIPLE_READ_ELEMENTS = 167
 #: Response data bytes after the end code in a 2012-byte frame.
-MAX_RESPONSE_DATA = 1998
+MAX_RESPONSE_DATA = MAX_RESPONSE_DATA_SIZE
 #: Command parameter bytes after MRC/SRC in a 2012-byte frame.
-MAX_COMMAND_PARAMS = 2000
+MAX_COMMAND_PARAMS = MAX_PARAMETER_SIZE
 
 # Area codes 01 02 cannot write (manual 5-3-3 table): forced-status views, completion flags,
 # task flags, clock pulses / condition flags (CS/CJ and CV codes).
