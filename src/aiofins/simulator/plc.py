@@ -28,11 +28,10 @@ from . import restrictions
 from .filememory import FileMemory
 from .handlers import HANDLERS, Call, GatewayHandler, default_gateway
 from .memory import IOMemory
-from .state import COMMAND_TOO_SHORT, UNDEFINED_COMMAND, CommandFailed, Mode
+from .state import COMMAND_TOO_SHORT, LOG_CAPACITY, UNDEFINED_COMMAND, CommandFailed, Mode
 
 BROADCAST_NODE = 0xFF
 LOCAL_NODE = 0x00
-LOG_CAPACITY = 20
 PROGRAM_AREA_BYTES = 0x20000  # 128 KiB of UM (CJ2M-CPU33: 10 K steps; kept simple)
 
 #: (command, codec end code) pairs where the manual prescribes data with the error, so the

@@ -16,13 +16,18 @@ from ...protocol.commands.errorlog import (
     FinsWriteAccessRecord,
 )
 from ..restrictions import MODE_END_CODES
-from ..state import ADDRESS_RANGE_ERROR, ADDRESS_RANGE_EXCEEDED, CommandFailed, Mode
+from ..state import (
+    ADDRESS_RANGE_ERROR,
+    ADDRESS_RANGE_EXCEEDED,
+    LOG_CAPACITY,
+    CommandFailed,
+    Mode,
+)
 from ._call import Call, Handler, request_of
 
 if TYPE_CHECKING:
     from ..plc import VirtualPLC
 
-LOG_CAPACITY = 20
 ALL_ERRORS = 0xFFFF
 CURRENT_ERROR = 0xFFFE
 #: Error codes ERROR CLEAR accepts only in PROGRAM mode (5-3-27's second table).
