@@ -63,3 +63,19 @@ async def test_every_operation_is_answered_over_host_link(pty_pair: tuple[str, s
     }
     assert failures == {}
     assert len(outcomes) == 47
+
+
+async def test_network_write_protection_spares_the_cpus_own_serial_port(
+    pty_pair: tuple[str, str],
+) -> None:
+    plc_side, host_side = pty_pair
+    plc = VirtualPLC(network_write_protection=True)
+    async with run_simulator(plc, serial=plc_side, udp=("127.0.0.1", 0)) as sim:
+        async with connect(f"serial://{host_side}?baudrate=115200", timeout=2) as client:
+            await client.write("D10", [42])  # Host Link is not a network: allowed
+            assert await client.read("D10") == [42]
+        async with connect(f"udp://127.0.0.1:{sim.udp_port}", timeout=2) as client:
+            with pytest.raises(EndCodeError) as info:
+                await client.write("D10", [1])  # over the network: refused
+            assert info.value.end_code.code == 0x2102
+            assert await client.read("D10") == [42]

@@ -315,7 +315,9 @@ class FaultPlan:
 class FrameHandler(Protocol):
     """What the servers need of a PLC: one FINS command frame in, its response (or none) out."""
 
-    def handle_frame(self, frame: bytes) -> bytes | None: ...
+    def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
+        """``from_network=False``: the frame came in on the CPU's own serial port."""
+        ...
 
 
 #: Sends the bytes of one response to the peer that asked.
@@ -334,6 +336,12 @@ class Dispatcher:
         self.plan = plan if plan is not None else FaultPlan()
         self.in_flight = 0
         self._held: tuple[list[bytes], Send, str] | None = None
+
+    def _handle(self, request: bytes, from_network: bool) -> bytes | None:
+        if from_network:
+            return self.plc.handle_frame(request)
+        # Host Link on the CPU's own port: not a network, so no network write protection.
+        return self.plc.handle_frame(request, from_network=False)
 
     @property
     def quiet(self) -> bool:
@@ -355,7 +363,7 @@ class Dispatcher:
         counters = self.plan.counters
         counters.requests += 1
         try:
-            response = self.plc.handle_frame(request)
+            response = self._handle(request, True)
         except Exception:
             # a PLC bug must not take the server down; it is logged and counted
             counters.handler_errors += 1
@@ -373,6 +381,7 @@ class Dispatcher:
         peer: str = "",
         encode: Callable[[bytes], bytes] | None = None,
         task_group: TaskGroup | None = None,
+        from_network: bool = True,
     ) -> None:
         """Handle one request frame.
 
@@ -403,9 +412,9 @@ class Dispatcher:
                 counters.delayed += 1
         self.in_flight += 1
         if decision.delay > 0 and task_group is not None:
-            task_group.start_soon(self._answer, request, decision, send, peer, encode)
+            task_group.start_soon(self._answer, request, decision, send, peer, encode, from_network)
         else:
-            await self._answer(request, decision, send, peer, encode)
+            await self._answer(request, decision, send, peer, encode, from_network)
 
     async def _answer(
         self,
@@ -414,13 +423,14 @@ class Dispatcher:
         send: Send,
         peer: str,
         encode: Callable[[bytes], bytes] | None,
+        from_network: bool = True,
     ) -> None:
         plan = self.plan
         counters = plan.counters
         try:
             if decision.delay > 0:
                 await anyio.sleep(decision.delay)
-            response = self.plc.handle_frame(request)
+            response = self._handle(request, from_network)
         except Exception:
             # a PLC bug must not take the server down; it is logged and counted
             counters.handler_errors += 1

@@ -128,7 +128,11 @@ class SerialServer:
             return encode_response(frame, unit=command.unit, full_header=command.full_header)
 
         await self.dispatcher.dispatch(
-            command.frame.encode(), self._write, peer=f"serial:{self.device}", encode=encode
+            command.frame.encode(),
+            self._write,
+            peer=f"serial:{self.device}",
+            encode=encode,
+            from_network=False,
         )
 
     async def _write(self, data: bytes) -> None:
