@@ -58,6 +58,11 @@ class Transport(ABC):
     #: A synchronous send the session may call instead of ``await send()`` (set while open
     #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
     fast_send: Callable[[bytes], None] | None = None
+    #: A synchronous "hand over what has already arrived, without waiting" the session may
+    #: call right after a send (set while open by transports that can read their socket
+    #: directly under asyncio); ``None`` otherwise. On one shared core the peer often answers
+    #: during the send itself, and the request then completes without an event-loop pass.
+    poll_now: Callable[[], None] | None = None
 
     @property
     @abstractmethod

@@ -82,6 +82,8 @@ class _AsyncioSocket:
             if not awaited:  # no other reply awaited: skip the recv() that would fail
                 return
 
+    poll = _readable
+
     def send(self, frame: bytes) -> None:
         if self.backlog:
             self.backlog.append(frame)
@@ -127,6 +129,8 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
         self.sink = sink
         self.transport: Any = None  # uvloop's UDPTransport (not an asyncio subclass)
         self._raw_send: Any = None
+        self._raw_recv: Any = None
+        self.awaited = replies_awaited(sink)
         self.datagram_received = sink.frame_received  # type: ignore[assignment,method-assign]
 
     @property
@@ -149,6 +153,23 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
         except OSError as exc:
             raise ConnectionLost(f"cannot send to {self.owner.description}: {exc}") from exc
 
+    def poll(self) -> None:
+        """Read what has already arrived on the socket (uvloop reads it only at its next pass)."""
+        recv = self._raw_recv
+        received = self.sink.frame_received
+        awaited = self.awaited
+        for _ in range(_BATCH):
+            try:
+                data = recv(_RECV_SIZE)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # ICMP errors and worse: uvloop's own reader reports them
+                self.sink.frame_dropped(f"socket error: {exc}")
+                return
+            received(data)
+            if not awaited:
+                return
+
     def error_received(self, exc: Exception) -> None:
         self.sink.frame_dropped(f"socket error: {exc}")  # ICMP unreachable: not fatal
 
@@ -156,6 +177,7 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
         if self.owner._aio is self:
             self.owner._aio = None
             self.owner.fast_send = None
+            self.owner.poll_now = None
             self.sink.connection_lost(exc)
 
     def close(self) -> None:
@@ -232,6 +254,7 @@ class UdpTransport(Transport):
             if type(loop).__module__.startswith("uvloop"):
                 proto = _UvloopProtocol(self, sink)
                 proto._raw_send = sock.send  # our own socket object: connected, non-blocking
+                proto._raw_recv = sock.recv
                 try:
                     await loop.create_datagram_endpoint(lambda: proto, sock=sock)
                 except BaseException:
@@ -241,6 +264,7 @@ class UdpTransport(Transport):
             else:
                 self._aio = _AsyncioSocket(loop, sock, self, sink)
             self.fast_send = self._aio.send
+            self.poll_now = self._aio.poll
         else:
             self._sock = sock
             task_group.start_soon(self._reader, sock, sink)
@@ -297,6 +321,7 @@ class UdpTransport(Transport):
         if self._aio is aio:
             self._aio = None
             self.fast_send = None
+            self.poll_now = None
             aio.close()
             aio.sink.connection_lost(exc)
 
@@ -305,6 +330,7 @@ class UdpTransport(Transport):
         self._aio = None
         self._sock = None
         self.fast_send = None
+        self.poll_now = None
         if aio is not None:
             aio.close()
         if sock is not None:

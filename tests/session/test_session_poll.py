@@ -1,0 +1,137 @@
+"""Read-after-send under asyncio: a reply already queued when the send returns completes the
+request with no event-loop pass; the session still yields regularly and backs off where the
+attempt never finds anything.
+
+The replies are placed in the client's socket *before* the request is sent (a loopback
+``sendto`` is delivered before it returns), which is what a peer on the same core does when
+it answers during the send. The SIDs are predictable: one destination allocates them in order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import anyio
+import pytest
+
+from aiofins.session import Session
+
+from .test_session_udp import PLC, SOURCE, Responder, read_params, session_for, udp_responder
+
+LOOPS = [
+    pytest.param({}, id="asyncio"),
+    pytest.param({"use_uvloop": True}, id="uvloop"),
+]
+
+
+def run(main: Callable[[], Awaitable[None]], options: dict[str, Any]) -> None:
+    if options:
+        pytest.importorskip("uvloop")
+    anyio.run(main, backend="asyncio", backend_options=options)
+
+
+def placed_reply(sid: int, data: bytes) -> bytes:
+    """A 0101 reply from PLC to SOURCE with ``sid``."""
+    dna, da1, da2 = SOURCE.network, SOURCE.node, SOURCE.unit
+    sna, sa1, sa2 = PLC.network, PLC.node, PLC.unit
+    return bytes((0xC0, 0, 2, dna, da1, da2, sna, sa1, sa2, sid, 1, 1, 0, 0)) + data
+
+
+async def first_sid(peer: Responder, session: Session) -> int:
+    """Send one request answered the ordinary way; its SID."""
+    await session.request(0x01, 0x01, read_params(0))
+    peer.handler = lambda cmd: []  # from now on the peer stays silent: replies are placed
+    return peer.received[-1][9]
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_placed_reply_completes_without_a_loop_pass_yet_yields_every_33(
+    options: dict[str, Any],
+) -> None:
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer) as session:
+            sid = await first_sid(peer, session)
+            addr = session.transport.local_address
+            assert addr is not None
+            ticks = 0
+
+            async def ticker() -> None:
+                nonlocal ticks
+                while True:
+                    await anyio.sleep(0)
+                    ticks += 1
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(ticker)
+                await anyio.sleep(0)
+                start = ticks
+                for i in range(1, 101):
+                    value = (0x4000 + i).to_bytes(2, "big")
+                    peer.sock.sendto(placed_reply((sid + i) & 0xFF, value), addr)
+                    response = await session.request(0x01, 0x01, read_params(i))
+                    assert response.data == value
+                passes = ticks - start
+                tg.cancel_scope.cancel()
+            # Waiting through the loop each time would give the ticker at least 100 turns;
+            # read-after-send gives it the forced turn after each streak of 32 (and one after
+            # the first request's miss).
+            assert 3 <= passes <= 15, passes
+            assert session.stats.completed == 101
+            assert session.stats.unsolicited == 0 and session.stats.late_replies == 0
+
+    run(main, options)
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_cancellation_lands_during_a_run_of_placed_replies(options: dict[str, Any]) -> None:
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer) as session:
+            sid = await first_sid(peer, session)
+            addr = session.transport.local_address
+            assert addr is not None
+            i = 0
+            with anyio.move_on_after(0.05) as scope:
+                while i < 100_000:
+                    i += 1
+                    peer.sock.sendto(placed_reply((sid + i) & 0xFF, b"\x00\x01"), addr)
+                    await session.request(0x01, 0x01, read_params(1))
+            assert scope.cancelled_caught and i < 100_000
+
+    run(main, options)
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_read_after_send_backs_off_when_replies_come_later(options: dict[str, Any]) -> None:
+    """The in-test peer answers only after a loop pass: nearly every attempt is skipped."""
+
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer) as session:
+            await session.request(0x01, 0x01, read_params(0))
+            poll = session.transport.poll_now
+            assert poll is not None
+            polls = 0
+
+            def counting() -> None:
+                nonlocal polls
+                polls += 1
+                poll()
+
+            session.transport.poll_now = counting
+            for word in range(200):
+                response = await session.request(0x01, 0x01, read_params(word))
+                assert response.data == (0x1000 | word).to_bytes(2, "big")
+            # 1 + 2 + 4 + ... + 64 skipped after misses, then one attempt per 64.
+            assert 1 <= polls <= 10, polls
+
+    run(main, options)
+
+
+def test_trio_has_no_read_after_send() -> None:
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer) as session:
+            assert session.transport.poll_now is None
+            response = await session.request(0x01, 0x01, read_params(7))
+            assert response.data == (0x1007).to_bytes(2, "big")
+
+    anyio.run(main, backend="trio")
