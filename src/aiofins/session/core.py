@@ -27,7 +27,7 @@ from ..protocol.errors import (
     FinsError,
     FinsTimeout,
 )
-from ..protocol.header import DEFAULT_GCT, FinsAddress
+from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
 from .batch import _BUSY_CODES, _NORMAL, _pack_head, check_command, end_code_error, request_many
@@ -372,7 +372,8 @@ class Session:
             timeout = self.timeout
         if retries is None:
             retries = self.retries if idempotent else 0
-        check_command(mrc, src, params)
+        if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
+            check_command(mrc, src, params)  # raises the error that says which
         attempt = busy = 0
         while True:
             # One attempt with a fresh SID, inlined (one coroutine per request, not two).
@@ -416,12 +417,15 @@ class Session:
                         fast_send = transport.fast_send
                         if fast_send is not None:
                             fast_send(frame)
-                            if (
-                                fut is not None
-                                and transport.poll_now is not None
-                                and len(pending) == 1
-                            ):
-                                self._poll_after_send(transport.poll_now, fut)
+                            if fut is not None and len(pending) == 1:
+                                poll = transport.poll_now
+                                if poll is not None:
+                                    if self._poll_skip:
+                                        self._poll_skip -= 1
+                                        self._poll_streak = 0
+                                    else:
+                                        poll()
+                                        self._polled(fut)
                         else:
                             await transport.send(frame)
                         frame = await (p.wait() if fut is None else fut)
@@ -458,23 +462,17 @@ class Session:
             self.stats.end_code_errors += 1
             raise end_code_error(frame, mrc, src)
 
-    def _poll_after_send(self, poll: Any, fut: asyncio.Future[bytes]) -> None:
-        """Read a reply that came during the send, so ``await fut`` needs no loop pass.
+    def _polled(self, fut: asyncio.Future[bytes]) -> None:
+        """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
 
-        Only for a request alone in flight (a sequential caller): with many in flight the
-        replies are read in one drain per loop pass, which is cheaper and keeps tasks fair.
-
-        Adaptive: after a miss (the peer answers later, e.g. from another core) the next
-        1, 2, 4 ... 64 requests skip the attempt, so it costs next to nothing where it never
-        helps. Fair: after :data:`_POLL_STREAK` requests completed this way in a row, one
-        request waits through the event loop, so other tasks, timers and cancellation run.
+        A peer on the same core often answers during the send itself: the request then
+        completes without an event-loop pass. Adaptive: after a miss (the peer answers later,
+        e.g. from another core) the next 1, 2, 4 ... 64 requests skip the attempt, so it costs
+        next to nothing where it never helps. Fair: after :data:`_POLL_STREAK` requests
+        completed this way in a row, one request waits through the event loop, so other
+        tasks, timers and cancellation run. (With many in flight the replies are read in one
+        drain per loop pass instead, which is cheaper and keeps tasks fair.)
         """
-        skip = self._poll_skip
-        if skip:
-            self._poll_skip = skip - 1
-            self._poll_streak = 0
-            return
-        poll()
         if fut.done():
             self._poll_backoff = 0
             streak = self._poll_streak + 1
