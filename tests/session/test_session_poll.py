@@ -16,6 +16,7 @@ import anyio
 import pytest
 
 from aiofins.session import Session
+from aiofins.transport import UdpTransport
 
 from .test_session_udp import PLC, SOURCE, Responder, read_params, session_for, udp_responder
 
@@ -38,11 +39,15 @@ def placed_reply(sid: int, data: bytes) -> bytes:
     return bytes((0xC0, 0, 2, dna, da1, da2, sna, sa1, sa2, sid, 1, 1, 0, 0)) + data
 
 
-async def first_sid(peer: Responder, session: Session) -> int:
-    """Send one request answered the ordinary way; its SID."""
+async def first_sid(peer: Responder, session: Session) -> tuple[int, tuple[str, int]]:
+    """Send one request answered the ordinary way; its SID and the session's local address."""
     await session.request(0x01, 0x01, read_params(0))
     peer.handler = lambda cmd: []  # from now on the peer stays silent: replies are placed
-    return peer.received[-1][9]
+    transport = session.transport
+    assert isinstance(transport, UdpTransport)
+    addr = transport.local_address
+    assert addr is not None
+    return peer.received[-1][9], addr
 
 
 @pytest.mark.parametrize("options", LOOPS)
@@ -51,9 +56,7 @@ def test_placed_reply_completes_without_a_loop_pass_yet_yields_every_33(
 ) -> None:
     async def main() -> None:
         async with udp_responder() as peer, session_for(peer) as session:
-            sid = await first_sid(peer, session)
-            addr = session.transport.local_address
-            assert addr is not None
+            sid, addr = await first_sid(peer, session)
             ticks = 0
 
             async def ticker() -> None:
@@ -87,9 +90,7 @@ def test_placed_reply_completes_without_a_loop_pass_yet_yields_every_33(
 def test_cancellation_lands_during_a_run_of_placed_replies(options: dict[str, Any]) -> None:
     async def main() -> None:
         async with udp_responder() as peer, session_for(peer) as session:
-            sid = await first_sid(peer, session)
-            addr = session.transport.local_address
-            assert addr is not None
+            sid, addr = await first_sid(peer, session)
             i = 0
             with anyio.move_on_after(0.05) as scope:
                 while i < 100_000:

@@ -16,6 +16,7 @@ import asyncio
 import contextlib
 import socket
 from collections import deque
+from collections.abc import Sized
 from typing import Any
 
 import anyio
@@ -41,6 +42,29 @@ _RECV_SIZE = 4096
 _BATCH = 64
 
 
+def _drain(recv: Any, sink: FrameSink, awaited: Sized) -> OSError | None:
+    """Hand the datagrams queued on the socket (up to :data:`_BATCH`) to the sink.
+
+    Stops early once no reply is awaited (the recv() after the last one would fail). ICMP
+    errors (port unreachable) are counted and skipped; another socket error is returned.
+    """
+    received = sink.frame_received
+    for _ in range(_BATCH):
+        try:
+            data = recv(_RECV_SIZE)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except ConnectionRefusedError as exc:  # ICMP port unreachable: not fatal for UDP
+            sink.frame_dropped(f"socket error: {exc}")
+            continue
+        except OSError as exc:
+            return exc
+        received(data)
+        if not awaited:
+            return None
+    return None
+
+
 class _AsyncioSocket:
     """The asyncio path: one reader callback drains every queued datagram into the sink.
 
@@ -64,23 +88,9 @@ class _AsyncioSocket:
         loop.add_reader(sock.fileno(), self._readable)
 
     def _readable(self) -> None:
-        recv = self.sock.recv
-        received = self.sink.frame_received
-        awaited = self.awaited
-        for _ in range(_BATCH):
-            try:
-                data = recv(_RECV_SIZE)
-            except (BlockingIOError, InterruptedError):
-                return
-            except ConnectionRefusedError as exc:  # ICMP port unreachable: not fatal for UDP
-                self.sink.frame_dropped(f"socket error: {exc}")
-                continue
-            except OSError as exc:
-                self.owner._lost(self, exc)
-                return
-            received(data)
-            if not awaited:  # no other reply awaited: skip the recv() that would fail
-                return
+        exc = _drain(self.sock.recv, self.sink, self.awaited)
+        if exc is not None:
+            self.owner._lost(self, exc)
 
     poll = _readable
 
@@ -155,20 +165,9 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
 
     def poll(self) -> None:
         """Read what has already arrived on the socket (uvloop reads it only at its next pass)."""
-        recv = self._raw_recv
-        received = self.sink.frame_received
-        awaited = self.awaited
-        for _ in range(_BATCH):
-            try:
-                data = recv(_RECV_SIZE)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError as exc:  # ICMP errors and worse: uvloop's own reader reports them
-                self.sink.frame_dropped(f"socket error: {exc}")
-                return
-            received(data)
-            if not awaited:
-                return
+        exc = _drain(self._raw_recv, self.sink, self.awaited)
+        if exc is not None:  # uvloop's own reader meets it too and reports the loss
+            self.sink.frame_dropped(f"socket error: {exc}")
 
     def error_received(self, exc: Exception) -> None:
         self.sink.frame_dropped(f"socket error: {exc}")  # ICMP unreachable: not fatal
@@ -271,24 +270,14 @@ class UdpTransport(Transport):
 
     async def _reader(self, sock: socket.socket, sink: FrameSink) -> None:
         """The anyio driver: wait until readable, then drain every queued datagram."""
-        received = sink.frame_received
-        recv = sock.recv
         awaited = replies_awaited(sink)
         exc: BaseException | None = None
         try:
             while True:
                 await anyio.wait_readable(sock)
-                for _ in range(_BATCH):
-                    try:
-                        data = recv(_RECV_SIZE)
-                    except (BlockingIOError, InterruptedError):
-                        break
-                    except ConnectionRefusedError as err:  # ICMP unreachable: keep going
-                        sink.frame_dropped(f"socket error: {err}")
-                        continue
-                    received(data)
-                    if not awaited:  # no other reply awaited: skip the recv() that would fail
-                        break
+                failure = _drain(sock.recv, sink, awaited)
+                if failure is not None:
+                    raise failure
         except (anyio.ClosedResourceError, ValueError):
             pass  # closed locally (ValueError: fileno -1)
         except OSError as err:
