@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
+from ..protocol.areas import AreaSpec, DataType, area_codes, area_specs
 from .state import (
     ADDRESS_RANGE_ERROR,
     ADDRESS_RANGE_EXCEEDED,
@@ -25,13 +26,10 @@ from .state import (
     CommandFailed,
 )
 
-EM_BANK_WORDS = 32768
-TIMER_COUNTER_COUNT = 4096
-COUNTER_BASE = 0x8000
-A_READ_ONLY_WORDS = 448  # A0-A447 are read-only for FINS writes
-
 
 class Kind(Enum):
+    """How the simulator stores and encodes the elements of an area code."""
+
     BIT = "bit"  # 1 byte 00/01, view of a word store
     BIT_FORCED = "bit+forced"  # 1 byte: bit 0 value, bit 1 forced
     WORD = "word"  # 2 bytes
@@ -46,73 +44,105 @@ class Kind(Enum):
     INDEX = "index"  # DC: index registers, 4 bytes
 
 
-_SIZE = {
-    Kind.BIT: 1,
-    Kind.BIT_FORCED: 1,
-    Kind.WORD: 2,
-    Kind.WORD_FORCED: 4,
-    Kind.FLAG: 1,
-    Kind.FLAG_FORCED: 1,
-    Kind.PV: 2,
-    Kind.TASK: 1,
-    Kind.TASK_STATUS: 1,
-    Kind.SYSTEM: 1,
-    Kind.REGISTER: 2,
-    Kind.INDEX: 4,
-}
+# Segments of an area code: (first word, number of elements, index of the first element).
+_Segments = tuple[tuple[int, int, int], ...]
 
 
 @dataclass(frozen=True, slots=True)
 class Area:
-    """What an area code designates: a kind and a store (``"CIO"``, ``"D"``, ``"E3"``...)."""
+    """What an area code designates: its rows of manual 5-2-2 seen as one store.
+
+    ``kind`` and ``store`` (``"CIO"``, ``"D"``, ``"E3"``, ``"E*"`` for the current bank,
+    ``"TC"``...) are the simulator's; ``element_size``, ``segments`` (adjacent rows merged)
+    and ``read_only`` (word ranges) come from :data:`aiofins.protocol.areas.AREAS`.
+    """
 
     code: int
     kind: Kind
-    store: str  # "CIO", "W", "H", "A", "D", "E<n>", "E*" (current bank), "TC", ...
-
-    @property
-    def element_size(self) -> int:
-        return _SIZE[self.kind]
+    store: str
+    element_size: int
+    segments: _Segments
+    read_only: tuple[tuple[int, int], ...] = ()
 
     @property
     def is_bit(self) -> bool:
         return self.kind in (Kind.BIT, Kind.BIT_FORCED)
 
+    @property
+    def elements(self) -> int:
+        """Number of elements (words, flags, registers) over all segments."""
+        return sum(n for _, n, _ in self.segments)
 
-def _area_table() -> dict[int, Area]:
-    t: dict[int, Area] = {}
-    for code, store in ((0x30, "CIO"), (0x31, "W"), (0x32, "H"), (0x33, "A"), (0x02, "D")):
-        t[code] = Area(code, Kind.BIT, store)
-    for code, store in ((0xB0, "CIO"), (0xB1, "W"), (0xB2, "H"), (0xB3, "A"), (0x82, "D")):
-        t[code] = Area(code, Kind.WORD, store)
-    for code, store in ((0x70, "CIO"), (0x71, "W"), (0x72, "H")):
-        t[code] = Area(code, Kind.BIT_FORCED, store)
-    for code, store in ((0xF0, "CIO"), (0xF1, "W"), (0xF2, "H")):
-        t[code] = Area(code, Kind.WORD_FORCED, store)
-    t[0x09] = Area(0x09, Kind.FLAG, "TC")
-    t[0x49] = Area(0x49, Kind.FLAG_FORCED, "TC")
-    t[0x89] = Area(0x89, Kind.PV, "TC")
-    for bank in range(16):
-        t[0x20 + bank] = Area(0x20 + bank, Kind.BIT, f"E{bank}")
-        t[0xA0 + bank] = Area(0xA0 + bank, Kind.WORD, f"E{bank}")
-        t[0x50 + bank] = Area(0x50 + bank, Kind.WORD, f"E{bank}")  # CJ2 only
-    for bank in range(16, 25):
-        t[0xE0 + bank - 16] = Area(0xE0 + bank - 16, Kind.BIT, f"E{bank}")
-        t[0x60 + bank - 16] = Area(0x60 + bank - 16, Kind.WORD, f"E{bank}")
-    t[0x0A] = Area(0x0A, Kind.BIT, "E*")
-    t[0x98] = Area(0x98, Kind.WORD, "E*")
-    t[0x06] = Area(0x06, Kind.TASK, "TK")
-    t[0x46] = Area(0x46, Kind.TASK_STATUS, "TK")
-    t[0x07] = Area(0x07, Kind.SYSTEM, "SYS")
-    t[0xBC] = Area(0xBC, Kind.REGISTER, "DR")
-    t[0xDC] = Area(0xDC, Kind.INDEX, "IR")
-    return t
+    def index(self, word: int) -> int:
+        """Element index of ``word``; :class:`KeyError` if no segment holds it."""
+        for first, n, index in self.segments:
+            if first <= word < first + n:
+                return index + word - first
+        raise KeyError(word)
 
 
-AREAS: dict[int, Area] = _area_table()
+_KIND_OF_TYPE = {
+    DataType.BIT: Kind.BIT,
+    DataType.BIT_FORCED: Kind.BIT_FORCED,
+    DataType.WORD: Kind.WORD,
+    DataType.WORD_FORCED: Kind.WORD_FORCED,
+    DataType.COMPLETION_FLAG: Kind.FLAG,
+    DataType.COMPLETION_FLAG_FORCED: Kind.FLAG_FORCED,
+    DataType.PV: Kind.PV,
+    DataType.TASK_FLAG: Kind.TASK,
+    DataType.TASK_STATUS: Kind.TASK_STATUS,
+    DataType.BANK_NUMBER: Kind.REGISTER,
+    DataType.FLAG: Kind.SYSTEM,
+}
+#: Stores whose values are registers rather than T/C present values.
+_KIND_OF_STORE = {"DR": Kind.REGISTER, "IR": Kind.INDEX}
+#: Text prefixes of manual 5-2-2 that share one store (timers and counters; DR and bank No.).
+_STORE_OF_AREA = {"E": "E*", "T": "TC", "C": "TC", "EMBANK": "DR"}
 
-_EM_WORD_CODES = frozenset((*range(0xA0, 0xB0), *range(0x50, 0x60), *range(0x60, 0x69)))
-_EM_BIT_CODES = frozenset((*range(0x20, 0x30), *range(0xE0, 0xE9)))
+
+def _store_of(spec: AreaSpec) -> str:
+    if spec.bank is not None:
+        return f"E{spec.bank}"
+    if spec.data_type is DataType.FLAG:
+        return "SYS"
+    return _STORE_OF_AREA.get(spec.area, spec.area)
+
+
+def _merged(specs: Sequence[AreaSpec]) -> _Segments:
+    runs: list[tuple[int, int]] = []
+    for spec in sorted(specs, key=lambda s: s.first_word):
+        if runs and sum(runs[-1]) == spec.first_word:
+            runs[-1] = (runs[-1][0], runs[-1][1] + spec.count)
+        else:
+            runs.append((spec.first_word, spec.count))
+    segments: list[tuple[int, int, int]] = []
+    index = 0
+    for first, n in runs:
+        segments.append((first, n, index))
+        index += n
+    return tuple(segments)
+
+
+def _area(code: int) -> Area:
+    specs = area_specs(code)
+    stores = {_store_of(s) for s in specs}
+    kinds = {_KIND_OF_STORE.get(_store_of(s), _KIND_OF_TYPE[s.data_type]) for s in specs}
+    sizes = {s.element_size for s in specs}
+    if len(stores) != 1 or len(kinds) != 1 or len(sizes) != 1:
+        raise ValueError(f"area code {code:02X}: rows of manual 5-2-2 disagree: {specs}")
+    read_only = tuple((s.first_word, s.last_word) for s in specs if s.read_only)
+    return Area(code, kinds.pop(), stores.pop(), sizes.pop(), _merged(specs), read_only)
+
+
+#: Every CS/CJ area code of :mod:`aiofins.protocol.areas`, as the simulator stores it.
+AREAS: dict[int, Area] = {code: _area(code) for code in sorted(area_codes())}
+
+_EM_WORD_CODES = frozenset(
+    c for c, a in AREAS.items() if a.kind is Kind.WORD and a.store[0] == "E" and a.store != "E*"
+)
+_EM_BIT_CODES = frozenset(
+    c for c, a in AREAS.items() if a.kind is Kind.BIT and a.store[0] == "E" and a.store != "E*"
+)
 #: Area codes accepted by each I/O memory command (manual's per-command area tables).
 _BASIC_READ = (0x30, 0x31, 0x32, 0x33, 0xB0, 0xB1, 0xB2, 0xB3, 0x09, 0x89, 0x02, 0x82, 0x0A)
 READ_AREAS = (
@@ -128,19 +158,24 @@ FILL_AREAS = frozenset((0xB0, 0xB1, 0xB2, 0xB3, 0x89, 0x82, 0x98)) | _EM_WORD_CO
 TRANSFER_AREAS = FILL_AREAS
 MULTIPLE_READ_AREAS = READ_AREAS | frozenset((0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x49))
 
-# Segments of each store: (first address, number of elements, index of the first element).
-_Segments = tuple[tuple[int, int, int], ...]
-_TC_SEGMENTS: _Segments = ((0, TIMER_COUNTER_COUNT, 0), (COUNTER_BASE, TIMER_COUNTER_COUNT, 4096))
-_SYSTEM_SEGMENTS: _Segments = ((0x0000, 5, 0), (0x1000, 16, 5), (0x2001, 1, 21))
-_DR_SEGMENTS: _Segments = ((0x0200, 16, 0), (0x0F00, 1, 16))
-_IR_SEGMENTS: _Segments = ((0x0100, 16, 0),)
-_TASK_SEGMENTS: _Segments = ((0, 32, 0),)
-_WORD_COUNTS = {"CIO": 6144, "W": 512, "H": 512, "A": 960, "D": 32768}
-_FORCEABLE = ("CIO", "W", "H")
-#: Condition flag numbers (07 area, word 0x1000 + n) that are constant.
-_ALWAYS_OFF = 0x0E
-_ALWAYS_ON = 0x0F
-_CURRENT_BANK_INDEX = 16
+#: Words of each word store (CIO, W, H, A, D, EM banks), from its word area code.
+_STORE_WORDS = {a.store: a.elements for a in AREAS.values() if a.kind is Kind.WORD}
+_FORCEABLE = frozenset(a.store for a in AREAS.values() if a.kind is Kind.WORD_FORCED)
+EM_BANK_WORDS = _STORE_WORDS["E0"]
+_TC = AREAS[0x89]
+TIMER_COUNTER_COUNT = _TC.segments[1][2]  # counters follow the timers in the T/C store
+_BANK_NUMBER_WORD = next(
+    s.first_word for s in area_specs(0xBC) if s.data_type is DataType.BANK_NUMBER
+)
+_CURRENT_BANK_INDEX = AREAS[0xBC].index(_BANK_NUMBER_WORD)
+#: Area 07 elements in index order, by the short names of :data:`aiofins.protocol.areas.FLAGS`.
+_SYSTEM_NAMES = tuple(s.area for s in sorted(area_specs(0x07), key=lambda s: s.first_word))
+_SYSTEM_INDEX = {name: i for i, name in enumerate(_SYSTEM_NAMES)}
+#: Clock pulses (simulated: ON for the first half of each period) and constant flags.
+_CLOCK_PULSE_PERIODS = {"P_1min": 60.0, "P_1s": 1.0, "P_0_2s": 0.2, "P_0_1s": 0.1, "P_0_02s": 0.02}
+_CONSTANT_FLAGS = {"P_Off": 0, "P_On": 1}
+#: Area 07 flags that :meth:`IOMemory.set_condition_flag` may set (not pulses or constants).
+SETTABLE_FLAGS = frozenset(_SYSTEM_NAMES) - set(_CLOCK_PULSE_PERIODS) - set(_CONSTANT_FLAGS)
 
 
 def _words(n: int) -> array[int]:
@@ -155,19 +190,20 @@ class IOMemory:
             raise ValueError(f"em_banks {em_banks} out of range 0..25")
         self.em_banks = em_banks
         self._clock = clock
-        self._stores: dict[str, array[int]] = {k: _words(n) for k, n in _WORD_COUNTS.items()}
+        self._stores: dict[str, array[int]] = {
+            k: _words(n) for k, n in _STORE_WORDS.items() if k[0] != "E"
+        }
         for bank in range(em_banks):
             self._stores[f"E{bank}"] = _words(EM_BANK_WORDS)
-        self._forced: dict[str, array[int]] = {k: _words(_WORD_COUNTS[k]) for k in _FORCEABLE}
-        self.pv = _words(2 * TIMER_COUNTER_COUNT)
-        self.completion = bytearray(2 * TIMER_COUNTER_COUNT)
-        self.completion_forced = bytearray(2 * TIMER_COUNTER_COUNT)
-        self.task_flags = bytearray(32)
-        self.task_status = bytearray(32)
-        self.condition_flags = bytearray(16)
-        self.access_error = False
-        self.data_registers = _words(16)
-        self.index_registers = [0] * 16
+        self._forced: dict[str, array[int]] = {k: _words(_STORE_WORDS[k]) for k in _FORCEABLE}
+        self.pv = _words(_TC.elements)
+        self.completion = bytearray(_TC.elements)
+        self.completion_forced = bytearray(_TC.elements)
+        self.task_flags = bytearray(AREAS[0x06].elements)
+        self.task_status = bytearray(AREAS[0x46].elements)
+        self.condition_flags = bytearray(len(_SYSTEM_NAMES))  # area 07, by element index
+        self.data_registers = _words(AREAS[0xBC].elements)  # the bank number's entry unused
+        self.index_registers = [0] * AREAS[0xDC].elements
         self.current_bank = 0
 
     # ---- location -------------------------------------------------------------------------
@@ -183,23 +219,9 @@ class IOMemory:
                 raise CommandFailed(AREA_MISSING, message=f"EM bank {bank} absent")
         return area
 
-    def _segments(self, area: Area) -> _Segments:
-        if area.kind in (Kind.FLAG, Kind.FLAG_FORCED, Kind.PV):
-            return _TC_SEGMENTS
-        if area.kind is Kind.SYSTEM:
-            return _SYSTEM_SEGMENTS
-        if area.kind is Kind.REGISTER:
-            return _DR_SEGMENTS
-        if area.kind is Kind.INDEX:
-            return _IR_SEGMENTS
-        if area.kind in (Kind.TASK, Kind.TASK_STATUS):
-            return _TASK_SEGMENTS
-        n = EM_BANK_WORDS if area.store.startswith("E") else _WORD_COUNTS[area.store]
-        return ((0, n, 0),)
-
     def locate(self, area: Area, word: int, bit: int, count: int) -> int:
         """Index of the first element; ``1103`` bad start, ``1104`` end past the area."""
-        for first, n, index in self._segments(area):
+        for first, n, index in area.segments:
             if first <= word < first + n:
                 if area.is_bit:
                     if bit > 15:
@@ -250,17 +272,17 @@ class IOMemory:
         return self.index_registers[i]
 
     def _system_flag(self, i: int) -> int:
-        if i < 5:  # clock pulses: 1 min, 1 s, 0.2 s, 0.1 s, 0.02 s; ON for half the period
-            period = (60.0, 1.0, 0.2, 0.1, 0.02)[i]
+        name = _SYSTEM_NAMES[i]
+        period = _CLOCK_PULSE_PERIODS.get(name)
+        if period is not None:
             return int((self._clock() % period) < period / 2)
-        if i < 21:
-            n = i - 5
-            if n == _ALWAYS_OFF:
-                return 0
-            if n == _ALWAYS_ON:
-                return 1
-            return self.condition_flags[n]
-        return int(self.access_error)
+        return _CONSTANT_FLAGS.get(name, self.condition_flags[i])
+
+    def set_condition_flag(self, name: str, value: bool) -> None:
+        """Set an area 07 flag by its short name (``P_CY``, ``P_AER``...), as the CPU would."""
+        if name not in SETTABLE_FLAGS:
+            raise ValueError(f"{name!r} is not a settable area 07 flag")
+        self.condition_flags[_SYSTEM_INDEX[name]] = int(value)
 
     def _set(self, area: Area, i: int, value: int) -> None:
         k = area.kind
@@ -290,10 +312,14 @@ class IOMemory:
         else:  # pragma: no cover - excluded by the command area tables
             raise CommandFailed(READ_ONLY)
 
-    def _check_writable(self, area: Area, word: int) -> None:
-        # A run that starts in A0-A447 touches a read-only word (runs only grow upwards).
-        if area.store == "A" and word < A_READ_ONLY_WORDS:
-            raise CommandFailed(READ_ONLY, message="A0-A447 are read-only")
+    def _check_writable(self, area: Area, word: int, bit: int, count: int) -> None:
+        """``2101`` if the run touches a read-only word (A0-A447)."""
+        last = word + (bit + count - 1) // 16 if area.is_bit else word + count - 1
+        for first, end in area.read_only:
+            if word <= end and first <= last:
+                raise CommandFailed(
+                    READ_ONLY, message=f"words {first:04X}-{end:04X} hex are read-only"
+                )
 
     # ---- wire-level operations ------------------------------------------------------------
 
@@ -320,7 +346,7 @@ class IOMemory:
         start = self.locate(area, word, bit, max(count, 1))
         if count == 0:
             return
-        self._check_writable(area, word)
+        self._check_writable(area, word, bit, count)
         if area.kind is Kind.WORD and not self._any_forced(area, start, count):
             chunk = array("H", data[: 2 * count])  # fast path: one slice assignment
             if sys.byteorder == "little":
@@ -348,7 +374,7 @@ class IOMemory:
         start = self.locate(area, word, bit, max(count, 1))
         if count == 0:
             return
-        self._check_writable(area, word)
+        self._check_writable(area, word, bit, count)
         for i in range(start, start + count):
             self._set(area, i, value)
             if area.kind is Kind.PV:
@@ -362,7 +388,7 @@ class IOMemory:
         d = self.locate(d_area, dst[1], dst[2], max(count, 1))
         if count == 0:
             return
-        self._check_writable(d_area, dst[1])
+        self._check_writable(d_area, dst[1], dst[2], count)
         values = [self._get(s_area, i) for i in range(s, s + count)]
         for j, v in enumerate(values):
             self._set(d_area, d + j, v)
