@@ -18,21 +18,18 @@ Also here: the parameter codes of 2203/220A-220C/2215/2220 and the 2201 result t
 from __future__ import annotations
 
 import datetime as _dt
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 from typing import TypeVar
 
 from .codec import Reader
-from .errors import AddressError, CommandError, DecodeError
+from .decoding import PARAMETER_ERROR, as_decode_error
+from .errors import CommandError, DecodeError
 
 FILE_NAME_SIZE = 12
 FILE_DATE_SIZE = 4
 #: Longest absolute directory path (characters).
 MAX_DIRECTORY_LENGTH = 65
-#: End code a PLC answers for a parameter it cannot accept (``110C`` parameter error).
-PARAMETER_ERROR = 0x110C
 
 
 class Disk(IntEnum):
@@ -80,7 +77,7 @@ def check_disk(value: int, allowed: frozenset[Disk] = FILE_DISKS, what: str = "d
 def read_disk(reader: Reader, allowed: frozenset[Disk] = FILE_DISKS) -> Disk:
     """Read a disk number; :class:`DecodeError` (``110C``) unless it is one of ``allowed``."""
     value = reader.u16()
-    with decoding("disk"):
+    with as_decode_error("disk"):
         return check_disk(value, allowed)
 
 
@@ -213,7 +210,7 @@ def read_directory(reader: Reader) -> str:
     if text == "\\" or "/" in text:
         message = f"directory {text!r}: separator is '\\', the root is length 0"
         raise DecodeError(message, end_code=PARAMETER_ERROR)
-    with decoding("directory"):
+    with as_decode_error("directory"):
         return check_directory(text)
 
 
@@ -221,19 +218,10 @@ def read_file_name(reader: Reader, what: str = "file name") -> str:
     """Read a command's 12-byte 8.3 name; :class:`DecodeError` (``110C``) if invalid."""
     raw = reader.take(FILE_NAME_SIZE)
     name = decode_file_name(raw)
-    with decoding(what):
+    with as_decode_error(what):
         if encode_file_name(name, what) != raw:
             raise CommandError(f"{what} field {raw!r} is not in the 8.3 layout")
     return name
-
-
-@contextmanager
-def decoding(what: str, end_code: int = PARAMETER_ERROR) -> Iterator[None]:
-    """Turn input errors raised while decoding a command into :class:`DecodeError`."""
-    try:
-        yield
-    except (CommandError, AddressError) as exc:
-        raise DecodeError(f"{what}: {exc}", end_code=end_code) from exc
 
 
 # --------------------------------------------------------------------------- date/time

@@ -21,10 +21,10 @@ from enum import IntEnum
 from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import AddressError, CommandError, DecodeError
 
 R = TypeVar("R")
-T = TypeVar("T")
 Q = TypeVar("Q", bound="Request[Any]")
 E = TypeVar("E", bound=IntEnum)
 
@@ -95,7 +95,10 @@ class ParameterlessRequest(Request[None]):
 
 
 class _Rejected(CommandError):
-    """A :class:`CommandError` that also names the end code a PLC answers for it."""
+    """A :class:`CommandError` that also names the end code a PLC answers for it.
+
+    :func:`.as_decode_error` passes that end code on to the :class:`DecodeError`.
+    """
 
     def __init__(self, message: str, end_code: int) -> None:
         super().__init__(message)
@@ -110,25 +113,17 @@ class _RejectedAddress(AddressError):
         self.end_code = end_code
 
 
-def _decoded(op: type[Request[Any]], build: Callable[[], T], end_code: int = 0x110C) -> T:
-    """Run a builder on decoded fields; argument errors become :class:`DecodeError`."""
-    try:
-        return build()
-    except (CommandError, AddressError) as exc:
-        code = getattr(exc, "end_code", end_code)
-        raise DecodeError(f"{op.NAME}: {exc}", end_code=code) from exc
-
-
 def _decode_fields(op: type[Q], params: bytes, *fields: Callable[[Reader], Any]) -> Q:
     """Read ``fields`` in order from all of ``params`` and build ``op`` from the values.
 
     Short or long parameters raise :class:`DecodeError` (1002 / 1001); argument errors of the
-    builder become :class:`DecodeError` as in :func:`_decoded`.
+    builder become :class:`DecodeError` (see :func:`.as_decode_error`).
     """
     r = Reader(params, op.NAME)
     values = [read(r) for read in fields]
     r.end()
-    return _decoded(op, lambda: op(*values))
+    with as_decode_error(op.NAME):
+        return op(*values)
 
 
 def _member(kind: type[E], value: int, what: str, choices: str) -> E:

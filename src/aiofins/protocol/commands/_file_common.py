@@ -7,7 +7,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar, TypeVar
 
 from ..codec import Reader
-from ..files import decoding
+from ..decoding import as_decode_error
 from ._base import Request, expect_no_data
 
 R = TypeVar("R")
@@ -58,5 +58,5 @@ def finish(cls: type[Q], r: Reader, *args: Any, **kwargs: Any) -> Q:
     """
     r.end()
     make: Callable[..., Q] = cls
-    with decoding(cls.NAME):
+    with as_decode_error(cls.NAME):
         return make(*args, **kwargs)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import CommandError
 from ..files import (
     DirectoryOperation,
@@ -16,7 +17,6 @@ from ..files import (
     check_file_name,
     check_u,
     coerce_enum,
-    decoding,
     encode_directory,
     encode_file_name,
     read_directory,
@@ -226,7 +226,7 @@ class CreateDeleteDirectory(FileOperation):
         r = Reader(params, cls.NAME)
         disk = read_disk(r)
         value = r.u16()
-        with decoding("parameter"):
+        with as_decode_error("parameter"):
             operation = coerce_enum(DirectoryOperation, value, "directory parameter")
         name = read_file_name(r, "directory name")
         return finish(cls, r, disk, operation, name, read_directory(r))

@@ -8,6 +8,7 @@ from typing import Any, ClassVar, TypeVar
 
 from ..areas import MemoryAddress
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import AddressError, CommandError, DecodeError
 from ..files import (
     ALL_CASSETTE_AREAS,
@@ -22,7 +23,6 @@ from ..files import (
     check_file_name,
     check_u,
     coerce_enum,
-    decoding,
     encode_directory,
     encode_file_name,
     read_directory,
@@ -125,7 +125,7 @@ class _AreaFileTransfer(FileCommand[R]):
     def decode(cls: type[T], params: bytes) -> T:
         r = Reader(params, cls.NAME)
         value = r.u16()
-        with decoding("parameter code"):
+        with as_decode_error("parameter code"):
             mode = coerce_enum(FileTransferMode, value, "transfer parameter code")
         area = cls._read_area(r)
         disk, name, directory = read_disk(r), read_file_name(r), read_directory(r)
@@ -330,7 +330,7 @@ class MemoryCassetteTransfer(FileCommand[MemoryCassetteDataType | None]):
     def decode(cls, params: bytes) -> MemoryCassetteTransfer:
         r = Reader(params, cls.NAME)
         disk_value, op_value = r.u16(), r.u16()
-        with decoding(cls.NAME):
+        with as_decode_error(cls.NAME):
             disk = check_disk(disk_value, frozenset({Disk.MEMORY_CASSETTE}))
             operation = coerce_enum(CassetteOperation, op_value, "memory cassette parameter")
         areas = 0 if operation is CassetteOperation.READ_DATA_TYPE else r.u16()

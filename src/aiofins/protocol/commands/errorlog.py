@@ -13,13 +13,15 @@ from typing import Any, ClassVar, Generic, TypeVar
 from ..codec import Reader, check_range
 from ..errors import DecodeError
 from ._base import Encodable, ParameterlessRequest, Request, expect_no_data
-from .clock import (
-    bcd_byte,
+from ._bcd_time import (
+    CLOCK_ORDER,
+    ERROR_LOG_ORDER,
     check_day_of_week,
-    make_datetime,
+    check_decoded_day_of_week,
+    encode_bcd_time,
     normalise_time,
-    read_bcd,
-    year_from_two_digits,
+    read_bcd_values,
+    time_from_bcd,
 )
 
 #: ERROR CLEAR codes valid in any mode / PROGRAM mode only (manual 5-3-27).
@@ -151,19 +153,15 @@ class ErrorLogRecord:
         object.__setattr__(self, "time", normalise_time(self.time, "error time"))
 
     def encode(self) -> bytes:
-        t = self.time
         # Minute, second, day, hour, year, month: BCD (manual 5-3-28).
-        stamp = bytes(
-            bcd_byte(v) for v in (t.minute, t.second, t.day, t.hour, t.year % 100, t.month)
-        )
+        stamp = encode_bcd_time(self.time, ERROR_LOG_ORDER)
         return self.error_code.to_bytes(2, "big") + self.error_code_2.to_bytes(2, "big") + stamp
 
     @classmethod
     def read(cls, r: Reader) -> ErrorLogRecord:
         code1 = r.u16()
         code2 = r.u16()
-        minute, second, day, hour, yy, month = (read_bcd(r) for _ in range(6))
-        moment = make_datetime(year_from_two_digits(yy), month, day, hour, minute, second)
+        moment = time_from_bcd(read_bcd_values(r, 6), ERROR_LOG_ORDER)
         return cls(code1, code2, moment)
 
 
@@ -230,11 +228,7 @@ class FinsWriteAccessRecord:
         check_day_of_week(self.day_of_week)
 
     def encode(self) -> bytes:
-        t = self.time
-        stamp = bytes(
-            bcd_byte(v)
-            for v in (t.year % 100, t.month, t.day, t.hour, t.minute, t.second, self.day_of_week)
-        )
+        stamp = encode_bcd_time(self.time, CLOCK_ORDER, self.day_of_week)
         source = bytes((self.network, self.node, self.unit))
         return source + self.command_code.to_bytes(2, "big") + stamp
 
@@ -242,10 +236,9 @@ class FinsWriteAccessRecord:
     def read(cls, r: Reader) -> FinsWriteAccessRecord:
         network, node, unit = r.u8(), r.u8(), r.u8()
         code = r.u16()
-        yy, month, day, hour, minute, second, dow = (read_bcd(r) for _ in range(7))
-        if dow > 6:
-            raise DecodeError(f"access log record: day of week {dow} out of range 0..6")
-        moment = make_datetime(year_from_two_digits(yy), month, day, hour, minute, second)
+        values = read_bcd_values(r, 7)
+        dow = check_decoded_day_of_week(values[6], "access log record")
+        moment = time_from_bcd(values, CLOCK_ORDER)
         return cls(network, node, unit, code, moment, dow)
 
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import CommandError
 from ..files import (
     Disk,
@@ -20,7 +21,6 @@ from ..files import (
     check_file_name,
     check_u,
     coerce_enum,
-    decoding,
     encode_directory,
     encode_file_name,
     read_directory,
@@ -241,7 +241,7 @@ class SingleFileWrite(FileOperation):
         data = r.take(length)
         directory = read_directory(r)
         r.end()
-        with decoding(cls.NAME):
+        with as_decode_error(cls.NAME):
             write_mode = coerce_enum(FileWriteMode, mode, "file write parameter code")
             return cls(disk, name, data, write_mode, position, directory)
 

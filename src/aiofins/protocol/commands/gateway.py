@@ -13,8 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ..files import decoding
 from ..header import MAX_PARAMETER_SIZE
 from ._base import Request
 
@@ -197,7 +197,7 @@ class _GatewayCommand(Request[R]):
                 f"{cls.NAME}: {len(params)} parameter bytes, at least {cls._MINIMUM}",
                 end_code=0x1002,
             )
-        with decoding(cls.NAME):
+        with as_decode_error(cls.NAME):
             return cls(params)
 
     def decode_response(self, data: bytes) -> R:

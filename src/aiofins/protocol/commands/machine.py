@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from ..codec import Reader, ascii_field, check_range, pad_ascii
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
 from ._base import Request
-from .clock import construct
 
 MODEL_SIZE = 20
 PART_A_SIZE = 92
@@ -250,7 +250,8 @@ class CpuUnitDataRead(Request[CpuUnitData]):
         r = Reader(params, cls.NAME)
         data_type = r.u8()
         r.end()
-        return construct(0x110C, cls, data_type)
+        with as_decode_error(None):
+            return cls(data_type)
 
     def decode_response(self, data: bytes) -> CpuUnitData:
         what = f"{self.NAME} response"
@@ -356,7 +357,8 @@ class ConnectionDataRead(Request[ConnectionData]):
         unit = r.u8()
         count = r.u8() if r.remaining else None
         r.end()
-        return construct(0x110C, cls, unit, count)
+        with as_decode_error(None):
+            return cls(unit, count)
 
     def decode_response(self, data: bytes) -> ConnectionData:
         return ConnectionData.decode(data)

@@ -15,12 +15,12 @@ from typing import Any, ClassVar
 
 from ..areas import MemoryAddress, element_size
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import AddressError, CommandError, DecodeError
 from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
 from ._base import (
     Request,
     _decode_fields,
-    _decoded,
     _Rejected,
     _RejectedAddress,
     expect_no_data,
@@ -270,14 +270,16 @@ class MemoryAreaWrite(Request[None]):
         address = _read_address(r)
         count = r.u16()
         data = r.rest()
-        size = _decoded(cls, lambda: _check_writable(address))
+        with as_decode_error(cls.NAME):
+            size = _check_writable(address)
         if count * size != len(data):
             raise DecodeError(
                 f"{cls.NAME}: {count} elements of {size} bytes need {count * size} data "
                 f"bytes, got {len(data)}",
                 end_code=0x1003,
             )
-        return _decoded(cls, lambda: cls(address, data))
+        with as_decode_error(cls.NAME):
+            return cls(address, data)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)
@@ -385,7 +387,8 @@ class MultipleMemoryAreaRead(Request[MultipleMemoryAreaReadResult]):
         addresses: list[MemoryAddress] = []
         while r.remaining:
             addresses.append(MemoryAddress.decode(r.take(min(4, r.remaining))))
-        return _decoded(cls, lambda: cls(tuple(addresses)))
+        with as_decode_error(cls.NAME):
+            return cls(tuple(addresses))
 
     def decode_response(self, data: bytes) -> MultipleMemoryAreaReadResult:
         r = Reader(data, f"{self.NAME} response")

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from ..codec import Reader, ascii_field, check_range, pad_ascii
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
 from ._base import Request, expect_no_data
-from .clock import construct
 
 _KIND_READ = 0b00
 _KIND_CLEAR = 0b01
@@ -218,7 +218,8 @@ class FalFalsRead(Request[FalFalsMessage]):
         r.end()
         if word >> 14 != _KIND_FAL:
             raise DecodeError(f"{cls.NAME}: parameter {word:04X} lacks bit 15", end_code=0x110C)
-        return construct(0x110C, cls, word & MAX_FAL_NUMBER)
+        with as_decode_error(None):
+            return cls(word & MAX_FAL_NUMBER)
 
     def decode_response(self, data: bytes) -> FalFalsMessage:
         return FalFalsMessage.decode(data)

@@ -11,7 +11,8 @@ from enum import IntEnum
 from typing import Any, ClassVar
 
 from ..codec import Reader
-from ._base import Request, _decoded, _member, expect_no_data
+from ..decoding import as_decode_error
+from ._base import Request, _member, expect_no_data
 from .program import PROGRAM_NUMBER, _read_program_number
 
 
@@ -53,7 +54,8 @@ class Run(Request[None]):
         _program_number(r, cls.NAME)
         mode = r.u8() if r.remaining else RunMode.MONITOR
         r.end()
-        return _decoded(cls, lambda: cls(mode))
+        with as_decode_error(cls.NAME):
+            return cls(mode)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -13,8 +13,9 @@ from enum import IntEnum
 from typing import Any, ClassVar
 
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, _decoded, _Rejected, expect_no_data
+from ._base import Request, _Rejected, expect_no_data
 
 #: Words per 02 01 / 02 02 command (manual 5-3-7, 5-3-8).
 MAX_PARAMETER_WORDS = 498
@@ -155,7 +156,8 @@ class ParameterAreaRead(Request[ParameterAreaReadResult]):
             raise DecodeError(
                 f"{cls.NAME}: bit 15 of the number of words must be 0", end_code=0x110C
             )
-        return _decoded(cls, lambda: cls(area_code, begin_word, count))
+        with as_decode_error(cls.NAME):
+            return cls(area_code, begin_word, count)
 
     def decode_response(self, data: bytes) -> ParameterAreaReadResult:
         r = Reader(data, f"{self.NAME} response")
@@ -212,7 +214,8 @@ class ParameterAreaWrite(Request[None]):
                 end_code=0x1003,
             )
         last = bool(count & _LAST_WORD)
-        return _decoded(cls, lambda: cls(area_code, begin_word, _bytes_words(data), last))
+        with as_decode_error(cls.NAME):
+            return cls(area_code, begin_word, _bytes_words(data), last)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)
@@ -256,7 +259,8 @@ class ParameterAreaClear(Request[None]):
             )
         if data != 0:
             raise DecodeError(f"{cls.NAME}: data {data:04X} must be 0000", end_code=0x110C)
-        return _decoded(cls, lambda: cls(area_code, count))
+        with as_decode_error(cls.NAME):
+            return cls(area_code, count)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

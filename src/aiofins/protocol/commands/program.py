@@ -13,8 +13,9 @@ from enum import IntEnum
 from typing import Any, ClassVar
 
 from ..codec import Reader
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, _decoded, _member, _Rejected, expect_no_data
+from ._base import Request, _member, _Rejected, expect_no_data
 
 #: Bytes per 03 06 command (manual 5-3-10).
 MAX_PROGRAM_READ_BYTES = 992
@@ -132,7 +133,8 @@ class ProgramAreaRead(Request[ProgramAreaReadResult]):
             raise DecodeError(
                 f"{cls.NAME}: bit 15 of the number of bytes must be 0", end_code=0x110C
             )
-        return _decoded(cls, lambda: cls(address, count))
+        with as_decode_error(cls.NAME):
+            return cls(address, count)
 
     def decode_response(self, data: bytes) -> ProgramAreaReadResult:
         r = Reader(data, f"{self.NAME} response")
@@ -199,7 +201,8 @@ class ProgramAreaWrite(Request[ProgramAreaWriteResult]):
                 f"{cls.NAME}: number of bytes {count & 0x7FFF} but {len(data)} data bytes",
                 end_code=0x1003,
             )
-        return _decoded(cls, lambda: cls(address, data, bool(count & _LAST)))
+        with as_decode_error(cls.NAME):
+            return cls(address, data, bool(count & _LAST))
 
     def decode_response(self, data: bytes) -> ProgramAreaWriteResult:
         r = Reader(data, f"{self.NAME} response")
@@ -235,7 +238,8 @@ class ProgramAreaClear(Request[None]):
         _read_program_number(r, cls.NAME)
         code = r.u8()
         r.end()
-        return _decoded(cls, lambda: cls(code))
+        with as_decode_error(cls.NAME):
+            return cls(code)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 from ..codec import Reader, ascii_field, check_range, pad_ascii
+from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
 from ._base import Request, expect_no_data
-from .clock import construct
 
 
 class CpuMode(enum.IntEnum):
@@ -246,7 +246,9 @@ class CycleTimeRead(Request["CycleTime | None"]):
         r = Reader(params, cls.NAME)
         code = r.u8()
         r.end()
-        return construct(0x110C, cls, code)
+        with as_decode_error(None):
+            # __post_init__ checks the raw code and turns it into a CycleTimeParameter.
+            return cls(cast(CycleTimeParameter, code))
 
     def decode_response(self, data: bytes) -> CycleTime | None:
         if self.parameter == CycleTimeParameter.INITIALIZE:
