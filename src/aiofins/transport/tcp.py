@@ -59,22 +59,21 @@ class _TcpProtocol(asyncio.Protocol):
             self.fail(exc)
             return
         for message in messages:
-            command = message.command
-            if command == TcpCommand.FRAME and self.handshake.done():
-                self.sink.frame_received(message.payload)
-            elif command == TcpCommand.CONNECTION_CONFIRMATION:
+            if self.handshake.done():
+                error = _deliver(self.owner, message, self.sink)
+            elif message.command == TcpCommand.CONNECTION_CONFIRMATION:
                 continue
-            elif command == TcpCommand.FRAME_ERROR:
-                self.fail(_error_notification(self.owner, message.error_code))
-                return
-            elif not self.handshake.done():
+            elif message.command == TcpCommand.FRAME_ERROR:
+                error = _error_notification(self.owner, message.error_code)
+            else:
                 try:
                     self.handshake.set_result(parse_node_response(message))
+                    continue
                 except FrameError as exc:
-                    self.fail(exc)
-                    return
-            else:
-                self.sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+                    error = exc
+            if error is not None:
+                self.fail(error)
+                return
 
     def fail(self, exc: BaseException) -> None:
         """End the connection: the stream is unusable after a framing error or command 3."""
@@ -90,6 +89,23 @@ class _TcpProtocol(asyncio.Protocol):
         lost = ConnectionLost(f"{self.owner.description} closed the connection")
         lost.__cause__ = exc
         self.fail(lost)
+
+
+def _deliver(owner: TcpTransport, message: TcpMessage, sink: FrameSink) -> FrameError | None:
+    """Hand one message after the handshake to the sink; the error it reports, if any.
+
+    A FINS frame goes to the session, a connection confirmation is discarded, an error
+    notification (command 3) comes back as :class:`FinsTcpError` (the connection is over),
+    and any other command is dropped and counted.
+    """
+    command = message.command
+    if command == TcpCommand.FRAME:
+        sink.frame_received(message.payload)
+    elif command == TcpCommand.FRAME_ERROR:
+        return _error_notification(owner, message.error_code)
+    elif command != TcpCommand.CONNECTION_CONFIRMATION:
+        sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+    return None
 
 
 def _error_notification(owner: TcpTransport, code: int) -> FinsTcpError:
@@ -227,13 +243,9 @@ class TcpTransport(Transport):
             messages = backlog
             while True:
                 for message in messages:
-                    command = message.command
-                    if command == TcpCommand.FRAME:
-                        sink.frame_received(message.payload)
-                    elif command == TcpCommand.FRAME_ERROR:
-                        raise _error_notification(self, message.error_code)
-                    elif command != TcpCommand.CONNECTION_CONFIRMATION:
-                        sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+                    error = _deliver(self, message, sink)
+                    if error is not None:
+                        raise error
                 messages = decoder.feed(await stream.receive())
         except FrameError as err:  # FinsTcpError included: the stream is unusable now
             exc = err
