@@ -71,7 +71,11 @@ def test_typed_read_and_write(sim_url: str, capsys: pytest.CaptureFixture[str]) 
 
 def test_status_info_clock_ping(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run(capsys, "status", sim_url, "--json")
-    assert code == 0 and json.loads(out)["mode"] == "PROGRAM"
+    status = json.loads(out)
+    assert code == 0 and status["mode"] == "PROGRAM"
+    # The status byte decoded: program stopped, not on standby (bits 3-6 masked).
+    assert status["running"] is False and status["standby"] is False
+    assert status["status"] & 0x01 == 0 and status["status"] & 0x78 == 0
     code, out, _ = run(capsys, "info", sim_url, "--json")
     assert code == 0 and "CJ2M" in out
     code, out, _ = run(capsys, "clock", sim_url, "--json")

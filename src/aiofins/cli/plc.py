@@ -135,6 +135,10 @@ async def _status(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
     s = await plc.cpu_unit_status_read(timeout=args.timeout)
     return {
         "status": s.status,
+        "running": s.running,
+        "standby": s.standby,
+        "battery_present": s.battery_present,
+        "flash_writing": s.flash_writing,
         "mode": s.mode.name,
         "fatal_errors": [f.name for f in type(s.fatal_errors) if f in s.fatal_errors],
         "non_fatal_errors": [f.name for f in type(s.non_fatal_errors) if f in s.non_fatal_errors],
