@@ -466,9 +466,10 @@ class Session:
         """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
 
         A peer on the same core often answers during the send itself: the request then
-        completes without an event-loop pass. Adaptive: after a miss (the peer answers later,
-        e.g. from another core) the next 1, 2, 4 ... 64 requests skip the attempt, so it costs
-        next to nothing where it never helps. Fair: after :data:`_POLL_STREAK` requests
+        completes without an event-loop pass. Adaptive: after one miss the next request tries
+        again (the peer was merely late); after misses in a row (the peer answers later, e.g.
+        from another core) the next 1, 2, 4 ... 64 requests skip the attempt, so it costs next
+        to nothing where it never helps. Fair: after :data:`_POLL_STREAK` requests
         completed this way in a row, one request waits through the event loop, so other
         tasks, timers and cancellation run. (With many in flight the replies are read in one
         drain per loop pass instead, which is cheaper and keeps tasks fair.)
@@ -481,8 +482,9 @@ class Session:
                 self._poll_skip = 1
             self._poll_streak = streak
         else:
-            backoff = min(2 * self._poll_backoff or 1, _POLL_MAX_BACKOFF)
-            self._poll_backoff = self._poll_skip = backoff
+            backoff = self._poll_backoff
+            self._poll_skip = backoff
+            self._poll_backoff = min(2 * backoff or 1, _POLL_MAX_BACKOFF)
             self._poll_streak = 0
 
     async def request_many(
