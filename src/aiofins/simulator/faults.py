@@ -24,12 +24,13 @@ from typing import Protocol, TextIO
 import anyio
 from anyio.abc import TaskGroup
 
-from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG
+from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG, RELAY_ERROR_FLAG
 from ..protocol.errors import DecodeError
 from ..protocol.header import CommandFrame, ResponseFrame
+from .state import BUSY
 
 #: "The node receiving the command is already processing 5 commands" (manual 5-1-3).
-BUSY_END_CODE = 0x2604
+BUSY_END_CODE = BUSY
 #: Commands a CPU Unit processes at once before it answers 2604 (manual 5-1-3).
 DEFAULT_MAX_CONCURRENT = 5
 _HEX_DIGITS = b"0123456789ABCDEF"
@@ -109,7 +110,10 @@ class FaultRule:
         if self.end_code is not None and not 0 <= self.end_code <= 0xFFFF:
             raise ValueError(f"end code {self.end_code:#x} out of range 0..0xFFFF")
         if self.flags & ~_CPU_FLAGS:
-            raise ValueError(f"flags {self.flags:#x} may only combine 0x40 and 0x80")
+            raise ValueError(
+                f"flags {self.flags:#x} may only combine"
+                f" {NON_FATAL_CPU_ERROR_FLAG:#x} and {FATAL_CPU_ERROR_FLAG:#x}"
+            )
         if not all(0 <= b <= 0xFF for b in self.relay):
             raise ValueError(f"relay point {self.relay} out of range 0..255")
 
@@ -277,7 +281,7 @@ class FaultPlan:
         if decision.end_code is not None:
             ec = decision.end_code
             out = bytearray(response[:12]) + ec.to_bytes(2, "big")
-            if ec & 0x8000:
+            if ec & RELAY_ERROR_FLAG:
                 out += bytes(decision.relay)
             self.counters.end_codes += 1
         if decision.flags:

@@ -11,7 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 
+from ..protocol.files import FileAttribute, FileWriteMode
 from .state import (
+    ADDRESS_RANGE_ERROR,
     ADDRESS_RANGE_EXCEEDED,
     CANNOT_CHANGE,
     CANNOT_REGISTER,
@@ -23,9 +25,6 @@ from .state import (
 )
 
 MAX_ENTRIES = 512
-ATTR_VOLUME = 0x08
-ATTR_DIRECTORY = 0x10
-ATTR_ARCHIVE = 0x20
 
 
 @dataclass
@@ -47,7 +46,7 @@ class Listing:
     name: str
     time: datetime
     size: int
-    attribute: int
+    attribute: FileAttribute
 
 
 class FileMemory:
@@ -91,15 +90,15 @@ class FileMemory:
         d = self.directory(path)
         out: list[Listing] = []
         if not path and self.volume_label:
-            out.append(Listing(self.volume_label, self.label_time, 0, ATTR_VOLUME))
+            out.append(Listing(self.volume_label, self.label_time, 0, FileAttribute.VOLUME_LABEL))
         if path:
-            out.append(Listing(".", d.time, 0, ATTR_DIRECTORY))
-            out.append(Listing("..", d.time, 0, ATTR_DIRECTORY))
+            out.append(Listing(".", d.time, 0, FileAttribute.DIRECTORY))
+            out.append(Listing("..", d.time, 0, FileAttribute.DIRECTORY))
         for name, e in d.entries.items():
             if isinstance(e, File):
-                out.append(Listing(name, e.time, len(e.data), ATTR_ARCHIVE))
+                out.append(Listing(name, e.time, len(e.data), FileAttribute.ARCHIVE))
             else:
-                out.append(Listing(name, e.time, 0, ATTR_DIRECTORY))
+                out.append(Listing(name, e.time, 0, FileAttribute.DIRECTORY))
         return out
 
     # ---- changes ----------------------------------------------------------------------------
@@ -118,11 +117,13 @@ class FileMemory:
     def write(
         self, path: tuple[str, ...], name: str, mode: int, position: int, data: bytes
     ) -> None:
-        """2203: 0 new (fail if it exists), 1 new (overwrite), 2 append, 3 overwrite in place."""
+        """2203 in ``mode`` (:class:`FileWriteMode`); another code is a parameter error."""
         d = self.directory(path, WRITE_FILE_MISSING)
         existing = d.entries.get(name)
-        if mode in (0, 1):
-            if isinstance(existing, Directory) or (existing is not None and mode == 0):
+        if mode in (FileWriteMode.NEW, FileWriteMode.NEW_OVERWRITE):
+            if isinstance(existing, Directory) or (
+                existing is not None and mode == FileWriteMode.NEW
+            ):
                 raise CommandFailed(FILE_EXISTS, message=f"{name} exists")
             old = len(existing.data) if isinstance(existing, File) else 0
             self._need(len(data) - old)
@@ -132,12 +133,12 @@ class FileMemory:
             return
         if not isinstance(existing, File):
             raise CommandFailed(WRITE_FILE_MISSING, message=f"no file {name}")
-        if mode == 2:
+        if mode == FileWriteMode.APPEND:
             self._need(len(data))
             existing.data += data
-        elif mode == 3:
+        elif mode == FileWriteMode.OVERWRITE:
             if position > len(existing.data):
-                raise CommandFailed(0x1103, message="file position beyond the end")
+                raise CommandFailed(ADDRESS_RANGE_ERROR, message="file position beyond the end")
             self._need(max(position + len(data) - len(existing.data), 0))
             existing.data[position : position + len(data)] = data
         else:

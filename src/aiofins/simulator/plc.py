@@ -16,6 +16,8 @@ from datetime import datetime
 from typing import Any
 
 from ..protocol.commands import Request, operation_for
+from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
+from ..protocol.commands.status import FatalError, NonFatalError
 from ..protocol.endcodes import (
     FATAL_CPU_ERROR_FLAG,
     NON_FATAL_CPU_ERROR_FLAG,
@@ -23,12 +25,24 @@ from ..protocol.endcodes import (
     EndCode,
 )
 from ..protocol.errors import DecodeError
+from ..protocol.files import Disk
 from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
 from . import restrictions
 from .filememory import FileMemory
 from .handlers import HANDLERS, Call, GatewayHandler, default_gateway
 from .memory import IOMemory
-from .state import COMMAND_TOO_SHORT, LOG_CAPACITY, UNDEFINED_COMMAND, CommandFailed, Mode
+from .state import (
+    ACCESS_RIGHT_HELD,
+    ADDRESS_RANGE_EXCEEDED,
+    COMMAND_TOO_SHORT,
+    LOG_CAPACITY,
+    NO_ROUTE,
+    NORMAL,
+    TOO_MANY_WORDS,
+    UNDEFINED_COMMAND,
+    CommandFailed,
+    Mode,
+)
 
 BROADCAST_NODE = 0xFF
 LOCAL_NODE = 0x00
@@ -37,34 +51,35 @@ PROGRAM_AREA_BYTES = 0x20000  # 128 KiB of UM (CJ2M-CPU33: 10 K steps; kept simp
 #: (command, codec end code) pairs where the manual prescribes data with the error, so the
 #: handler answers instead of the codec: 0201 over 498 words reads 498 and answers 1108;
 #: 0201 past the end of the area returns what exists with 1104 (manual 5-3-7).
-_HANDLER_DECIDES = frozenset({(0x0201, 0x1108), (0x0201, 0x1104)})
-PARAMETER_WORDS = 8000  # the whole parameter area, code 8000 (manual 5-3-7)
+_HANDLER_DECIDES = frozenset({(0x0201, TOO_MANY_WORDS), (0x0201, ADDRESS_RANGE_EXCEEDED)})
+#: The whole parameter area, code 8000 (manual 5-3-7).
+PARAMETER_WORDS = PARAMETER_AREA_WORDS[ParameterArea.ALL]
 
 
 #: Error code ranges → (fatal?, bit of the 0601 fatal / non-fatal error word), per the
 #: error codes of 5-3-27 and the 0601 bit layout (wire-format §6, 0601).
 _ERROR_BITS: tuple[tuple[int, int, bool, int], ...] = (
-    (0xC101, 0xC2FF, True, 0x0040),  # FALS
-    (0x80F1, 0x80F1, True, 0x8000),  # memory error
-    (0x80C0, 0x80C7, True, 0x4000),  # I/O bus error
-    (0x80E9, 0x80EA, True, 0x2000),  # duplication error
-    (0x82F0, 0x82F0, True, 0x1000),  # inner board (fatal)
-    (0x80E1, 0x80E1, True, 0x0800),  # too many I/O points
-    (0x80E0, 0x80E0, True, 0x0400),  # I/O setting error
-    (0x80F0, 0x80F0, True, 0x0200),  # program error
-    (0x809F, 0x809F, True, 0x0100),  # cycle time over
-    (0x4101, 0x42FF, False, 0x8000),  # FAL
-    (0x008B, 0x008B, False, 0x2000),  # interrupt task error
-    (0x009A, 0x009A, False, 0x1000),  # basic I/O unit error
-    (0x009B, 0x009B, False, 0x0400),  # PLC Setup error
-    (0x00E7, 0x00E7, False, 0x0200),  # I/O verification error
-    (0x02F0, 0x02F0, False, 0x0100),  # inner board (non-fatal)
-    (0x0200, 0x020F, False, 0x0080),  # CPU Bus Unit error
-    (0x0300, 0x035F, False, 0x0040),  # Special I/O Unit error
-    (0x00A0, 0x00A1, False, 0x0020),  # SYSMAC BUS error
-    (0x00F7, 0x00F7, False, 0x0010),  # battery error
-    (0x0400, 0x040F, False, 0x0008),  # CPU Bus Unit setting error
-    (0x0500, 0x055F, False, 0x0004),  # Special I/O Unit setting error
+    (0xC101, 0xC2FF, True, FatalError.FALS_ERROR),
+    (0x80F1, 0x80F1, True, FatalError.MEMORY_ERROR),
+    (0x80C0, 0x80C7, True, FatalError.IO_BUS_ERROR),
+    (0x80E9, 0x80EA, True, FatalError.DUPLICATION_ERROR),
+    (0x82F0, 0x82F0, True, FatalError.INNER_BOARD_ERROR),
+    (0x80E1, 0x80E1, True, FatalError.TOO_MANY_IO_POINTS),
+    (0x80E0, 0x80E0, True, FatalError.IO_SETTING_ERROR),
+    (0x80F0, 0x80F0, True, FatalError.PROGRAM_ERROR),
+    (0x809F, 0x809F, True, FatalError.CYCLE_TIME_OVER),
+    (0x4101, 0x42FF, False, NonFatalError.FAL_ERROR),
+    (0x008B, 0x008B, False, NonFatalError.INTERRUPT_TASK_ERROR),
+    (0x009A, 0x009A, False, NonFatalError.BASIC_IO_UNIT_ERROR),
+    (0x009B, 0x009B, False, NonFatalError.PLC_SETUP_ERROR),
+    (0x00E7, 0x00E7, False, NonFatalError.IO_VERIFICATION_ERROR),
+    (0x02F0, 0x02F0, False, NonFatalError.INNER_BOARD_ERROR),
+    (0x0200, 0x020F, False, NonFatalError.CPU_BUS_UNIT_ERROR),
+    (0x0300, 0x035F, False, NonFatalError.SPECIAL_IO_UNIT_ERROR),
+    (0x00A0, 0x00A1, False, NonFatalError.SYSMAC_BUS_ERROR),
+    (0x00F7, 0x00F7, False, NonFatalError.BATTERY_ERROR),
+    (0x0400, 0x040F, False, NonFatalError.CPU_BUS_UNIT_SETTING_ERROR),
+    (0x0500, 0x055F, False, NonFatalError.SPECIAL_IO_UNIT_SETTING_ERROR),
 )
 
 
@@ -72,7 +87,7 @@ def error_bit(code: int) -> tuple[bool, int]:
     """(fatal?, error-word bit) of an error code; unknown codes count as non-fatal, no bit."""
     for low, high, fatal, bit in _ERROR_BITS:
         if low <= code <= high:
-            return fatal, bit
+            return fatal, int(bit)
     return False, 0
 
 
@@ -111,7 +126,7 @@ class VirtualPLC:
         um_write_protected: bool = False,
         network_write_protection: bool = False,
         write_allowed_nodes: Iterable[tuple[int, int]] = (),
-        relay_error: int | None = 0x0501,
+        relay_error: int | None = NO_ROUTE,
         em_banks: int = 25,
         memory_card: bool = True,
         em_file_memory: bool = True,
@@ -151,9 +166,11 @@ class VirtualPLC:
         self.parameter_memory = bytearray(2 * PARAMETER_WORDS)
         self.file_memory: dict[int, FileMemory] = {}
         if memory_card:
-            self.file_memory[0x8000] = FileMemory(capacity=64 * 1024 * 1024, clock=self.now)
+            self.file_memory[Disk.MEMORY_CARD] = FileMemory(
+                capacity=64 * 1024 * 1024, clock=self.now
+            )
         if em_file_memory:
-            self.file_memory[0x8001] = FileMemory(capacity=512 * 1024, clock=self.now)
+            self.file_memory[Disk.EM_FILE_MEMORY] = FileMemory(capacity=512 * 1024, clock=self.now)
         self.frames_handled = 0
         self.frames_ignored = 0
         self.commands: Counter[int] = Counter()
@@ -326,11 +343,11 @@ class VirtualPLC:
         refused = restrictions.check_row(row, self.conditions(source, from_network=from_network))
         if refused is not None:
             holder = self.access_holder
-            if code == 0x0C01 and refused == restrictions.ACCESS_RIGHT_HELD and holder:
+            if code == 0x0C01 and refused == ACCESS_RIGHT_HELD and holder:
                 return refused, bytes((holder.network, holder.node, holder.unit))
             return refused, b""
         try:
-            return 0, handler(self, Call(code, params, source, request))
+            return NORMAL, handler(self, Call(code, params, source, request))
         except CommandFailed as exc:
             return exc.end_code, exc.data
         except DecodeError as exc:

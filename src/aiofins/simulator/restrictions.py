@@ -16,17 +16,26 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .state import Mode
+from .state import (
+    ACCESS_RIGHT_HELD,
+    NETWORK_WRITE_PROTECTED,
+    UM_READ_PROTECTED,
+    UM_WRITE_PROTECTED,
+    WRONG_MODE_MONITOR,
+    WRONG_MODE_PROGRAM,
+    WRONG_MODE_RUN,
+    Mode,
+)
 
 OK = True
 NO = False
 
-#: End code per refused condition.
-MODE_END_CODES: dict[Mode, int] = {Mode.RUN: 0x2206, Mode.MONITOR: 0x2205, Mode.PROGRAM: 0x2203}
-NETWORK_WRITE_PROTECTED = 0x2102
-ACCESS_RIGHT_HELD = 0x3001
-UM_READ_PROTECTED = 0x2002
-UM_WRITE_PROTECTED = 0x2101
+#: Wrong-mode end code per mode the PLC is in (the other refusals are named in state.py).
+MODE_END_CODES: dict[Mode, int] = {
+    Mode.RUN: WRONG_MODE_RUN,
+    Mode.MONITOR: WRONG_MODE_MONITOR,
+    Mode.PROGRAM: WRONG_MODE_PROGRAM,
+}
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ import anyio
 import serial  # type: ignore[import-untyped]  # no types-pyserial in the env
 from anyio.abc import TaskStatus
 
-from ..protocol.endcodes import EndCode
+from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG, EndCode
 from ..protocol.errors import DecodeError
 from ..protocol.header import ICF_NO_RESPONSE, ICF_RESPONSE, ResponseFrame
 from ..protocol.hostlink import (
@@ -30,9 +30,7 @@ from ..protocol.hostlink import (
     encode_response,
 )
 from .faults import Dispatcher
-
-#: End code 110B, "response too long" (manual 5-1-3).
-RESPONSE_TOO_LONG = 0x110B
+from .state import RESPONSE_TOO_LONG
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,7 +113,7 @@ class SerialServer:
             frame = ResponseFrame.decode(response)
             if len(frame.data) > MAX_RESPONSE_DATA_BYTES:
                 # 110B response too long: a Host Link response carries at most 538 data bytes
-                flags = frame.end_code.raw & 0x00C0
+                flags = frame.end_code.raw & (FATAL_CPU_ERROR_FLAG | NON_FATAL_CPU_ERROR_FLAG)
                 frame = dataclasses.replace(
                     frame, end_code=EndCode(RESPONSE_TOO_LONG | flags), data=b"", relay=None
                 )

@@ -21,6 +21,7 @@ from ...protocol.commands.message import (
     MessageRead,
     Messages,
 )
+from ...protocol.commands.program import PROGRAM_NUMBER
 from ..state import PARAMETER_ERROR, PROGRAM_NUMBER_MISSING, CommandFailed
 from ._call import Call, Handler, request_of
 
@@ -70,7 +71,7 @@ def message(plc: VirtualPLC, call: Call) -> bytes:
 
 
 def _check_program_number(number: int) -> None:
-    if number != 0xFFFF:  # 1106: FFFF hex was not specified (manual 5-1-3)
+    if number != PROGRAM_NUMBER:  # 1106: FFFF hex was not specified (manual 5-1-3)
         raise CommandFailed(PROGRAM_NUMBER_MISSING, message="program number must be FFFF")
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ...protocol.commands.errorlog import (
+    CLEAR_ALL_ERRORS,
+    CLEAR_CURRENT_ERROR,
     ErrorClear,
     ErrorLog,
     ErrorLogClear,
@@ -28,21 +30,29 @@ from ._call import Call, Handler, request_of
 if TYPE_CHECKING:
     from ..plc import VirtualPLC
 
-ALL_ERRORS = 0xFFFF
-CURRENT_ERROR = 0xFFFE
 #: Error codes ERROR CLEAR accepts only in PROGRAM mode (5-3-27's second table).
 _PROGRAM_ONLY = frozenset(
-    (0xFFFF, 0x809F, *range(0x80C0, 0x80C8), 0x80E0, 0x80E1, 0x80E9, 0x80EA, 0x80F0, 0x80F1)
+    (
+        CLEAR_ALL_ERRORS,
+        0x809F,
+        *range(0x80C0, 0x80C8),
+        0x80E0,
+        0x80E1,
+        0x80E9,
+        0x80EA,
+        0x80F0,
+        0x80F1,
+    )
 ) | frozenset((0x82F0, *range(0xC101, 0xC300)))
 MAX_RESPONSE_DATA = 1998
 
 
 def error_clear(plc: VirtualPLC, call: Call) -> bytes:
     code = request_of(call, ErrorClear).error_code
-    target = plc.current_errors[0] if code == CURRENT_ERROR and plc.current_errors else code
+    target = plc.current_errors[0] if code == CLEAR_CURRENT_ERROR and plc.current_errors else code
     if (code in _PROGRAM_ONLY or target in _PROGRAM_ONLY) and plc.mode is not Mode.PROGRAM:
         raise CommandFailed(MODE_END_CODES[plc.mode], message="clearable in PROGRAM mode only")
-    if code == ALL_ERRORS:
+    if code == CLEAR_ALL_ERRORS:
         plc.current_errors.clear()
     elif target in plc.current_errors:  # normal end even when the error is not present
         plc.current_errors.remove(target)

@@ -27,7 +27,6 @@ from ...protocol.commands.file import (
 from ...protocol.files import (
     DirectoryOperation,
     DiskData,
-    FileAttribute,
     FileDate,
     FileEntry,
     FileNameReadResult,
@@ -76,8 +75,7 @@ def file_name_read(plc: VirtualPLC, call: Call) -> bytes:
         total_files=len(entries),
     )
     files = tuple(
-        FileEntry(e.name, FileDate.from_datetime(e.time), e.size, FileAttribute(e.attribute))
-        for e in chosen
+        FileEntry(e.name, FileDate.from_datetime(e.time), e.size, e.attribute) for e in chosen
     )
     return FileNameReadResult(disk, files, begin + len(chosen) >= len(entries)).encode()
 

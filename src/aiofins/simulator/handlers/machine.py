@@ -16,6 +16,8 @@ from ...protocol.commands.machine import (
     UnitModel,
 )
 from ...protocol.commands.status import (
+    STATUS_BATTERY_PRESENT,
+    STATUS_RUNNING,
     CpuMode,
     CpuUnitStatus,
     CpuUnitStatusRead,
@@ -25,6 +27,7 @@ from ...protocol.commands.status import (
     FatalError,
     NonFatalError,
 )
+from ...protocol.files import Disk
 from ..state import Mode
 from ._call import Call, Handler, request_of
 
@@ -32,13 +35,11 @@ if TYPE_CHECKING:
     from ..plc import VirtualPLC
 
 CPU_UNIT = 0x00
-BATTERY_PRESENT = 0x04
-RUNNING = 0x01
 MEMORY_CARD_FLASH = 0x04
 
 
 def _model_data(plc: VirtualPLC) -> CpuUnitModelData:
-    card = plc.file_memory.get(0x8000)
+    card = plc.file_memory.get(Disk.MEMORY_CARD)
     area = AreaData(
         program_area_size=len(plc.program) // 2048,  # K words
         iom_size=23,
@@ -81,7 +82,7 @@ def connection_data_read(plc: VirtualPLC, call: Call) -> bytes:
 def cpu_unit_status_read(plc: VirtualPLC, call: Call) -> bytes:
     request_of(call, CpuUnitStatusRead)
     return CpuUnitStatus(
-        status=BATTERY_PRESENT | (RUNNING if plc.mode is not Mode.PROGRAM else 0),
+        status=STATUS_BATTERY_PRESENT | (STATUS_RUNNING if plc.mode is not Mode.PROGRAM else 0),
         mode=CpuMode(int(plc.mode)),
         fatal_errors=FatalError(plc.fatal_errors),
         non_fatal_errors=NonFatalError(plc.non_fatal_errors),

@@ -11,6 +11,9 @@ from typing import TYPE_CHECKING
 
 from ...protocol.codec import Reader
 from ...protocol.commands.parameter import (
+    MAX_PARAMETER_WORDS,
+    PARAMETER_AREA_WORDS,
+    ParameterArea,
     ParameterAreaClear,
     ParameterAreaReadResult,
     ParameterAreaWrite,
@@ -21,6 +24,7 @@ from ..state import (
     ADDRESS_RANGE_EXCEEDED,
     AREA_MISSING,
     PARAMETER_ERROR,
+    TOO_MANY_WORDS,
     CommandFailed,
     Mode,
 )
@@ -29,18 +33,30 @@ from ._call import Call, Handler, request_of
 if TYPE_CHECKING:
     from ..plc import VirtualPLC
 
-MAX_WORDS = 498
-TOO_MANY_WORDS = 0x1108  # manual 5-3-7: more than 498 words asked, 498 returned
+MAX_WORDS = MAX_PARAMETER_WORDS
 LAST_WORD = 0x8000  # bit 15 of a word count
-IO_TABLE = 0x8012
+IO_TABLE = ParameterArea.IO_TABLE
+
+
+def _layout(*order: ParameterArea) -> dict[int, tuple[int, int]]:
+    """8000 spans the whole store; the other areas lie end to end from word 0, in ``order``."""
+    out: dict[int, tuple[int, int]] = {
+        ParameterArea.ALL: (0, PARAMETER_AREA_WORDS[ParameterArea.ALL])
+    }
+    base = 0
+    for area in order:
+        out[area] = (base, PARAMETER_AREA_WORDS[area])
+        base += PARAMETER_AREA_WORDS[area]
+    return out
+
+
 #: Parameter area code → (first word in the 8000 store, number of words).
-LAYOUT: dict[int, tuple[int, int]] = {
-    0x8000: (0, 8000),
-    0x8010: (0, 512),
-    0x8012: (512, 1280),
-    0x8013: (1792, 512),
-    0x8002: (2304, 5184),
-}
+LAYOUT = _layout(
+    ParameterArea.PLC_SETUP,
+    ParameterArea.IO_TABLE,
+    ParameterArea.ROUTING_TABLES,
+    ParameterArea.CPU_BUS_UNIT_SETUP,
+)
 
 
 def _area(code: int) -> tuple[int, int]:
