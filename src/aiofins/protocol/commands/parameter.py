@@ -20,7 +20,8 @@ from ._base import Request, _Rejected, expect_no_data
 #: Words per 02 01 / 02 02 command (manual 5-3-7, 5-3-8).
 MAX_PARAMETER_WORDS = 498
 
-_LAST_WORD = 0x8000
+#: Bit 15 of a 02 01 / 02 02 word count: this block reaches the area's last word.
+LAST_WORD = 0x8000
 
 
 # manual wins: the CV-only codes 8001 and 8011 of the wire-format notes are not accepted.
@@ -101,7 +102,7 @@ def _read_head(r: Reader) -> tuple[int, int, int]:
 
 def _block(area_code: int, begin_word: int, words: tuple[int, ...], last: bool | None) -> bytes:
     """The head with bit 15 of the number of words set for ``last``, then the words."""
-    count = len(words) | (_LAST_WORD if last else 0)
+    count = len(words) | (LAST_WORD if last else 0)
     return _head(area_code, begin_word, count) + _words_bytes(words)
 
 
@@ -152,7 +153,7 @@ class ParameterAreaRead(Request[ParameterAreaReadResult]):
         r = Reader(params, cls.NAME)
         area_code, begin_word, count = _read_head(r)
         r.end()
-        if count & _LAST_WORD:
+        if count & LAST_WORD:
             raise DecodeError(
                 f"{cls.NAME}: bit 15 of the number of words must be 0", end_code=0x110C
             )
@@ -164,7 +165,7 @@ class ParameterAreaRead(Request[ParameterAreaReadResult]):
         area_code, begin_word, count = _read_head(r)
         words = _bytes_words(r.take(2 * (count & 0x7FFF)))
         r.end()
-        return ParameterAreaReadResult(area_code, begin_word, words, bool(count & _LAST_WORD))
+        return ParameterAreaReadResult(area_code, begin_word, words, bool(count & LAST_WORD))
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,7 @@ class ParameterAreaWrite(Request[None]):
                 f"{cls.NAME}: {words} words need {2 * words} data bytes, got {len(data)}",
                 end_code=0x1003,
             )
-        last = bool(count & _LAST_WORD)
+        last = bool(count & LAST_WORD)
         with as_decode_error(cls.NAME):
             return cls(area_code, begin_word, _bytes_words(data), last)
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from ...protocol.codec import Reader
 from ...protocol.commands.parameter import (
+    LAST_WORD,
     MAX_PARAMETER_WORDS,
     PARAMETER_AREA_WORDS,
     ParameterArea,
@@ -34,7 +35,6 @@ if TYPE_CHECKING:
     from ..plc import VirtualPLC
 
 MAX_WORDS = MAX_PARAMETER_WORDS
-LAST_WORD = 0x8000  # bit 15 of a word count
 IO_TABLE = ParameterArea.IO_TABLE
 
 
