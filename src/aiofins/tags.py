@@ -134,9 +134,7 @@ class ReadPlan:
         cache = self.cache
         if "steps" not in cache:
             cache["steps"] = _compile_steps(self)
-        steps: list[_Step] | None = cache["steps"]
-        if steps is None:
-            return self._decode_by_address(run_words, multiple_values)
+        steps: list[_Step] = cache["steps"]
         flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
         out: dict[str, Value] = {}
         for name, op, at, arg in steps:
@@ -159,36 +157,6 @@ class ReadPlan:
                 out[name] = arg.decode([flat[i] for i in at])
         return out
 
-    def _decode_by_address(
-        self,
-        run_words: Sequence[Sequence[int]],
-        multiple_values: Sequence[Sequence[int]],
-    ) -> dict[str, Value]:
-        """The general decoder (a plan whose words cannot all be found fails here)."""
-        words: dict[tuple[int, int], int] = {}
-        for run, values in zip(self.runs, run_words, strict=True):
-            for i, v in enumerate(values):
-                words[(run.area_code, run.word + i)] = v
-        elements: dict[MemoryAddress, int] = {}
-        for frame, values in zip(self.multiple, multiple_values, strict=True):
-            elements.update(zip(frame, values, strict=True))
-        out: dict[str, Value] = {}
-        for tag in self.tags:
-            area = tag.word_area
-            if area is None:
-                out[tag.name] = bool(elements[tag.address] & 1)
-                continue
-            if tag.vtype.kind == "bit":
-                word = _word_value(words, elements, area, tag.address.word)
-                out[tag.name] = bool((word >> tag.address.bit) & 1)
-                continue
-            span = [
-                _word_value(words, elements, area, tag.address.word + i)
-                for i in range(tag.vtype.words)
-            ]
-            out[tag.name] = tag.vtype.decode(span)
-        return out
-
 
 # Decoding steps: (tag name, op, index or indices into the flat results, argument).
 _BIT, _FLAG, _UINT16, _NUMBER, _OTHER = "bit", "flag", "uint16", "number", "other"
@@ -206,11 +174,11 @@ _STRUCT_CODES = {
 _Step = tuple[str, str, Any, Any]
 
 
-def _compile_steps(plan: ReadPlan) -> list[_Step] | None:
+def _compile_steps(plan: ReadPlan) -> list[_Step]:
     """Where each tag's words sit in the flat results, and how to decode them.
 
-    The same precedence as the general decoder: a word from the last 0101 run holding it,
-    else from the last 0104 element naming it. ``None`` if some word is in no frame.
+    A word comes from the last 0101 run holding it, else from the last 0104 element naming
+    it. A plan with a tag whose word is in no frame (built by hand) raises DecodeError.
     """
     index: dict[tuple[int, int], int] = {}
     at = 0
@@ -234,7 +202,7 @@ def _compile_steps(plan: ReadPlan) -> list[_Step] | None:
         if area is None:
             flag = elements.get(tag.address)
             if flag is None:
-                return None
+                raise _not_in_plan(tag, tag.address.word)
             steps.append((tag.name, _FLAG, flag, None))
             continue
         spots = [
@@ -242,7 +210,7 @@ def _compile_steps(plan: ReadPlan) -> list[_Step] | None:
             for i in range(1 if vtype.kind == "bit" else vtype.words)
         ]
         if None in spots:
-            return None
+            raise _not_in_plan(tag, tag.address.word + spots.index(None))
         where = [i for i in spots if i is not None]
         if vtype.kind == "bit":
             steps.append((tag.name, _BIT, where[0], tag.address.bit))
@@ -257,6 +225,12 @@ def _compile_steps(plan: ReadPlan) -> list[_Step] | None:
 
 
 _UNSWAPPED = (WordOrder.LOW_FIRST, WordOrder.HIGH_FIRST)
+
+
+def _not_in_plan(tag: Tag, word: int) -> DecodeError:
+    return DecodeError(
+        f"tag {tag.name!r} ({tag.address}): word {word} is in none of the plan's frames"
+    )
 
 
 def _value_order(spots: list[int], vtype: ValueType) -> list[int]:
@@ -277,18 +251,6 @@ def _codec(
     pack = struct.Struct(f"{'<' if swapped else '>'}{n}H").pack
     unpack = struct.Struct(">" + _STRUCT_CODES[vtype.kind]).unpack
     return pack, unpack, vtype
-
-
-def _word_value(
-    words: dict[tuple[int, int], int],
-    elements: dict[MemoryAddress, int],
-    area: int,
-    word: int,
-) -> int:
-    got = words.get((area, word))
-    if got is None:
-        got = elements[MemoryAddress(area, word, 0)]
-    return got
 
 
 def compile_tags(

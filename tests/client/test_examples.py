@@ -19,10 +19,11 @@ def test_polling_daemon_prints_changes_of_two_plcs() -> None:
         text=True,
         timeout=60,
     )
-    assert result.returncode == 0, result.stderr
+    seen = f"stdout:\n{result.stdout}\nstderr:\n{result.stderr}"
+    assert result.returncode == 0, seen
     lines = [json.loads(line) for line in result.stdout.splitlines()]
-    assert {line["plc"] for line in lines} == {"plc0", "plc1"}
-    assert lines[0]["changed"]["temperature"] == [0.0, "good"]
+    assert {line["plc"] for line in lines} == {"plc0", "plc1"}, seen
+    assert lines[0]["changed"]["temperature"] == [0.0, "good"], seen
 
 
 def test_fastapi_app_serves_reads_and_writes() -> None:

@@ -7,9 +7,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from aiofins.protocol.areas import MemoryAddress
-from aiofins.protocol.errors import CommandError
+from aiofins.protocol.errors import CommandError, DecodeError
 from aiofins.protocol.values import parse_value_type
-from aiofins.tags import WordRun, compile_tags
+from aiofins.tags import ReadPlan, WordRun, compile_tags
 
 
 def test_neighbouring_words_and_bits_share_one_frame() -> None:
@@ -60,6 +60,13 @@ def test_decode_gives_typed_values() -> None:
     plan = compile_tags({"temp": "D100:float32", "flag": "D102.01", "n": "D103:int16"})
     words = [0x0000, 0x3FC0, 0x0002, 0xFFFF]
     assert plan.decode([words], []) == {"temp": 1.5, "flag": True, "n": -1}
+
+
+def test_a_hand_built_plan_missing_a_word_names_the_tag() -> None:
+    plan = compile_tags({"temp": "D100:float32"})
+    short = ReadPlan(plan.tags, (WordRun(0x82, 100, 1),), ())  # D101 in no frame
+    with pytest.raises(DecodeError, match=r"'temp' \(D100\): word 101"):
+        short.decode([[0]], [])
 
 
 def test_bad_tags_are_refused() -> None:
