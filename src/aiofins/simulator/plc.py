@@ -16,7 +16,8 @@ from datetime import datetime
 from typing import Any
 
 from ..protocol.commands import Request, operation_for
-from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
+from ..protocol.commands.access import AccessRightAcquire
+from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea, ParameterAreaRead
 from ..protocol.commands.status import FatalError, NonFatalError
 from ..protocol.endcodes import (
     FATAL_CPU_ERROR_FLAG,
@@ -51,7 +52,12 @@ PROGRAM_AREA_BYTES = 0x20000  # 128 KiB of UM (CJ2M-CPU33: 10 K steps; kept simp
 #: (command, codec end code) pairs where the manual prescribes data with the error, so the
 #: handler answers instead of the codec: 0201 over 498 words reads 498 and answers 1108;
 #: 0201 past the end of the area returns what exists with 1104 (manual 5-3-7).
-_HANDLER_DECIDES = frozenset({(0x0201, TOO_MANY_WORDS), (0x0201, ADDRESS_RANGE_EXCEEDED)})
+_HANDLER_DECIDES = frozenset(
+    (ParameterAreaRead.command_code(), end_code)
+    for end_code in (TOO_MANY_WORDS, ADDRESS_RANGE_EXCEEDED)
+)
+#: ACCESS RIGHT ACQUIRE refused with 3001 answers the holder's address (manual 5-3-24).
+_ACCESS_RIGHT_ACQUIRE = AccessRightAcquire.command_code()
 #: The whole parameter area, code 8000 (manual 5-3-7).
 PARAMETER_WORDS = PARAMETER_AREA_WORDS[ParameterArea.ALL]
 
@@ -343,7 +349,7 @@ class VirtualPLC:
         refused = restrictions.check_row(row, self.conditions(source, from_network=from_network))
         if refused is not None:
             holder = self.access_holder
-            if code == 0x0C01 and refused == ACCESS_RIGHT_HELD and holder:
+            if code == _ACCESS_RIGHT_ACQUIRE and refused == ACCESS_RIGHT_HELD and holder:
                 return refused, bytes((holder.network, holder.node, holder.unit))
             return refused, b""
         try:

@@ -16,6 +16,53 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..protocol.commands.access import (
+    AccessRightAcquire,
+    AccessRightForcedAcquire,
+    AccessRightRelease,
+)
+from ..protocol.commands.clock import ClockRead, ClockWrite
+from ..protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel
+from ..protocol.commands.errorlog import (
+    ErrorClear,
+    ErrorLogClear,
+    ErrorLogRead,
+    FinsWriteAccessLogClear,
+    FinsWriteAccessLogRead,
+)
+from ..protocol.commands.file import (
+    CreateDeleteDirectory,
+    FileCopy,
+    FileDelete,
+    FileMemoryFormat,
+    FileNameChange,
+    FileNameRead,
+    MemoryAreaFileTransfer,
+    MemoryCassetteTransfer,
+    ParameterAreaFileTransfer,
+    ProgramAreaFileTransfer,
+    SingleFileRead,
+    SingleFileWrite,
+)
+from ..protocol.commands.gateway import (
+    ConvertToCompowayFCommand,
+    ConvertToModbusAsciiCommand,
+    ConvertToModbusRtuCommand,
+)
+from ..protocol.commands.machine import ConnectionDataRead, CpuUnitDataRead
+from ..protocol.commands.memory import (
+    MemoryAreaFill,
+    MemoryAreaRead,
+    MemoryAreaTransfer,
+    MemoryAreaWrite,
+    MultipleMemoryAreaRead,
+)
+from ..protocol.commands.message import FalFalsRead, MessageClear, MessageRead
+from ..protocol.commands.mode import Run, Stop
+from ..protocol.commands.parameter import ParameterAreaClear, ParameterAreaRead, ParameterAreaWrite
+from ..protocol.commands.program import ProgramAreaClear, ProgramAreaRead, ProgramAreaWrite
+from ..protocol.commands.status import CpuUnitStatusRead, CycleTimeRead
+from .codes import Operation
 from .state import (
     ACCESS_RIGHT_HELD,
     NETWORK_WRITE_PROTECTED,
@@ -65,77 +112,87 @@ _PARAMETER_WRITE = _r(OK, OK, OK, NO, OK, NO, NO)
 _PROGRAM_WRITE = _r(NO, NO, OK, NO, OK, NO, NO)
 _DEBUG = _r(NO, OK, OK, OK, OK, OK, NO)
 
-#: Command code (or ``(code, variant)``) → restriction row, in the manual's order.
-RESTRICTIONS: dict[int | tuple[int, str], Restriction] = {
-    0x0101: _READ,
-    0x0102: _WRITE,
-    0x0103: _WRITE,
-    0x0104: _READ,
-    0x0105: _WRITE,
-    0x0201: _READ,
-    0x0202: _PARAMETER_WRITE,
-    0x0203: _PARAMETER_WRITE,
-    0x0306: _r(OK, OK, OK, OK, NO, OK, OK),
-    0x0307: _PROGRAM_WRITE,
-    0x0308: _PROGRAM_WRITE,
-    0x0401: _CONTROL,
-    0x0402: _CONTROL,
-    0x0501: _READ,
-    0x0502: _READ,
-    0x0601: _READ,
-    0x0620: _r(OK, OK, NO, OK, OK, OK, OK),
-    0x0701: _READ,
+#: Operation (or ``(operation, variant)``) → restriction row, in the manual's order.
+_ROWS: dict[Operation | tuple[Operation, str], Restriction] = {
+    MemoryAreaRead: _READ,
+    MemoryAreaWrite: _WRITE,
+    MemoryAreaFill: _WRITE,
+    MultipleMemoryAreaRead: _READ,
+    MemoryAreaTransfer: _WRITE,
+    ParameterAreaRead: _READ,
+    ParameterAreaWrite: _PARAMETER_WRITE,
+    ParameterAreaClear: _PARAMETER_WRITE,
+    ProgramAreaRead: _r(OK, OK, OK, OK, NO, OK, OK),
+    ProgramAreaWrite: _PROGRAM_WRITE,
+    ProgramAreaClear: _PROGRAM_WRITE,
+    Run: _CONTROL,
+    Stop: _CONTROL,
+    CpuUnitDataRead: _READ,
+    ConnectionDataRead: _READ,
+    CpuUnitStatusRead: _READ,
+    CycleTimeRead: _r(OK, OK, NO, OK, OK, OK, OK),
+    ClockRead: _READ,
     # manual wins: the 5-1-2 network-protection cell of 0702 is blank; 5-1-1 note 1 and the
     # command's own table (5-3-20) both refuse it.
-    0x0702: _CONTROL,
+    ClockWrite: _CONTROL,
     # 0920: only MESSAGE CLEAR is refused while another node holds the access right (5-1-2).
     # manual wins: 5-1-2 marks the whole row "Disabled" under network protection, but 5-1-1
     # note 1 does not list 0920 and 5-3-21..23 say OK; only CLEAR writes, so only it is refused.
-    (0x0920, "read"): _READ,
-    (0x0920, "clear"): _CONTROL,
-    (0x0920, "fal"): _READ,
-    0x0C01: _CONTROL,
-    0x0C02: _READ,
-    0x0C03: _READ,
-    0x2101: _CONTROL,
-    0x2102: _READ,
-    0x2103: _r(OK, OK, OK, OK, OK, OK, NO),
-    0x2140: _READ,
-    0x2141: _CONTROL,
-    0x2201: _READ,
-    0x2202: _READ,
-    0x2203: _CONTROL,
-    0x2204: _CONTROL,
-    0x2205: _CONTROL,
-    0x2207: _CONTROL,
-    0x2208: _CONTROL,
-    0x220A: _CONTROL,
+    (MessageRead, "read"): _READ,
+    (MessageClear, "clear"): _CONTROL,
+    (FalFalsRead, "fal"): _READ,
+    AccessRightAcquire: _CONTROL,
+    AccessRightForcedAcquire: _READ,
+    AccessRightRelease: _READ,
+    ErrorClear: _CONTROL,
+    ErrorLogRead: _READ,
+    ErrorLogClear: _r(OK, OK, OK, OK, OK, OK, NO),
+    FinsWriteAccessLogRead: _READ,
+    FinsWriteAccessLogClear: _CONTROL,
+    FileNameRead: _READ,
+    SingleFileRead: _READ,
+    SingleFileWrite: _CONTROL,
+    FileMemoryFormat: _CONTROL,
+    FileDelete: _CONTROL,
+    FileCopy: _CONTROL,
+    FileNameChange: _CONTROL,
+    MemoryAreaFileTransfer: _CONTROL,
     # Notes 1-3: file-to-area transfers are refused in RUN/MONITOR (and 220B under DIP
     # protection); 220C program-to-file transfers are allowed under DIP protection.
-    (0x220B, "to_file"): _CONTROL,
-    (0x220B, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
-    (0x220B, "compare"): _CONTROL,
-    (0x220C, "to_file"): _CONTROL,
-    (0x220C, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
-    (0x220C, "compare"): _CONTROL,
-    0x2215: _CONTROL,
-    0x2220: _r(NO, NO, OK, NO, OK, OK, NO),
-    0x2301: _DEBUG,
-    0x2302: _DEBUG,
-    0x2803: _READ,
-    0x2804: _READ,
-    0x2805: _READ,
+    (ParameterAreaFileTransfer, "to_file"): _CONTROL,
+    (ParameterAreaFileTransfer, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
+    (ParameterAreaFileTransfer, "compare"): _CONTROL,
+    (ProgramAreaFileTransfer, "to_file"): _CONTROL,
+    (ProgramAreaFileTransfer, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
+    (ProgramAreaFileTransfer, "compare"): _CONTROL,
+    CreateDeleteDirectory: _CONTROL,
+    MemoryCassetteTransfer: _r(NO, NO, OK, NO, OK, OK, NO),
+    ForcedSetReset: _DEBUG,
+    ForcedSetResetCancel: _DEBUG,
+    ConvertToCompowayFCommand: _READ,
+    ConvertToModbusRtuCommand: _READ,
+    ConvertToModbusAsciiCommand: _READ,
+}
+
+#: Command code (or ``(code, variant)``) → restriction row, in the manual's order.
+RESTRICTIONS: dict[int | tuple[int, str], Restriction] = {
+    (key[0].command_code(), key[1]) if isinstance(key, tuple) else key.command_code(): row
+    for key, row in _ROWS.items()
 }
 
 _VARIANT_CODES = frozenset(k[0] for k in RESTRICTIONS if isinstance(k, tuple))
+_MESSAGE = MessageRead.command_code()  # MessageClear and FalFalsRead share it
+_AREA_FILE_TRANSFERS = frozenset(
+    op.command_code() for op in (ParameterAreaFileTransfer, ProgramAreaFileTransfer)
+)
 
 
 def variant(command_code: int, params: bytes) -> str | None:
     """Which row of a command with several rows applies (0920, 220B, 220C)."""
-    if command_code == 0x0920:
+    if command_code == _MESSAGE:
         top = (params[0] >> 6) if params else 0
         return {0: "read", 1: "clear"}.get(top, "fal")
-    if command_code in (0x220B, 0x220C):
+    if command_code in _AREA_FILE_TRANSFERS:
         code = int.from_bytes(params[:2], "big") if len(params) >= 2 else 0
         return {0: "to_file", 1: "from_file"}.get(code, "compare")
     return None

@@ -8,6 +8,8 @@ Execution conditions (manual 5-1-2) are checked by the PLC before a handler runs
 
 from __future__ import annotations
 
+from ...protocol.commands.file import MemoryCassetteTransfer
+from ..codes import Operation
 from ._call import Call, GatewayHandler, Handler
 from .access import HANDLERS as _ACCESS
 from .debug import HANDLERS as _DEBUG
@@ -19,6 +21,10 @@ from .machine import HANDLERS as _MACHINE
 from .memory import HANDLERS as _MEMORY
 from .parameter import HANDLERS as _PARAMETER
 from .program import HANDLERS as _PROGRAM
+
+#: Operations the virtual PLC has no handler for: a CJ2M has no Memory Cassette, so 2220
+#: is answered ``0401`` (undefined command) before any other check.
+UNANSWERED: tuple[Operation, ...] = (MemoryCassetteTransfer,)
 
 #: Command code → handler, for every command the virtual PLC answers.
 HANDLERS: dict[int, Handler] = {
@@ -33,4 +39,4 @@ HANDLERS: dict[int, Handler] = {
     **_GATEWAY,
 }
 
-__all__ = ["HANDLERS", "Call", "GatewayHandler", "Handler", "default_gateway"]
+__all__ = ["HANDLERS", "UNANSWERED", "Call", "GatewayHandler", "Handler", "default_gateway"]

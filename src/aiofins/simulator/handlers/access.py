@@ -22,6 +22,7 @@ from ...protocol.commands.message import (
     Messages,
 )
 from ...protocol.commands.program import PROGRAM_NUMBER
+from ..codes import by_command_code
 from ..state import PARAMETER_ERROR, PROGRAM_NUMBER_MISSING, CommandFailed
 from ._call import Call, Handler, request_of
 
@@ -93,9 +94,13 @@ def access_right_release(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x0920: message,
-    0x0C01: access_right_acquire,
-    0x0C02: access_right_forced_acquire,
-    0x0C03: access_right_release,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        MessageRead: message,
+        MessageClear: message,
+        FalFalsRead: message,
+        AccessRightAcquire: access_right_acquire,
+        AccessRightForcedAcquire: access_right_forced_acquire,
+        AccessRightRelease: access_right_release,
+    }
+)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ...protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel
+from ..codes import by_command_code
 from ._call import Call, Handler, request_of
 
 if TYPE_CHECKING:
@@ -30,4 +31,6 @@ def forced_set_reset_cancel(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {0x2301: forced_set_reset, 0x2302: forced_set_reset_cancel}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {ForcedSetReset: forced_set_reset, ForcedSetResetCancel: forced_set_reset_cancel}
+)

@@ -17,6 +17,7 @@ from ...protocol.commands.errorlog import (
     FinsWriteAccessLogRead,
     FinsWriteAccessRecord,
 )
+from ..codes import by_command_code
 from ..restrictions import MODE_END_CODES
 from ..state import (
     ADDRESS_RANGE_ERROR,
@@ -115,10 +116,12 @@ def fins_write_access_log_clear(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x2101: error_clear,
-    0x2102: error_log_read,
-    0x2103: error_log_clear,
-    0x2140: fins_write_access_log_read,
-    0x2141: fins_write_access_log_clear,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        ErrorClear: error_clear,
+        ErrorLogRead: error_log_read,
+        ErrorLogClear: error_log_clear,
+        FinsWriteAccessLogRead: fins_write_access_log_read,
+        FinsWriteAccessLogClear: fins_write_access_log_clear,
+    }
+)

@@ -32,6 +32,7 @@ from ...protocol.files import (
     FileNameReadResult,
     FileTransferMode,
 )
+from ..codes import by_command_code
 from ..filememory import FileMemory
 from ..memory import FILL_AREAS
 from ..state import (
@@ -197,16 +198,18 @@ def create_delete_directory(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x2201: file_name_read,
-    0x2202: single_file_read,
-    0x2203: single_file_write,
-    0x2204: file_memory_format,
-    0x2205: file_delete,
-    0x2207: file_copy,
-    0x2208: file_name_change,
-    0x220A: memory_area_file_transfer,
-    0x220B: parameter_area_file_transfer,
-    0x220C: program_area_file_transfer,
-    0x2215: create_delete_directory,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        FileNameRead: file_name_read,
+        SingleFileRead: single_file_read,
+        SingleFileWrite: single_file_write,
+        FileMemoryFormat: file_memory_format,
+        FileDelete: file_delete,
+        FileCopy: file_copy,
+        FileNameChange: file_name_change,
+        MemoryAreaFileTransfer: memory_area_file_transfer,
+        ParameterAreaFileTransfer: parameter_area_file_transfer,
+        ProgramAreaFileTransfer: program_area_file_transfer,
+        CreateDeleteDirectory: create_delete_directory,
+    }
+)

@@ -20,6 +20,7 @@ from ...protocol.commands.gateway import (
     ModbusAsciiResponse,
     ModbusRtuResponse,
 )
+from ..codes import Operation, by_command_code
 from ._call import Call, Handler, request_of
 
 if TYPE_CHECKING:
@@ -44,10 +45,10 @@ def _modbus_reply(pdu: bytes) -> bytes:
 
 def default_gateway(command_code: int, params: bytes) -> bytes:
     """The stub serial device behind the gateway (see the module docstring)."""
-    if command_code == 0x2803:
+    if command_code == ConvertToCompowayFCommand.command_code():
         # node (2) + sub-address (2) + end code "00" + command MRC/SRC (4) + response "0000"
         return params[0:4] + b"00" + params[5:9] + b"0000"
-    if command_code == 0x2804:
+    if command_code == ConvertToModbusRtuCommand.command_code():
         return _modbus_reply(params)
     try:  # Modbus-ASCII: the same exchange, each byte as two hex characters
         pdu = bytes.fromhex(params.decode("ascii"))
@@ -56,11 +57,15 @@ def default_gateway(command_code: int, params: bytes) -> bytes:
     return _modbus_reply(pdu).hex().upper().encode("ascii") if len(pdu) >= 2 else params
 
 
-_TYPES: dict[int, tuple[type[object], type[GatewayResponse]]] = {
-    0x2803: (ConvertToCompowayFCommand, CompowayFResponse),
-    0x2804: (ConvertToModbusRtuCommand, ModbusRtuResponse),
-    0x2805: (ConvertToModbusAsciiCommand, ModbusAsciiResponse),
+#: Each gateway operation and the response type wrapping what the serial device answered.
+_RESPONSE_TYPES: dict[Operation, type[GatewayResponse]] = {
+    ConvertToCompowayFCommand: CompowayFResponse,
+    ConvertToModbusRtuCommand: ModbusRtuResponse,
+    ConvertToModbusAsciiCommand: ModbusAsciiResponse,
 }
+_TYPES: dict[int, tuple[Operation, type[GatewayResponse]]] = by_command_code(
+    {op: (op, response) for op, response in _RESPONSE_TYPES.items()}
+)
 
 
 def convert(plc: VirtualPLC, call: Call) -> bytes:
@@ -69,4 +74,4 @@ def convert(plc: VirtualPLC, call: Call) -> bytes:
     return response_type(plc.gateway(call.command_code, call.params)).encode()
 
 
-HANDLERS: dict[int, Handler] = {0x2803: convert, 0x2804: convert, 0x2805: convert}
+HANDLERS: dict[int, Handler] = by_command_code(dict.fromkeys(_RESPONSE_TYPES, convert))

@@ -28,6 +28,7 @@ from ...protocol.commands.status import (
     NonFatalError,
 )
 from ...protocol.files import Disk
+from ..codes import by_command_code
 from ..state import Mode
 from ._call import Call, Handler, request_of
 
@@ -114,11 +115,13 @@ def clock_write(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x0501: cpu_unit_data_read,
-    0x0502: connection_data_read,
-    0x0601: cpu_unit_status_read,
-    0x0620: cycle_time_read,
-    0x0701: clock_read,
-    0x0702: clock_write,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        CpuUnitDataRead: cpu_unit_data_read,
+        ConnectionDataRead: connection_data_read,
+        CpuUnitStatusRead: cpu_unit_status_read,
+        CycleTimeRead: cycle_time_read,
+        ClockRead: clock_read,
+        ClockWrite: clock_write,
+    }
+)

@@ -14,6 +14,7 @@ from ...protocol.commands.memory import (
     MultipleMemoryAreaReadItem,
     MultipleMemoryAreaReadResult,
 )
+from ..codes import by_command_code
 from ..memory import MULTIPLE_READ_AREAS, READ_AREAS, WRITE_AREAS
 from ._call import Call, Handler, request_of
 
@@ -59,10 +60,12 @@ def memory_area_transfer(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x0101: memory_area_read,
-    0x0102: memory_area_write,
-    0x0103: memory_area_fill,
-    0x0104: multiple_memory_area_read,
-    0x0105: memory_area_transfer,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        MemoryAreaRead: memory_area_read,
+        MemoryAreaWrite: memory_area_write,
+        MemoryAreaFill: memory_area_fill,
+        MultipleMemoryAreaRead: multiple_memory_area_read,
+        MemoryAreaTransfer: memory_area_transfer,
+    }
+)

@@ -16,9 +16,11 @@ from ...protocol.commands.parameter import (
     PARAMETER_AREA_WORDS,
     ParameterArea,
     ParameterAreaClear,
+    ParameterAreaRead,
     ParameterAreaReadResult,
     ParameterAreaWrite,
 )
+from ..codes import by_command_code
 from ..restrictions import MODE_END_CODES
 from ..state import (
     ADDRESS_RANGE_ERROR,
@@ -134,8 +136,10 @@ def parameter_area_clear(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x0201: parameter_area_read,
-    0x0202: parameter_area_write,
-    0x0203: parameter_area_clear,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        ParameterAreaRead: parameter_area_read,
+        ParameterAreaWrite: parameter_area_write,
+        ParameterAreaClear: parameter_area_clear,
+    }
+)

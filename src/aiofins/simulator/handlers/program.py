@@ -18,6 +18,7 @@ from ...protocol.commands.program import (
     ProgramAreaWrite,
     ProgramAreaWriteResult,
 )
+from ..codes import by_command_code
 from ..state import (
     ADDRESS_RANGE_ERROR,
     ADDRESS_RANGE_EXCEEDED,
@@ -82,10 +83,12 @@ def stop(plc: VirtualPLC, call: Call) -> bytes:
     return b""
 
 
-HANDLERS: dict[int, Handler] = {
-    0x0306: program_area_read,
-    0x0307: program_area_write,
-    0x0308: program_area_clear,
-    0x0401: run,
-    0x0402: stop,
-}
+HANDLERS: dict[int, Handler] = by_command_code(
+    {
+        ProgramAreaRead: program_area_read,
+        ProgramAreaWrite: program_area_write,
+        ProgramAreaClear: program_area_clear,
+        Run: run,
+        Stop: stop,
+    }
+)
