@@ -14,6 +14,7 @@ from .test_session_udp import (
     Reply,
     Responder,
     answer,
+    client_address,
     read_params,
     reply,
     session_for,
@@ -37,10 +38,6 @@ def word_of(cmd: bytes) -> int:
 def key_of(cmd: bytes) -> int:
     """The in-flight key of a command: DNA DA1 DA2 SID."""
     return (cmd[3] << 24) | (cmd[4] << 16) | (cmd[5] << 8) | cmd[9]
-
-
-def local_addr(session: Session) -> tuple[str, int]:
-    return ("127.0.0.1", session.transport.local_address[1])  # type: ignore[attr-defined]
 
 
 def assert_idle(session: Session) -> None:
@@ -136,7 +133,7 @@ async def test_thousand_commands_with_reordered_duplicated_and_dropped_replies()
 
     options = {"max_in_flight": 50, "timeout": 0.3, "quarantine_factor": 4.0}
     async with udp_responder(chaos) as peer, session_for(peer, **options) as s:
-        peer.tg.start_soon(flush_stragglers, peer, local_addr(s))
+        peer.tg.start_soon(flush_stragglers, peer, client_address(s))
         nodes = [FinsAddress(0, n, 0) for n in (1, 2)]
         for node in nodes:
             results = await s.request_many(
@@ -246,7 +243,7 @@ async def test_cancellation_frees_slots_and_quarantines_sids() -> None:
         assert s.stats.cancelled == 4
         assert_idle(s)
         # Their replies come late now: counted, never delivered to the next batch.
-        addr = local_addr(s)
+        addr = client_address(s)
         for c in held:
             peer.send(reply(c, 0, b"\xde\xad"), addr)
         peer.handler = answer

@@ -22,6 +22,7 @@ from .test_session_udp import (
     Reply,
     Responder,
     answer,
+    client_address,
     read_params,
     reply,
     session_for,
@@ -30,10 +31,6 @@ from .test_session_udp import (
 )
 
 PLC_ADDR = FinsAddress(0, 1, 0)
-
-
-def addr_of(session: Session) -> tuple[str, int]:
-    return ("127.0.0.1", session.transport.local_address[1])  # type: ignore[attr-defined]
 
 
 @pytest.mark.anyio
@@ -93,7 +90,7 @@ async def test_late_reply_is_counted_and_never_reaches_the_next_request() -> Non
             await session.request(0x01, 0x01, read_params(1))
         old_sid = late[0][9]
         # The late reply arrives just before the next request's reply.
-        peer.send(reply(late[0], 0, b"\xde\xad"), addr_of(session))
+        peer.send(reply(late[0], 0, b"\xde\xad"), client_address(session))
         response = await session.request(0x01, 0x01, read_params(2))
         assert response.data == bytes.fromhex("1002")
         assert peer.received[1][9] != old_sid
@@ -175,7 +172,7 @@ async def test_cancellation_frees_the_slot_and_quarantines_the_sid() -> None:
         assert scope.cancelled_caught
         assert session.stats.in_flight == 0 and session.stats.cancelled == 1
         # The only slot is free again; the cancelled request's SID is not reused.
-        peer.send(reply(held[0], 0, b"\xbe\xef"), addr_of(session))
+        peer.send(reply(held[0], 0, b"\xbe\xef"), client_address(session))
         response = await session.request(0x01, 0x01, read_params(4))
         assert response.data == bytes.fromhex("1004")
         assert peer.received[1][9] != held[0][9]
@@ -385,5 +382,5 @@ async def test_deadline_heap_stays_small_behind_a_slow_request() -> None:
             for word in range(1, 400):
                 await session.request(0x01, 0x01, read_params(word))
             assert len(session._deadlines) <= 64 + 4 * session.stats.in_flight
-            peer.send(reply(first[0], 0, b"\x00\x00"), addr_of(session))
+            peer.send(reply(first[0], 0, b"\x00\x00"), client_address(session))
         assert session.stats.completed == 400

@@ -16,9 +16,16 @@ import anyio
 import pytest
 
 from aiofins.session import Session
-from aiofins.transport import UdpTransport
 
-from .test_session_udp import PLC, SOURCE, Responder, read_params, session_for, udp_responder
+from .test_session_udp import (
+    PLC,
+    SOURCE,
+    Responder,
+    client_address,
+    read_params,
+    session_for,
+    udp_responder,
+)
 
 LOOPS = [
     pytest.param({}, id="asyncio"),
@@ -43,11 +50,7 @@ async def first_sid(peer: Responder, session: Session) -> tuple[int, tuple[str, 
     """Send one request answered the ordinary way; its SID and the session's local address."""
     await session.request(0x01, 0x01, read_params(0))
     peer.handler = lambda cmd: []  # from now on the peer stays silent: replies are placed
-    transport = session.transport
-    assert isinstance(transport, UdpTransport)
-    addr = transport.local_address
-    assert addr is not None
-    return peer.received[-1][9], addr
+    return peer.received[-1][9], client_address(session)
 
 
 @pytest.mark.parametrize("options", LOOPS)

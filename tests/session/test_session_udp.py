@@ -107,6 +107,15 @@ async def udp_responder(handler: Handler = answer) -> AsyncIterator[Responder]:
             tg.cancel_scope.cancel()
 
 
+def client_address(session: Session) -> tuple[str, int]:
+    """Where the session's UDP socket is bound: the address a responder sends replies to."""
+    transport = session.transport
+    assert isinstance(transport, UdpTransport)
+    address = transport.local_address
+    assert address is not None
+    return address
+
+
 def session_for(responder: Responder, **options: object) -> Session:
     return Session(
         UdpTransport("127.0.0.1", responder.port),
