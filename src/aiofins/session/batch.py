@@ -101,13 +101,13 @@ class Batch:
 
     __slots__ = (
         "commands",
+        "count",
         "dest",
         "error",
         "flush_handle",
         "fut",
         "handles",
         "held",
-        "live",
         "next",
         "outbox",
         "remaining",
@@ -130,6 +130,7 @@ class Batch:
     ) -> None:
         self.session = session
         self.commands = commands
+        self.count = len(commands)
         self.state = state
         self.dest = state.address
         self.timeout = timeout
@@ -139,7 +140,6 @@ class Batch:
         self.remaining = len(commands)
         self.next = 0  # the next command not yet sent
         self.held = 0  # slots of the destination this batch holds
-        self.live: dict[BatchPending, None] = {}  # sent, not yet answered (or given up)
         self.handles: set[asyncio.TimerHandle] = set()
         self.error: BaseException | None = None
         self.outbox: list[tuple[BatchPending, bytes]] = []
@@ -170,7 +170,6 @@ class Batch:
         p.sent_at = now
         deadline = p.deadline = now + self.timeout
         pending[key] = p
-        self.live[p] = None
         fifo = session._fifo
         if not fifo or deadline >= fifo[-1].deadline:
             fifo.append(p)
@@ -249,7 +248,6 @@ class Batch:
 
     def replied(self, p: BatchPending, frame: bytes) -> None:
         """The receive callback matched a reply to ``p`` (already out of the pending table)."""
-        self.live.pop(p, None)
         if self.fut.done():
             return
         session = self.session
@@ -262,6 +260,11 @@ class Batch:
             self.remaining -= 1
             if not self.remaining:
                 self.finish(None)
+                return
+            following = self.next
+            if following < self.count and self.held >= self.window and not self.state.slots.waiters:
+                self.next = following + 1  # the common case of slot_free, inlined
+                self.send(following)
             else:
                 self.slot_free()
             return
@@ -274,7 +277,6 @@ class Batch:
 
     def failed(self, p: BatchPending, exc: BaseException) -> None:
         """``p`` timed out (already quarantined) or the link failed."""
-        self.live.pop(p, None)
         if self.fut.done():
             return
         session = self.session
@@ -295,7 +297,6 @@ class Batch:
 
     def abandon(self, p: BatchPending) -> None:
         """Give up on ``p``: out of the pending table, its SID quarantined."""
-        self.live.pop(p, None)
         if not p.done:
             session = self.session
             p.done = True
@@ -314,7 +315,13 @@ class Batch:
             self.flush_handle.cancel()
             self.flush_handle = None
         self.outbox.clear()
-        for p in list(self.live):
+        # Sent and not answered: this batch's entries of the pending table (a scan, once).
+        mine = [
+            p
+            for p in self.session._pending.values()
+            if isinstance(p, BatchPending) and p.batch is self
+        ]
+        for p in mine:
             self.abandon(p)
         slots = self.state.slots
         while self.held:
@@ -340,7 +347,8 @@ async def request_many(
     if retries is None:
         retries = session.retries if idempotent else 0
     for mrc, src, params in commands:
-        check_command(mrc, src, params)
+        if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
+            check_command(mrc, src, params)  # raises the error that says which
     if window is not None and window < 1:
         raise CommandError(f"window {window} must be at least 1")
     if not commands:
