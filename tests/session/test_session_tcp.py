@@ -38,7 +38,7 @@ class TcpPeer:
     connections: int = 0
     error_notification: int = 0  # answer the next frame with command 3 instead
     serving: anyio.CancelScope | None = None
-    listener: anyio.abc.SocketListener | None = None
+    listener: anyio.abc.Listener[anyio.abc.SocketStream] | None = None
 
     async def stop(self) -> None:
         """The PLC goes away: stop listening, drop every connection."""

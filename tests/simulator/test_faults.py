@@ -223,10 +223,10 @@ async def test_tcp_corrupt_keeps_envelope_valid() -> None:
 
 
 class BrokenPLC:
-    def handle_frame(self, frame: bytes) -> bytes | None:
+    def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
         if frame[10] == 0x01:
             raise RuntimeError("bug")
-        return make_plc().handle_frame(frame)
+        return make_plc().handle_frame(frame, from_network=from_network)
 
 
 @pytest.mark.anyio

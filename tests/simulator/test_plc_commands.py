@@ -163,15 +163,18 @@ def test_program_area_write_read_with_last_flag(plc: VirtualPLC) -> None:
 
 
 def test_run_without_mode_goes_to_monitor(plc: VirtualPLC) -> None:
+    modes = []
     assert call(plc, "0401") == (0, b"")
-    assert plc.mode is Mode.MONITOR
+    modes.append(plc.mode)
     assert call(plc, "0401", "FFFF 04") == (0, b"")
-    assert plc.mode is Mode.RUN
+    modes.append(plc.mode)
     assert call(plc, "0401", "FFFF 04") == (0, b"")  # already there: normal
+    modes.append(plc.mode)
     assert call(plc, "0402", "FFFF") == (0, b"")
-    assert plc.mode is Mode.PROGRAM
+    modes.append(plc.mode)
     assert call(plc, "0401", "FFFF") == (0, b"")
-    assert plc.mode is Mode.MONITOR
+    modes.append(plc.mode)
+    assert modes == [Mode.MONITOR, Mode.RUN, Mode.RUN, Mode.PROGRAM, Mode.MONITOR]
 
 
 # ---- status, configuration, clock ----------------------------------------------------------
