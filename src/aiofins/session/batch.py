@@ -176,10 +176,7 @@ class Batch:
         else:
             session._deadlines.add(p)
         if deadline < session._timer_at:
-            scope = session._timer_scope
-            if scope is not None:
-                session._timer_at = deadline
-                scope.deadline = session._loop.time() + (deadline - now)
+            session._arm(deadline)
         # Sent at the end of this event-loop step, together with the other frames queued in
         # it: the peer then gets a burst instead of a wake-up per frame.
         self.outbox.append((p, _pack_head(state.prefix, key & 0xFF, mrc, src) + params))

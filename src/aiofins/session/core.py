@@ -30,7 +30,15 @@ from ..protocol.errors import (
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
-from .batch import _BUSY_CODES, _NORMAL, _pack_head, check_command, end_code_error, request_many
+from .batch import (
+    _BUSY_CODES,
+    _NORMAL,
+    _SID_WAIT,
+    _pack_head,
+    check_command,
+    end_code_error,
+    request_many,
+)
 from .deadlines import Deadlines
 from .matching import count_unmatched, match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
@@ -519,7 +527,7 @@ class Session:
         """A free SID; while all 256 are busy or quarantined, wait for the first release."""
         key = self._allocate_sid(state)
         while key is None:
-            await anyio.sleep(min(0.01, timeout))
+            await anyio.sleep(min(_SID_WAIT, timeout))
             key = self._allocate_sid(state)
         return key
 

@@ -166,13 +166,12 @@ class SlotQueue:
                 self.waiters.remove(waiter)
 
     def release(self) -> None:
-        waiters = self.waiters
-        while waiters:
-            waiter = waiters.popleft()
+        if self.waiters:
+            waiter = self.waiters.popleft()
             waiter.granted = True  # the slot moves to the waiter: in_flight unchanged
             waiter.event.set()
-            return
-        self.in_flight -= 1
+        else:
+            self.in_flight -= 1
 
     def fail_waiters(self, exc: BaseException) -> None:
         while self.waiters:

@@ -146,9 +146,7 @@ class SerialTransport(Transport):
                 data = ser.read(max(1, ser.in_waiting))
                 if data:
                     handler.feed(data)
-        except (OSError, anyio.ClosedResourceError) as err:
-            exc = err
-        except Exception as err:  # pyserial raises SerialException (an OSError) or TypeError
+        except Exception as err:  # OSError/SerialException, TypeError, ClosedResourceError
             exc = err
         finally:
             if self._serial is ser:
