@@ -342,10 +342,17 @@ class Dispatcher:
         self._held: tuple[list[bytes], Send, str] | None = None
 
     def _handle(self, request: bytes, from_network: bool) -> bytes | None:
-        if from_network:
-            return self.plc.handle_frame(request)
-        # Host Link on the CPU's own port: not a network, so no network write protection.
-        return self.plc.handle_frame(request, from_network=False)
+        """The PLC's answer to ``request``; ``None`` also when the PLC failed on it."""
+        try:
+            if from_network:
+                return self.plc.handle_frame(request)
+            # Host Link on the CPU's own port: not a network, so no network write protection.
+            return self.plc.handle_frame(request, from_network=False)
+        except Exception:
+            # a PLC bug must not take the server down; it is logged and counted
+            self.plan.counters.handler_errors += 1
+            _logger.exception("the PLC failed on frame %s", request.hex(" "))
+            return None
 
     @property
     def quiet(self) -> bool:
@@ -366,13 +373,7 @@ class Dispatcher:
         """
         counters = self.plan.counters
         counters.requests += 1
-        try:
-            response = self._handle(request, True)
-        except Exception:
-            # a PLC bug must not take the server down; it is logged and counted
-            counters.handler_errors += 1
-            _logger.exception("the PLC failed on frame %s", request.hex(" "))
-            return None
+        response = self._handle(request, True)
         if response is not None:
             counters.responses += 1
         return response
@@ -435,11 +436,6 @@ class Dispatcher:
             if decision.delay > 0:
                 await anyio.sleep(decision.delay)
             response = self._handle(request, from_network)
-        except Exception:
-            # a PLC bug must not take the server down; it is logged and counted
-            counters.handler_errors += 1
-            _logger.exception("the PLC failed on frame %s", request.hex(" "))
-            return
         finally:
             self.in_flight -= 1
         if response is None:

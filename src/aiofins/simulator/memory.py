@@ -157,6 +157,8 @@ WRITE_AREAS = (
 FILL_AREAS = frozenset((0xB0, 0xB1, 0xB2, 0xB3, 0x89, 0x82, 0x98)) | _EM_WORD_CODES
 TRANSFER_AREAS = FILL_AREAS
 MULTIPLE_READ_AREAS = READ_AREAS | frozenset((0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x49))
+#: 2301: relay areas (CIO, W, H bits) and timer/counter completion flags (manual 5-3-45).
+FORCE_AREAS = frozenset((0x30, 0x31, 0x32, 0x09))
 
 #: Words of each word store (CIO, W, H, A, D, EM banks), from its word area code.
 _STORE_WORDS = {a.store: a.elements for a in AREAS.values() if a.kind is Kind.WORD}
@@ -427,7 +429,7 @@ class IOMemory:
     def force(self, code: int, word: int, bit: int, spec: int) -> None:
         """Apply one 2301 entry: 0000 force OFF, 0001 force ON, 8000/8001 release to OFF/ON,
         FFFF release keeping the state."""
-        area = self.area(code, frozenset((0x30, 0x31, 0x32, 0x09)))
+        area = self.area(code, FORCE_AREAS)
         i = self.locate(area, word, bit, 1)
         if spec not in (0x0000, 0x0001, 0x8000, 0x8001, 0xFFFF):
             raise CommandFailed(PARAMETER_ERROR, message=f"set/reset spec {spec:04X}")

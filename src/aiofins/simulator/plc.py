@@ -223,10 +223,7 @@ class VirtualPLC:
 
     def log_write(self, source: FinsAddress, command_code: int) -> None:
         """Manual 5-3-30: one record per node (overwritten), appended at the end, 20 max."""
-        key = (source.network, source.node, source.unit)
-        self.write_log = [
-            r for r in self.write_log if (r.source.network, r.source.node, r.source.unit) != key
-        ]
+        self.write_log = [r for r in self.write_log if r.source != source]
         self.write_log.append(WriteRecord(source, command_code, self.now(), self.weekday()))
         del self.write_log[:-LOG_CAPACITY]
 

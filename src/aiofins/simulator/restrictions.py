@@ -2,8 +2,8 @@
 
 Each row says whether a command is refused in RUN / MONITOR / PROGRAM mode, while another node
 holds the access right, under UM read protection, under DIP-switch UM write protection and
-under network write protection. :func:`check` turns the PLC's state into the end code the CPU
-Unit answers, or ``None`` when the command may run.
+under network write protection. :func:`check_row` turns the PLC's state into the end code the
+CPU Unit answers, or ``None`` when the command may run.
 
 End codes: network write protection ``2102`` (manual 5-1-1 note 1); access right held by
 another node ``3001``; UM read protection ``2002`` (read not possible: program area
@@ -227,13 +227,9 @@ class Conditions:
     network_write_refused: bool
 
 
-def check(command_code: int, params: bytes, conditions: Conditions) -> int | None:
-    """The end code refusing the command under ``conditions``, or ``None`` if it may run."""
-    return check_row(restriction_for(command_code, params), conditions)
-
-
 def check_row(row: Restriction | None, conditions: Conditions) -> int | None:
-    """:func:`check` for a row already looked up (``None``: a code outside the table)."""
+    """The end code refusing a command of ``row`` (from :func:`restriction_for`; ``None``: a
+    code outside the table) under ``conditions``, or ``None`` if it may run."""
     if row is None:
         return None
     if conditions.network_write_refused and not row.network_write:

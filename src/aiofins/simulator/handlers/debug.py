@@ -6,20 +6,18 @@ from typing import TYPE_CHECKING
 
 from ...protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel
 from ..codes import by_command_code
+from ..memory import FORCE_AREAS
 from ._call import Call, Handler, request_of
 
 if TYPE_CHECKING:
     from ..plc import VirtualPLC
-
-#: Relay areas (CIO, W, H bits) and timer/counter completion flags (manual 5-3-45).
-FORCEABLE_AREAS = frozenset((0x30, 0x31, 0x32, 0x09))
 
 
 def forced_set_reset(plc: VirtualPLC, call: Call) -> bytes:
     req = request_of(call, ForcedSetReset)
     for e in req.entries:  # validate every address before forcing anything
         a = e.address
-        plc.memory.locate(plc.memory.area(a.area_code, FORCEABLE_AREAS), a.word, a.bit, 1)
+        plc.memory.locate(plc.memory.area(a.area_code, FORCE_AREAS), a.word, a.bit, 1)
     for e in req.entries:
         plc.memory.force(e.address.area_code, e.address.word, e.address.bit, int(e.spec))
     return b""
