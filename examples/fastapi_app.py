@@ -51,32 +51,33 @@ def _http_error(exc: aiofins.FinsError) -> HTTPException:
     return HTTPException(504, str(exc))
 
 
-@app.get("/plc/{address}")
-async def read(address: str, count: int = 1) -> dict[str, Any]:
+@asynccontextmanager
+async def _plc() -> AsyncIterator[aiofins.Client]:
+    """The PLC's client, lent by the pool; FINS errors leave the block as HTTP errors."""
     try:
         async with STATE["pool"].client(STATE["url"]) as plc:
-            return {"address": address, "values": await plc.read(address, count)}
+            yield plc
     except aiofins.FinsError as exc:
         raise _http_error(exc) from exc
+
+
+@app.get("/plc/{address}")
+async def read(address: str, count: int = 1) -> dict[str, Any]:
+    async with _plc() as plc:
+        return {"address": address, "values": await plc.read(address, count)}
 
 
 @app.get("/plc/{address}/value")
 async def read_value(address: str, type: str = "uint16") -> dict[str, Any]:
-    try:
-        async with STATE["pool"].client(STATE["url"]) as plc:
-            return {"address": address, "value": await plc.read_value(address, type)}
-    except aiofins.FinsError as exc:
-        raise _http_error(exc) from exc
+    async with _plc() as plc:
+        return {"address": address, "value": await plc.read_value(address, type)}
 
 
 @app.put("/plc/{address}")
 async def write(address: str, values: list[int]) -> dict[str, Any]:
-    try:
-        async with STATE["pool"].client(STATE["url"]) as plc:
-            await plc.write(address, values)
-            return {"written": len(values)}
-    except aiofins.FinsError as exc:
-        raise _http_error(exc) from exc
+    async with _plc() as plc:
+        await plc.write(address, values)
+        return {"written": len(values)}
 
 
 @app.get("/status")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from .chunking import plan_parameter, plan_program
+from .chunking import PROGRAM_BLOCK_UNIT, plan_parameter, plan_program
 from .client import Client
 from .protocol.commands.file import (
     FILE_READ_OVERHEAD,
@@ -36,7 +36,7 @@ def _report(progress: Progress | None, done: int, total: int | None) -> None:
 
 async def backup_program(client: Client, progress: Progress | None = None) -> bytes:
     """Read the whole user program (0306 in blocks up to the last-block bit 15)."""
-    limit = client.limits.program_read_bytes - client.limits.program_read_bytes % 4
+    limit = client.limits.program_read_bytes - client.limits.program_read_bytes % PROGRAM_BLOCK_UNIT
     out = bytearray()
     address = 0
     while True:
@@ -52,7 +52,7 @@ async def backup_program(client: Client, progress: Progress | None = None) -> by
 
 async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:
     """Write a program backup (0307, last block flagged); the PLC must be in PROGRAM mode."""
-    if len(program) % 4:
+    if len(program) % PROGRAM_BLOCK_UNIT:
         raise CommandError(f"program image must be a multiple of 4 bytes, got {len(program)}")
     status = await client.cpu_unit_status_read()
     if status.mode != CpuMode.PROGRAM:

@@ -307,13 +307,7 @@ class Client(CommandMethods):
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
             return plan.decode((await self._read_run(plan, 0, timeout),), ())
-        multiple: list[MultipleMemoryAreaRead] | None = plan.cache.get("multiple")
-        if multiple is None:
-            multiple = plan.cache["multiple"] = [
-                MultipleMemoryAreaRead(addresses=addresses) for addresses in plan.multiple
-            ]
-        commands = [self._run_read(plan, i)[:3] for i in range(n_runs)]
-        commands += [(m.MRC, m.SRC, m.encode()) for m in multiple]
+        commands, multiple = self._scan_commands(plan)
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
         run_words = [self._run_words(plan, i, responses[i]) for i in range(n_runs)]
         multi: list[Sequence[int]] = [
@@ -321,6 +315,20 @@ class Client(CommandMethods):
             for m, response in zip(multiple, responses[n_runs:], strict=True)
         ]
         return plan.decode(run_words, multi)
+
+    def _scan_commands(
+        self, plan: ReadPlan
+    ) -> tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]]:
+        """The plan's commands for one pipelined scan (its 0101 runs, then its 0104 frames)
+        and its 0104 requests, built once per plan."""
+        built: tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]] | None
+        built = plan.cache.get("scan")
+        if built is None:
+            multiple = [MultipleMemoryAreaRead(addresses=addresses) for addresses in plan.multiple]
+            commands = [self._run_read(plan, i)[:3] for i in range(len(plan.runs))]
+            commands += [(m.MRC, m.SRC, m.encode()) for m in multiple]
+            built = plan.cache["scan"] = (commands, multiple)
+        return built
 
     def _run_read(self, plan: ReadPlan, i: int) -> tuple[int, int, bytes, MemoryAreaRead, Any]:
         """The 0101 command of the plan's run ``i`` (MRC, SRC, parameters, request, unpacker),

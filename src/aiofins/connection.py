@@ -17,7 +17,7 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from .client import Client
-from .endpoint import Endpoint, node_from_host, parse_endpoint
+from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, parse_endpoint
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.limits import NetworkType, RouteLimits, limits_for
@@ -55,10 +55,8 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
         return UdpTransport(endpoint.host, endpoint.port)
     if endpoint.scheme == "tcp":
         return TcpTransport(endpoint.host, endpoint.port, node=int(options.get("tcp_node", 0)))
-    settings: dict[str, Any] = {}
-    for key, value in endpoint.options:
-        settings[key] = value
-    settings.update({k: v for k, v in options.items() if k in _SERIAL_OPTIONS})
+    settings: dict[str, Any] = dict(endpoint.options)
+    settings.update({k: v for k, v in options.items() if k in SERIAL_SETTINGS})
     return SerialTransport(
         endpoint.device,
         baudrate=int(settings.get("baudrate", 9600)),
@@ -68,9 +66,6 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
         unit=int(settings.get("unit", 0)),
         response_wait=int(settings.get("response_wait", 0)),
     )
-
-
-_SERIAL_OPTIONS = {"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait"}
 
 
 def default_addresses(
@@ -119,7 +114,7 @@ async def connect(
     query or keyword arguments.
     """
     endpoint = parse_endpoint(url)
-    unknown = set(transport_options) - _SERIAL_OPTIONS - {"tcp_node"}
+    unknown = set(transport_options) - SERIAL_SETTINGS - {"tcp_node"}
     if unknown:
         raise CommandError(f"unknown option(s): {', '.join(sorted(unknown))}")
     d, s = default_addresses(endpoint, dest, src)

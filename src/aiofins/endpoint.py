@@ -19,7 +19,9 @@ from .protocol.header import FinsAddress
 
 DEFAULT_PORT = 9600
 
-_SERIAL_KEYS = {"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait", "timeout"}
+#: Serial line settings, from a ``serial://`` URL's query or keyword arguments of ``connect``.
+SERIAL_SETTINGS = frozenset({"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait"})
+_SERIAL_KEYS = SERIAL_SETTINGS | {"timeout"}
 _NET_KEYS = {"dest", "src", "node", "timeout"}
 
 

@@ -225,17 +225,15 @@ class Pool:
         return None
 
     async def _acquire(self, url: str) -> _Entry:
+        """The slow path of lending (:meth:`_ready_entry` found no session to lend)."""
         if self._tg is None:
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
-        lent = self._ready_entry(url)
-        if lent is not None:
-            return lent
         endpoint = parse_endpoint(url)
         key = endpoint.key
         async with self._lock:
             entries = [e for e in self._entries.get(key, []) if not e.closing.is_set()]
             ready = [e for e in entries if e.error is None]
-            idle = min(ready, key=lambda e: e.users, default=None)
+            idle = min(ready, key=_users, default=None)
             if idle is None or (idle.users and len(entries) < self.max_per_endpoint):
                 now = anyio.current_time()
                 retry_at, _ = self._failures.get(key, (0.0, 0.0))

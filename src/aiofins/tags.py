@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from itertools import chain
 from typing import Any
 
+from .chunking import plan_multiple
 from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress
 from .protocol.errors import CommandError, DecodeError
@@ -61,6 +62,11 @@ class Tag:
         if code in WORD_AREAS and (self.vtype.kind != "bit" or self.address.bit == 0):
             return code
         return None
+
+    @property
+    def width(self) -> int:
+        """The words the tag needs from its word area (a bit: the one word holding it)."""
+        return 1 if self.vtype.kind == "bit" else self.vtype.words
 
 
 def parse_tag(name: str, spec: str) -> Tag:
@@ -205,10 +211,7 @@ def _compile_steps(plan: ReadPlan) -> list[_Step]:
                 raise _not_in_plan(tag, tag.address.word)
             steps.append((tag.name, _FLAG, flag, None))
             continue
-        spots = [
-            word_at(area, tag.address.word + i)
-            for i in range(1 if vtype.kind == "bit" else vtype.words)
-        ]
+        spots = [word_at(area, tag.address.word + i) for i in range(tag.width)]
         if None in spots:
             raise _not_in_plan(tag, tag.address.word + spots.index(None))
         where = [i for i in spots if i is not None]
@@ -283,7 +286,7 @@ def compile_tags(
             if tag.address not in flags:
                 flags.append(tag.address)
             continue
-        width = 1 if tag.vtype.kind == "bit" else tag.vtype.words
+        width = tag.width
         if width > max_read_words:
             raise CommandError(f"tag {tag.name!r} needs {width} words, over {max_read_words}")
         needed.setdefault(area, set()).update(range(tag.address.word, tag.address.word + width))
@@ -309,10 +312,7 @@ def compile_tags(
             if w in needed[run.area_code]
         )
     kept = sorted(runs[best_k:], key=lambda r: (r.area_code, r.word))
-    multiple = tuple(
-        tuple(elements[i : i + max_multiple_elements])
-        for i in range(0, len(elements), max_multiple_elements)
-    )
+    multiple = tuple(tuple(frame) for frame in plan_multiple(elements, max_multiple_elements))
     return ReadPlan(parsed, tuple(kept), multiple)
 
 

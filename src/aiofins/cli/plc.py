@@ -8,8 +8,8 @@ go to stderr with a non-zero exit code. ``--dest NET.NODE.UNIT``, ``--src NET.NO
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
-import sys
 import time
 from collections.abc import Awaitable, Callable
 from datetime import datetime
@@ -150,12 +150,10 @@ async def _status(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
 
 async def _info(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
     data = await plc.cpu_unit_data_read(timeout=args.timeout)
-    return {k: v for k, v in _public_fields(data).items()}
+    return _public_fields(data)
 
 
 def _public_fields(obj: object) -> dict[str, Any]:
-    import dataclasses
-
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
     return {"value": obj}
@@ -178,8 +176,3 @@ async def _ping(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
         "avg_ms": round(sum(times) / len(times), 3),
         "max_ms": round(max(times), 3),
     }
-
-
-def fail(message: str) -> int:
-    print(f"aiofins: {message}", file=sys.stderr)
-    return 1

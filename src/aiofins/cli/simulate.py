@@ -173,16 +173,11 @@ def build_plan(args: argparse.Namespace) -> FaultPlan:
     log = None
     if args.log:
         log = FrameLog(sys.stderr if args.log == "-" else args.log)
-    if args.commands:
-        return FaultPlan(
-            per_command=dict.fromkeys(args.commands, rule),
-            seed=args.seed,
-            max_concurrent=args.max_concurrent,
-            tcp_refusal=args.tcp_refuse,
-            log=log,
-        )
+    # With --commands the rule applies to those commands only (the rest are answered normally).
+    per_command = dict.fromkeys(args.commands, rule) if args.commands else None
     return FaultPlan(
-        rule,
+        None if per_command else rule,
+        per_command=per_command,
         seed=args.seed,
         max_concurrent=args.max_concurrent,
         tcp_refusal=args.tcp_refuse,
