@@ -45,21 +45,7 @@ from aiofins.protocol.commands.message import (
 )
 from aiofins.protocol.errors import AddressError, CommandError, DecodeError
 
-PRINTABLE = st.characters(min_codepoint=0x20, max_codepoint=0x7E)
-u8 = st.integers(0, 0xFF)
-u16 = st.integers(0, 0xFFFF)
-plc_times = st.datetimes(
-    min_value=datetime(1998, 1, 1), max_value=datetime(2097, 12, 31, 23, 59, 59)
-).map(lambda d: d.replace(microsecond=0))
-
-
-def ascii_text(size: int) -> st.SearchStrategy[str]:
-    return st.text(PRINTABLE, max_size=size).map(str.rstrip)
-
-
-def hexbytes(text: str) -> bytes:
-    return bytes.fromhex(text.replace(" ", ""))
-
+from .test_commands_status_clock import ascii_text, hexbytes, plc_times, u8, u16
 
 # --- 09 20 MESSAGE READ / MESSAGE CLEAR / FAL/FALS READ ------------------------------------
 

@@ -9,7 +9,7 @@ units whose limits differ (e.g. an older Ethernet unit, or a test that wants tin
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from enum import Enum
 
 from . import hostlink
@@ -144,7 +144,5 @@ def limits_for(*network_types: NetworkType, **overrides: int) -> RouteLimits:
         unknown = sorted(set(overrides) - names)
         if unknown:
             raise CommandError(f"unknown route limit(s): {', '.join(unknown)}")
-        values = {name: getattr(result, name) for name in names}
-        values.update(overrides)
-        result = RouteLimits(**values)
+        result = replace(result, **overrides)
     return result

@@ -145,6 +145,12 @@ class ValueType:
             return (self.length + 1) // 2
         return 1
 
+    @property
+    def _string_order(self) -> WordOrder:
+        """A string's bytes run first word first, the first character in the high byte of
+        each word (the low byte with ``swap_bytes``)."""
+        return WordOrder.HIGH_FIRST_SWAPPED if self.swap_bytes else WordOrder.HIGH_FIRST
+
     def __str__(self) -> str:
         text = f"{self.kind}:{self.length}" if self.kind == "string" else self.kind
         if self.words > 1 and self.kind != "string" and self.word_order != WordOrder.LOW_FIRST:
@@ -193,11 +199,7 @@ class ValueType:
             raise CommandError(f"{value!r} cannot be encoded as {self.encoding}") from exc
         if len(raw) > self.length:
             raise CommandError(f"{value!r} is {len(raw)} bytes, longer than {self.length}")
-        raw = raw.ljust(self.words * 2, self.padding)
-        words = [raw[i : i + 2] for i in range(0, len(raw), 2)]
-        if self.swap_bytes:
-            words = [w[::-1] for w in words]
-        return tuple((w[0] << 8) | w[1] for w in words)
+        return _words_from_bytes(raw.ljust(self.words * 2, self.padding), self._string_order)
 
     # -- decoding -----------------------------------------------------------------------
 
@@ -218,10 +220,7 @@ class ValueType:
             return from_bcd(int.from_bytes(raw, "big"), len(raw) * 2)
         if kind == "bit":
             return bool(words[0] & 1)
-        chunks = [bytes(((w >> 8) & 0xFF, w & 0xFF)) for w in words]
-        if self.swap_bytes:
-            chunks = [c[::-1] for c in chunks]
-        raw = b"".join(chunks)[: self.length]
+        raw = _bytes_from_words(words, self._string_order)[: self.length]
         end = raw.find(b"\x00")
         if end >= 0:
             raw = raw[:end]

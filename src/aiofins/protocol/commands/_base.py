@@ -79,8 +79,8 @@ def encode_result(result: Encodable | None) -> bytes:
     return b"" if result is None else result.encode()
 
 
-class ParameterlessRequest(Request[None]):
-    """Base of operations with no parameters and no response data (e.g. the log clears)."""
+class NoParameters(Request[R]):
+    """Base of operations whose command carries no parameters (e.g. 07 01 CLOCK READ)."""
 
     def encode(self) -> bytes:
         return b""
@@ -89,6 +89,10 @@ class ParameterlessRequest(Request[None]):
     def decode(cls: type[Q], params: bytes) -> Q:
         Reader(params, cls.NAME).end()
         return cls()
+
+
+class ParameterlessRequest(NoParameters[None]):
+    """Base of operations with no parameters and no response data (e.g. the log clears)."""
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)
@@ -113,6 +117,19 @@ class _RejectedAddress(AddressError):
         self.end_code = end_code
 
 
+def finish(cls: type[Q], r: Reader, *args: Any, **kwargs: Any) -> Q:
+    """End of a command's decoding: no bytes may follow (end code 1001), then build
+    ``cls(*args, **kwargs)`` with invalid values turned into :class:`DecodeError` (110C).
+
+    The arguments are read from ``r`` in the order they are written, e.g.
+    ``finish(cls, r, read_disk(r), read_directory(r))``.
+    """
+    r.end()
+    make: Callable[..., Q] = cls
+    with as_decode_error(cls.NAME):
+        return make(*args, **kwargs)
+
+
 def _decode_fields(op: type[Q], params: bytes, *fields: Callable[[Reader], Any]) -> Q:
     """Read ``fields`` in order from all of ``params`` and build ``op`` from the values.
 
@@ -120,10 +137,7 @@ def _decode_fields(op: type[Q], params: bytes, *fields: Callable[[Reader], Any])
     builder become :class:`DecodeError` (see :func:`.as_decode_error`).
     """
     r = Reader(params, op.NAME)
-    values = [read(r) for read in fields]
-    r.end()
-    with as_decode_error(op.NAME):
-        return op(*values)
+    return finish(op, r, *[read(r) for read in fields])
 
 
 def _member(kind: type[E], value: int, what: str, choices: str) -> E:

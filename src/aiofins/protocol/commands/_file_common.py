@@ -3,15 +3,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, ClassVar, TypeVar
+from typing import ClassVar, TypeVar
 
 from ..codec import Reader
-from ..decoding import as_decode_error
 from ._base import Request, expect_no_data
 
 R = TypeVar("R")
-Q = TypeVar("Q", bound=Request[Any])
 
 
 class FileCommand(Request[R]):
@@ -47,16 +44,3 @@ def read_number(data: bytes, what: str, size: int = 2) -> int:
     value = r.u32() if size == 4 else r.u16()
     r.end()
     return value
-
-
-def finish(cls: type[Q], r: Reader, *args: Any, **kwargs: Any) -> Q:
-    """End of a command's decoding: no bytes may follow (end code 1001), then build
-    ``cls(*args, **kwargs)`` with invalid values turned into :class:`DecodeError` (110C).
-
-    The arguments are read from ``r`` in the order they are written, e.g.
-    ``finish(cls, r, read_disk(r), read_directory(r))``.
-    """
-    r.end()
-    make: Callable[..., Q] = cls
-    with as_decode_error(cls.NAME):
-        return make(*args, **kwargs)

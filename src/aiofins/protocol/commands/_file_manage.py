@@ -24,7 +24,8 @@ from ..files import (
     read_file_name,
 )
 from ..header import MAX_PARAMETER_SIZE
-from ._file_common import FileCommand, FileOperation, finish, read_number, set_field, u16
+from ._base import finish
+from ._file_common import FileCommand, FileOperation, read_number, set_field, u16
 
 # --------------------------------------------------------------------------- 2205
 

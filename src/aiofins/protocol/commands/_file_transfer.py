@@ -29,8 +29,8 @@ from ..files import (
     read_disk,
     read_file_name,
 )
-from ._base import expect_no_data
-from ._file_common import FileCommand, finish, read_number, set_field, u16, u32
+from ._base import expect_no_data, finish
+from ._file_common import FileCommand, read_number, set_field, u16, u32
 from .program import PROGRAM_NUMBER
 
 #: Memory area codes 220A accepts (word data only): CIO/W/H/A, T/C PV, DM, EM banks 0..18

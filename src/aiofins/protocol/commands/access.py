@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 from ..codec import Reader, check_range
-from ._base import R, Request, expect_no_data
+from ._base import R, Request, _decode_fields, expect_no_data
 from .program import PROGRAM_NUMBER
 
 
@@ -56,10 +56,7 @@ class _AccessRightRequest(Request[R]):
 
     @classmethod
     def decode(cls: type[_AccessT], params: bytes) -> _AccessT:
-        r = Reader(params, cls.NAME)
-        number = r.u16()
-        r.end()
-        return cls(number)
+        return _decode_fields(cls, params, Reader.u16)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 
 from ..codec import Reader, from_bcd
 from ..errors import CommandError, DecodeError
-from ._base import Request, expect_no_data
+from ._base import NoParameters, Request, expect_no_data
 from ._bcd_time import (
     CLOCK_ORDER,
     check_day_of_week,
@@ -60,7 +60,7 @@ class ClockData:
 
 
 @dataclass(frozen=True)
-class ClockRead(Request[ClockData]):
+class ClockRead(NoParameters[ClockData]):
     """07 01 CLOCK READ: year, month, day, hour, minute, second, day of week."""
 
     MRC: ClassVar[int] = 0x07
@@ -68,14 +68,6 @@ class ClockRead(Request[ClockData]):
     NAME: ClassVar[str] = "CLOCK READ"
     METHOD: ClassVar[str] = "clock_read"
     IDEMPOTENT: ClassVar[bool] = True
-
-    def encode(self) -> bytes:
-        return b""
-
-    @classmethod
-    def decode(cls, params: bytes) -> ClockRead:
-        Reader(params, cls.NAME).end()
-        return cls()
 
     def decode_response(self, data: bytes) -> ClockData:
         return ClockData.decode(data)

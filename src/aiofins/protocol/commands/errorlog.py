@@ -12,7 +12,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 from ..codec import Reader, check_range
 from ..errors import DecodeError
-from ._base import Encodable, ParameterlessRequest, Request, expect_no_data
+from ._base import Encodable, ParameterlessRequest, Request, _decode_fields, expect_no_data
 from ._bcd_time import (
     CLOCK_ORDER,
     ERROR_LOG_ORDER,
@@ -130,10 +130,7 @@ class ErrorClear(Request[None]):
 
     @classmethod
     def decode(cls, params: bytes) -> ErrorClear:
-        r = Reader(params, cls.NAME)
-        code = r.u16()
-        r.end()
-        return cls(code)
+        return _decode_fields(cls, params, Reader.u16)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

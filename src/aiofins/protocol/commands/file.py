@@ -28,8 +28,8 @@ from ..files import (
     read_file_name,
 )
 from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
-from ._base import Request
-from ._file_common import FileCommand, FileOperation, finish, set_field, u16, u32
+from ._base import Request, finish
+from ._file_common import FileCommand, FileOperation, set_field, u16, u32
 from ._file_manage import (
     CreateDeleteDirectory,
     FileCopy,

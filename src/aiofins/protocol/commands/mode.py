@@ -11,8 +11,7 @@ from enum import IntEnum
 from typing import Any, ClassVar
 
 from ..codec import Reader
-from ..decoding import as_decode_error
-from ._base import Request, _member, expect_no_data
+from ._base import Request, _member, expect_no_data, finish
 from .program import PROGRAM_NUMBER, _read_program_number
 
 
@@ -52,10 +51,7 @@ class Run(Request[None]):
     def decode(cls, params: bytes) -> Run:
         r = Reader(params, cls.NAME)
         _program_number(r, cls.NAME)
-        mode = r.u8() if r.remaining else RunMode.MONITOR
-        r.end()
-        with as_decode_error(cls.NAME):
-            return cls(mode)
+        return finish(cls, r, r.u8() if r.remaining else RunMode.MONITOR)
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 from ..codec import Reader
 from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, _member, _Rejected, expect_no_data
+from ._base import Request, _member, _Rejected, expect_no_data, finish
 
 #: Bytes per 03 06 command (manual 5-3-10).
 MAX_PROGRAM_READ_BYTES = 992
@@ -236,10 +236,7 @@ class ProgramAreaClear(Request[None]):
     def decode(cls, params: bytes) -> ProgramAreaClear:
         r = Reader(params, cls.NAME)
         _read_program_number(r, cls.NAME)
-        code = r.u8()
-        r.end()
-        with as_decode_error(cls.NAME):
-            return cls(code)
+        return finish(cls, r, r.u8())
 
     def decode_response(self, data: bytes) -> None:
         expect_no_data(self, data)

@@ -9,7 +9,7 @@ from typing import Any, ClassVar, cast
 from ..codec import Reader, ascii_field, check_range, pad_ascii
 from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, expect_no_data
+from ._base import NoParameters, Request, expect_no_data
 
 
 class CpuMode(enum.IntEnum):
@@ -151,7 +151,7 @@ class CpuUnitStatus:
 
 
 @dataclass(frozen=True)
-class CpuUnitStatusRead(Request[CpuUnitStatus]):
+class CpuUnitStatusRead(NoParameters[CpuUnitStatus]):
     """06 01 CPU UNIT STATUS READ: run/stop, mode, error flags, messages, error code."""
 
     MRC: ClassVar[int] = 0x06
@@ -159,14 +159,6 @@ class CpuUnitStatusRead(Request[CpuUnitStatus]):
     NAME: ClassVar[str] = "CPU UNIT STATUS READ"
     METHOD: ClassVar[str] = "cpu_unit_status_read"
     IDEMPOTENT: ClassVar[bool] = True
-
-    def encode(self) -> bytes:
-        return b""
-
-    @classmethod
-    def decode(cls, params: bytes) -> CpuUnitStatusRead:
-        Reader(params, cls.NAME).end()
-        return cls()
 
     def decode_response(self, data: bytes) -> CpuUnitStatus:
         return CpuUnitStatus.decode(data)
