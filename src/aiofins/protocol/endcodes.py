@@ -16,6 +16,8 @@ from dataclasses import dataclass
 RELAY_ERROR_FLAG = 0x8000
 FATAL_CPU_ERROR_FLAG = 0x0080
 NON_FATAL_CPU_ERROR_FLAG = 0x0040
+#: Both CPU error flags (bits 6 and 7): they ride on any end code, normal or not.
+CPU_ERROR_FLAGS = FATAL_CPU_ERROR_FLAG | NON_FATAL_CPU_ERROR_FLAG
 END_CODE_MASK = 0x7F3F
 
 

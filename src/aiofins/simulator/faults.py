@@ -24,7 +24,12 @@ from typing import Protocol, TextIO
 import anyio
 from anyio.abc import TaskGroup
 
-from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG, RELAY_ERROR_FLAG
+from ..protocol.endcodes import (
+    CPU_ERROR_FLAGS,
+    FATAL_CPU_ERROR_FLAG,
+    NON_FATAL_CPU_ERROR_FLAG,
+    RELAY_ERROR_FLAG,
+)
 from ..protocol.errors import DecodeError
 from ..protocol.header import CommandFrame, ResponseFrame
 from .state import BUSY
@@ -35,7 +40,6 @@ BUSY_END_CODE = BUSY
 DEFAULT_MAX_CONCURRENT = 5
 _HEX_DIGITS = b"0123456789ABCDEF"
 _logger = logging.getLogger(__name__)
-_CPU_FLAGS = FATAL_CPU_ERROR_FLAG | NON_FATAL_CPU_ERROR_FLAG
 
 
 def _check_probability(name: str, value: float) -> None:
@@ -109,7 +113,7 @@ class FaultRule:
             raise ValueError(f"late_after {self.late_after} must not be negative")
         if self.end_code is not None and not 0 <= self.end_code <= 0xFFFF:
             raise ValueError(f"end code {self.end_code:#x} out of range 0..0xFFFF")
-        if self.flags & ~_CPU_FLAGS:
+        if self.flags & ~CPU_ERROR_FLAGS:
             raise ValueError(
                 f"flags {self.flags:#x} may only combine"
                 f" {NON_FATAL_CPU_ERROR_FLAG:#x} and {FATAL_CPU_ERROR_FLAG:#x}"

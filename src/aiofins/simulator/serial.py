@@ -19,7 +19,7 @@ import anyio
 import serial  # type: ignore[import-untyped]  # no types-pyserial in the env
 from anyio.abc import TaskStatus
 
-from ..protocol.endcodes import FATAL_CPU_ERROR_FLAG, NON_FATAL_CPU_ERROR_FLAG, EndCode
+from ..protocol.endcodes import CPU_ERROR_FLAGS, EndCode
 from ..protocol.errors import DecodeError
 from ..protocol.header import ICF_NO_RESPONSE, ICF_RESPONSE, ResponseFrame
 from ..protocol.hostlink import (
@@ -113,7 +113,7 @@ class SerialServer:
             frame = ResponseFrame.decode(response)
             if len(frame.data) > MAX_RESPONSE_DATA_BYTES:
                 # 110B response too long: a Host Link response carries at most 538 data bytes
-                flags = frame.end_code.raw & (FATAL_CPU_ERROR_FLAG | NON_FATAL_CPU_ERROR_FLAG)
+                flags = frame.end_code.raw & CPU_ERROR_FLAGS
                 frame = dataclasses.replace(
                     frame, end_code=EndCode(RESPONSE_TOO_LONG | flags), data=b"", relay=None
                 )
