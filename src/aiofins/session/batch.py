@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import anyio
 
-from ..protocol.endcodes import EndCode
+from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
     CommandError,
     ConnectionLost,
@@ -41,6 +41,8 @@ if TYPE_CHECKING:
 
 _NORMAL = EndCode(0)
 _BUSY_CODES = (0x2604, 0x2605)
+#: End code bits that make a reply an error: all but the CPU error flags (0040/0080 are normal).
+_ERROR_BITS = 0xFFFF & ~CPU_ERROR_FLAGS
 #: The header of a command: the 9-byte prefix of its destination, then SID, MRC, SRC.
 _pack_head = struct.Struct("9sBBB").pack
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
@@ -249,7 +251,7 @@ class Batch:
             return
         session = self.session
         raw = (frame[12] << 8) | frame[13]
-        if not raw & 0xFF3F:
+        if not raw & _ERROR_BITS:
             session.stats.completed += 1
             self.results[p.index] = new_response(
                 _NORMAL if not raw else EndCode(raw), frame[14:], frame
@@ -265,7 +267,7 @@ class Batch:
             else:
                 self.slot_free()
             return
-        if (raw & 0x7F3F) in _BUSY_CODES and p.busy < session.busy_retries:
+        if (raw & END_CODE_MASK) in _BUSY_CODES and p.busy < session.busy_retries:
             session.stats.busy_retries += 1
             self.later(session.busy_backoff * (2**p.busy), p.index, p.attempt, p.busy + 1)
             return

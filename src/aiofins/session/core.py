@@ -32,6 +32,7 @@ from ..transport.base import Transport, is_asyncio
 from .background import Background
 from .batch import (
     _BUSY_CODES,
+    _ERROR_BITS,
     _NORMAL,
     _SID_WAIT,
     _pack_head,
@@ -458,7 +459,7 @@ class Session:
                 self.stats.retries += 1
                 continue
             raw = (frame[12] << 8) | frame[13]
-            if not raw & 0xFF3F:
+            if not raw & _ERROR_BITS:
                 self.stats.completed += 1
                 return new_response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
             end_code = EndCode(raw)
