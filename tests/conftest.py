@@ -1,4 +1,4 @@
-"""Shared test configuration: async tests run under both asyncio and trio via anyio."""
+"""Shared test configuration: async tests run under asyncio, uvloop and trio via anyio."""
 
 from __future__ import annotations
 
@@ -7,13 +7,27 @@ import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+#: An anyio backend: a name, or a name and its options.
+Backend = str | tuple[str, dict[str, Any]]
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
+
+@pytest.fixture(
+    params=[
+        "asyncio",
+        pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop"),
+        "trio",
+    ]
+)
+def anyio_backend(request: pytest.FixtureRequest) -> Backend:
+    """Every async test runs under stock asyncio, asyncio with uvloop, and trio."""
+    backend: Backend = request.param
+    if backend != "asyncio" and backend != "trio":
+        pytest.importorskip("uvloop")
+    return backend
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from aiofins.simulator.runner import Simulator, run_simulator
 
 
 @pytest.fixture
-async def sim(anyio_backend: str) -> AsyncIterator[Simulator]:
+async def sim(anyio_backend: object) -> AsyncIterator[Simulator]:
     async with run_simulator(
         VirtualPLC(), udp=("127.0.0.1", 0), tcp=("127.0.0.1", 0), faults=FaultPlan(seed=1)
     ) as running:

@@ -59,7 +59,7 @@ async def test_extra_udp_sessions_get_their_own_source_node(sim: Simulator) -> N
         assert pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 3
 
 
-async def test_unreachable_endpoint_fails_fast_with_backoff(anyio_backend: str) -> None:
+async def test_unreachable_endpoint_fails_fast_with_backoff(anyio_backend: object) -> None:
     async with Pool(backoff_min=5.0) as pool:
         for _ in range(2):
             with pytest.raises(ConnectionLost):
@@ -70,7 +70,7 @@ async def test_unreachable_endpoint_fails_fast_with_backoff(anyio_backend: str) 
 
 
 @pytest.fixture
-async def two_plcs(anyio_backend: str) -> AsyncIterator[tuple[Simulator, Simulator]]:
+async def two_plcs(anyio_backend: object) -> AsyncIterator[tuple[Simulator, Simulator]]:
     slow_plan = FaultPlan(seed=3)
     async with (
         run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as fast,

@@ -28,7 +28,7 @@ def command(sid: int, code: str, params: str = "", *, src_node: int = 0x22) -> b
 
 @pytest.fixture(params=["udp", "tcp"])
 async def exchange(
-    request: pytest.FixtureRequest, anyio_backend: str
+    request: pytest.FixtureRequest, anyio_backend: object
 ) -> AsyncIterator[tuple[VirtualPLC, Exchange]]:
     plc = VirtualPLC(mode=Mode.PROGRAM)
     async with run_simulator(plc, udp=("127.0.0.1", 0), tcp=("127.0.0.1", 0)) as sim:

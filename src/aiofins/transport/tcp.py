@@ -14,6 +14,7 @@ Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session 
 from __future__ import annotations
 
 import asyncio
+from typing import cast
 
 import anyio
 from anyio.abc import SocketAttribute, SocketStream
@@ -43,8 +44,9 @@ class _TcpProtocol(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # Not ``isinstance(transport, asyncio.Transport)``: uvloop's TCPTransport has the
+        # same methods but is not a subclass of asyncio's.
+        self.transport = cast(asyncio.Transport, transport)
 
     def send(self, frame: bytes) -> None:
         transport = self.transport
