@@ -131,6 +131,53 @@ def test_any_split_and_merge(messages: list[TcpMessage], data: st.DataObject) ->
     assert decoder.buffered == 0
 
 
+frames_and_others_st = st.lists(
+    st.builds(
+        TcpMessage,
+        st.sampled_from([2, 2, 2, 0, 1, 3, 6]),
+        st.one_of(st.just(0), st.integers(0, 0xFFFFFFFF)),
+        st.binary(max_size=300),
+    ),
+    max_size=12,
+)
+
+
+@given(frames_and_others_st, st.data())
+def test_feed_frames_hands_over_the_same_messages_in_order(
+    messages: list[TcpMessage], data: st.DataObject
+) -> None:
+    """The receive path's form: frames to the callback, anything else returned, in order."""
+    stream = b"".join(m.encode() for m in messages)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=10)))
+    decoder = TcpDecoder()
+    out: list[TcpMessage] = []
+
+    def frame(payload: bytes) -> None:
+        out.append(TcpMessage(TcpCommand.FRAME, 0, payload))
+
+    start = 0
+    for cut in [*cuts, len(stream)]:
+        message = decoder.feed_frames(stream[start:cut], frame)
+        while message is not None:
+            assert not (message.command == TcpCommand.FRAME and message.error_code == 0)
+            out.append(message)
+            message = decoder.feed_frames(b"", frame)
+        start = cut
+    assert out == messages
+    assert decoder.buffered == 0
+
+
+def test_feed_frames_hands_over_the_frames_before_a_bad_header() -> None:
+    frames: list[bytes] = []
+    decoder = TcpDecoder()
+    with pytest.raises(FinsTcpError) as info:
+        decoder.feed_frames(
+            tcp.encode_frame(b"one") + tcp.encode_frame(b"two") + b"JUNK" * 4, frames.append
+        )
+    assert frames == [b"one", b"two"]
+    assert info.value.tcp_error_code == TcpErrorCode.BAD_HEADER
+
+
 def test_largest_frame_and_one_byte_more() -> None:
     biggest = tcp.encode_frame(bytes(2012))
     assert biggest[4:8] == (2020).to_bytes(4, "big")  # 0x7E4
