@@ -1,4 +1,4 @@
-"""Session throughput and latency against the C FINS responder (UDP): asyncio, uvloop, trio.
+"""Session throughput against the C FINS responder (UDP, FINS/TCP): asyncio, uvloop, trio.
 
 Builds ``fins_responder`` (``make -C <perf tools>``), runs it on a free loopback port and
 measures, for each event loop: sequential 1-word reads, 50 reads in flight on one session
@@ -58,7 +58,7 @@ INFLIGHT_999 = "50 in flight, 999 words"
 BARE_SEQ = "bare protocol, sequential"
 BARE_INFLIGHT = "bare protocol, 50 in flight"
 C_LOOP = "C pingpong"
-#: Targets: (loop, sequential xC, 50-in-flight req/s).
+#: Targets: (loop, sequential xC, 50-in-flight req/s), each checked over UDP and FINS/TCP.
 TARGETS = (("asyncio", 0.55, 90_000.0), ("uvloop", 0.73, 150_000.0))
 
 
@@ -299,8 +299,13 @@ async def raw_baseline(
     return rows
 
 
-def c_baseline(port: int, duration: float, cpu: int | None, cases: Sequence[str]) -> list[Row]:
-    """``fins_pingpong`` rows: ``seq``/``inflight`` (1 word), ``seq999``/``inflight999``."""
+def c_baseline(
+    port: int, duration: float, cpu: int | None, cases: Sequence[str], tcp: bool = False
+) -> list[Row]:
+    """``fins_pingpong`` rows: ``seq``/``inflight`` (1 word), ``seq999``/``inflight999``.
+
+    ``tcp``: over FINS/TCP (1-word cases only), rows named ``TCP ...``.
+    """
     runs = {
         "seq": (SEQ_1, ["-w", "1"]),
         "inflight": (INFLIGHT_1, ["-w", "50"]),
@@ -310,6 +315,10 @@ def c_baseline(port: int, duration: float, cpu: int | None, cases: Sequence[str]
     rows = []
     for key in cases:
         case, extra = runs[key]
+        if tcp:
+            if key not in ("seq", "inflight"):
+                continue
+            case, extra = "TCP " + case, [*extra, "-t"]
         cmd = [str(PERF_TOOLS / "bin/fins_pingpong"), "-p", str(port), "-d", str(duration)]
         if cpu is not None:
             cmd = ["taskset", "-c", str(cpu), *cmd]
@@ -386,12 +395,15 @@ def run_round(
         for loop in loops:
             rows += on_loop(loop, run_cases, port, d, loop[0], keys)
         if args.tcp and "999" not in keys:
+            if not args.no_c:
+                rows += c_baseline(port, d, cpu, c_cases, tcp=True)
             for loop in loops:
-                if loop[0] in ("asyncio", "trio"):
-                    rows += on_loop(loop, run_cases, port, d, loop[0], keys, True)
+                rows += on_loop(loop, run_cases, port, d, loop[0], keys, True)
     c_rows = {row["case"]: row["req_s"] for row in rows if row["loop"] == C_LOOP}
     for row in rows:
-        c = c_rows.get(C_MATCH[row["case"].removeprefix("TCP ")])
+        case = row["case"]
+        prefix = "TCP " if case.startswith("TCP ") else ""
+        c = c_rows.get(prefix + C_MATCH[case.removeprefix(prefix)])
         row["x_c"] = row["req_s"] / c if c else None
     return rows
 
@@ -438,12 +450,23 @@ def targets(table: list[Row], loops: list[Loop]) -> list[Row]:
         met = None if value is None else value >= want
         out.append({"loop": loop, "target": target, "value": value, "goal": want, "met": met})
 
-    for loop, seq_target, inflight_target in TARGETS:
-        if loop in names:
-            seq = by.get((loop, SEQ_1))
-            goal(loop, "sequential xC", seq["x_c"] if seq else None, seq_target)
-            rates = [by[(loop, c)]["req_s"] for c in (INFLIGHT_1, BULK_1) if (loop, c) in by]
-            goal(loop, "50 in flight req/s", max(rates) if rates else None, inflight_target)
+    tcp = any(row["case"].startswith("TCP ") for row in table)
+    for prefix, medium in (("", "UDP"), ("TCP ", "TCP")) if tcp else (("", "UDP"),):
+        for loop, seq_target, inflight_target in TARGETS:
+            if loop in names:
+                seq = by.get((loop, prefix + SEQ_1))
+                goal(loop, f"{medium} sequential xC", seq["x_c"] if seq else None, seq_target)
+                rates = [
+                    by[(loop, prefix + c)]["req_s"]
+                    for c in (INFLIGHT_1, BULK_1)
+                    if (loop, prefix + c) in by
+                ]
+                goal(
+                    loop,
+                    f"{medium} 50 in flight req/s",
+                    max(rates) if rates else None,
+                    inflight_target,
+                )
     return out
 
 
@@ -464,13 +487,13 @@ def print_table(table: list[Row], goals: list[Row], rounds: int) -> None:
     print("\ntargets")
     for goal in goals:
         verdict = {None: "n/a", True: "met", False: "NOT met"}[goal["met"]]
-        if goal["target"].startswith("sequential"):
+        if "sequential" in goal["target"]:
             value = "n/a" if goal["value"] is None else f"{goal['value']:.2f} xC"
             want = f"≥ {goal['goal']:.2f} xC"
         else:
             value = "n/a" if goal["value"] is None else f"{goal['value'] / 1e3:.1f}k/s"
             want = f"≥ {goal['goal'] / 1e3:.0f}k/s"
-        print(f"  {goal['loop']:<8} {goal['target']:<20} {value:>10}  {want:<12} {verdict}")
+        print(f"  {goal['loop']:<8} {goal['target']:<24} {value:>10}  {want:<12} {verdict}")
 
 
 def main() -> None:
@@ -483,7 +506,9 @@ def main() -> None:
     parser.add_argument("--pin", default="", help="CPU for responder[,client], e.g. 0 or 0,1")
     parser.add_argument("--json", action="store_true", help="print per-round rows and medians")
     parser.add_argument("--no-c", action="store_true", help="skip the C baseline")
-    parser.add_argument("--tcp", action="store_true", help="also run FINS/TCP (1-word cases)")
+    parser.add_argument(
+        "--tcp", action="store_true", help="also run FINS/TCP (1-word cases, C client too)"
+    )
     args = parser.parse_args()
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = set(cases) - set(CASE_KEYS)

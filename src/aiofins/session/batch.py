@@ -192,7 +192,19 @@ class Batch:
         if not outbox:
             return
         self.outbox = []
-        fast_send = self.session.transport.fast_send
+        transport = self.session.transport
+        send_many = transport.fast_send_many
+        if send_many is not None:  # one write for all (FINS/TCP)
+            live = [(p, frame) for p, frame in outbox if not p.done]
+            if live and not self.fut.done():
+                try:
+                    send_many([frame for _, frame in live])
+                except BaseException as exc:
+                    for p, _ in live:
+                        self.abandon(p)
+                    self.finish(exc)
+            return
+        fast_send = transport.fast_send
         for p, frame in outbox:
             if p.done or self.fut.done():
                 continue

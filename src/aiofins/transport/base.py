@@ -58,6 +58,9 @@ class Transport(ABC):
     #: A synchronous send the session may call instead of ``await send()`` (set while open
     #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
     fast_send: Callable[[bytes], None] | None = None
+    #: Like :attr:`fast_send` for several frames at once, in order (FINS/TCP writes them with
+    #: one system call); set together with ``fast_send``, ``None`` otherwise.
+    fast_send_many: Callable[[list[bytes]], None] | None = None
     #: A synchronous "hand over what has already arrived, without waiting" the session may
     #: call right after a send (set while open by transports that can read their socket
     #: directly under asyncio); ``None`` otherwise. On one shared core the peer often answers

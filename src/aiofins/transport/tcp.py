@@ -30,7 +30,7 @@ from ..protocol.tcp import (
     parse_node_response,
     tcp_error_meaning,
 )
-from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+from .base import FrameSink, TaskSpawner, Transport, is_asyncio, replies_awaited, wrap_os_error
 
 
 class _TcpProtocol(asyncio.Protocol):
@@ -42,6 +42,9 @@ class _TcpProtocol(asyncio.Protocol):
         self.decoder = TcpDecoder()
         self.handshake: asyncio.Future[tuple[int, int]] = asyncio.get_running_loop().create_future()
         self.transport: asyncio.Transport | None = None
+        self.outbox: list[bytes] = []
+        self.awaited = replies_awaited(sink)
+        self.loop = asyncio.get_running_loop()
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         # Not ``isinstance(transport, asyncio.Transport)``: uvloop's TCPTransport has the
@@ -52,9 +55,51 @@ class _TcpProtocol(asyncio.Protocol):
         transport = self.transport
         if transport is None or transport.is_closing():
             raise ConnectionLost(f"{self.owner.description} is not connected")
-        transport.write(encode_frame(frame))
+        outbox = self.outbox
+        if outbox:
+            outbox.append(encode_frame(frame))
+        elif len(self.awaited) > 1:
+            outbox.append(encode_frame(frame))
+            self.loop.call_soon(self.flush)
+        else:
+            transport.write(encode_frame(frame))
+
+    def send_many(self, frames: list[bytes]) -> None:
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            raise ConnectionLost(f"{self.owner.description} is not connected")
+        data = b"".join([encode_frame(frame) for frame in frames])
+        if self.outbox:
+            self.outbox.append(data)
+        else:
+            transport.write(data)
+
+    def flush(self) -> None:
+        """Write the frames gathered in the last event-loop step, as one write."""
+        outbox = self.outbox
+        self.outbox = []
+        transport = self.transport
+        if outbox and transport is not None and not transport.is_closing():
+            transport.write(b"".join(outbox))
 
     def data_received(self, data: bytes) -> None:
+        if not self.handshake.done():
+            self.before_handshake(data)
+            return
+        decoder = self.decoder
+        received = self.sink.frame_received
+        try:
+            message = decoder.feed_frames(data, received)
+            while message is not None:
+                error = _deliver(self.owner, message, self.sink)
+                if error is not None:
+                    self.fail(error)
+                    return
+                message = decoder.feed_frames(b"", received)
+        except FrameError as exc:
+            self.fail(exc)
+
+    def before_handshake(self, data: bytes) -> None:
         try:
             messages = self.decoder.feed(data)
         except FrameError as exc:
@@ -199,10 +244,12 @@ class TcpTransport(Transport):
             raise
         self._aio = proto
         self.fast_send = proto.send
+        self.fast_send_many = proto.send_many
 
     def _detach(self) -> None:
         self._aio = None
         self.fast_send = None
+        self.fast_send_many = None
 
     async def _handshake(self, stream: SocketStream, decoder: TcpDecoder) -> list[TcpMessage]:
         """Send our node, read the server's reply; returns messages that followed it."""
@@ -242,13 +289,18 @@ class TcpTransport(Transport):
     ) -> None:
         exc: BaseException | None = None
         try:
-            messages = backlog
+            for early in backlog:
+                error = _deliver(self, early, sink)
+                if error is not None:
+                    raise error
+            received = sink.frame_received
             while True:
-                for message in messages:
+                message = decoder.feed_frames(await stream.receive(), received)
+                while message is not None:
                     error = _deliver(self, message, sink)
                     if error is not None:
                         raise error
-                messages = decoder.feed(await stream.receive())
+                    message = decoder.feed_frames(b"", received)
         except FrameError as err:  # FinsTcpError included: the stream is unusable now
             exc = err
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError) as err:
