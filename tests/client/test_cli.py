@@ -77,7 +77,14 @@ def test_status_info_clock_ping(sim_url: str, capsys: pytest.CaptureFixture[str]
     assert status["running"] is False and status["standby"] is False
     assert status["status"] & 0x01 == 0 and status["status"] & 0x78 == 0
     code, out, _ = run(capsys, "info", sim_url, "--json")
-    assert code == 0 and "CJ2M" in out
+    info = json.loads(out)
+    assert code == 0 and info["model_data"]["model"] == "CJ2M-CPU33"
+    assert info["model_data"]["area_data"]["dm_words"] == 32768
+    assert info["configuration"]["cpu_bus_units"] == [0] * 16
+    assert "reserved" not in info["configuration"]
+    code, out, _ = run(capsys, "info", sim_url)
+    assert code == 0 and "model_data.model: CJ2M-CPU33" in out.splitlines()
+    assert "model_data.area_data.dm_words: 32768" in out.splitlines()
     code, out, _ = run(capsys, "clock", sim_url, "--json")
     assert code == 0 and json.loads(out)["time"][:2] == "20"
     code, out, _ = run(capsys, "ping", sim_url, "--count", "2", "--json")

@@ -13,6 +13,7 @@ import json
 import time
 from collections.abc import Awaitable, Callable
 from datetime import datetime
+from enum import Enum
 from typing import Any
 
 import anyio
@@ -91,12 +92,18 @@ def _json_default(value: object) -> object:
     return str(value)
 
 
-def _print_text(result: Any) -> None:
+def _print_text(result: Any, prefix: str = "") -> None:
+    """``key: value`` lines; nested objects as ``outer.inner: value``."""
     if isinstance(result, dict):
         for key, value in result.items():
+            if isinstance(value, dict):
+                _print_text(value, f"{prefix}{key}.")
+                continue
             if isinstance(value, list):
                 value = " ".join(str(v) for v in value)
-            print(f"{key}: {_json_default(value) if not isinstance(value, (int, str)) else value}")
+            elif not isinstance(value, (int, str)):
+                value = _json_default(value)
+            print(f"{prefix}{key}: {value}")
     else:
         print(result)
 
@@ -149,14 +156,30 @@ async def _status(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
 
 
 async def _info(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
-    data = await plc.cpu_unit_data_read(timeout=args.timeout)
-    return _public_fields(data)
+    data = _plain(await plc.cpu_unit_data_read(timeout=args.timeout))
+    assert isinstance(data, dict)
+    return data
 
 
-def _public_fields(obj: object) -> dict[str, Any]:
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-    return {"value": obj}
+#: Fields the manual marks reserved: left out of ``info``.
+_RESERVED = frozenset({"reserved", "system_reserved"})
+
+
+def _plain(value: object) -> object:
+    """JSON-ready data: dataclasses as nested objects (reserved bytes left out), enums by name."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {
+            f.name: _plain(getattr(value, f.name))
+            for f in dataclasses.fields(value)
+            if f.name not in _RESERVED
+        }
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, Enum):
+        return value.name
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return _json_default(value)
 
 
 async def _clock(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
