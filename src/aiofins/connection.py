@@ -3,8 +3,9 @@
 Node addressing defaults, all overridable:
 
 * UDP: the PLC's node (DA1) is the last octet of its IPv4 address (Omron's automatic
-  address conversion), our node (SA1) the last octet of the local address that routes to it;
-  ``dest=``/``src=`` (or ``?dest=``/``?src=``/``?node=`` in the URL) override them.
+  address conversion; a host name is resolved first), our node (SA1) the last octet of the
+  local address that routes to it; ``dest=``/``src=`` (or ``?dest=``/``?src=``/``?node=`` in
+  the URL) override them.
 * FINS/TCP: both nodes come from the handshake (we ask the PLC to assign ours).
 * Host Link: the CPU unit behind the serial port (``0.0.0``) from ``0.0.0``.
 """
@@ -15,6 +16,8 @@ import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
+
+import anyio
 
 from .client import Client
 from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, parse_endpoint
@@ -68,25 +71,43 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
     )
 
 
-def default_addresses(
+async def _ipv4_of(host: str, port: int) -> str | None:
+    """``host`` itself if it is an IPv4 address, else its first IPv4 address (``None``: none)."""
+    if node_from_host(host) is not None or ":" in host:
+        return host
+    try:
+        infos = await anyio.getaddrinfo(host, port, family=socket.AF_INET, type=socket.SOCK_DGRAM)
+    except OSError:
+        return None
+    return str(infos[0][4][0]) if infos else None
+
+
+async def default_addresses(
     endpoint: Endpoint,
     dest: FinsAddress | str | None = None,
     src: FinsAddress | str | None = None,
 ) -> tuple[FinsAddress, FinsAddress]:
-    """(dest, source) for an endpoint, from arguments, URL options, or the defaults above."""
+    """(dest, source) for an endpoint, from arguments, URL options, or the defaults above.
+
+    A UDP host name is resolved (without blocking the event loop) for the node defaults only;
+    the transport resolves it again when it opens.
+    """
     d = _address(dest) or _address(endpoint.option("dest"))
     s = _address(src) or _address(endpoint.option("src"))
     if endpoint.scheme == "serial":
         return d or FinsAddress(0, 0, 0), s or FinsAddress(0, 0, 0)
+    host = endpoint.host
+    if endpoint.scheme == "udp" and (d is None or s is None):
+        host = await _ipv4_of(host, endpoint.port) or host
     if d is None:
         node_text = endpoint.option("node")
-        node = int(node_text) if node_text else node_from_host(endpoint.host)
+        node = int(node_text) if node_text else node_from_host(host)
         d = FinsAddress(0, node if node is not None else 1, 0)
     if s is None:
         if endpoint.scheme == "tcp":
             s = FinsAddress(0, 0, 0)  # assigned by the handshake
         else:
-            s = FinsAddress(0, local_node_towards(endpoint.host, avoid=d.node), 0)
+            s = FinsAddress(0, local_node_towards(host, avoid=d.node), 0)
     return d, s
 
 
@@ -117,7 +138,7 @@ async def connect(
     unknown = set(transport_options) - SERIAL_SETTINGS - {"tcp_node"}
     if unknown:
         raise CommandError(f"unknown option(s): {', '.join(sorted(unknown))}")
-    d, s = default_addresses(endpoint, dest, src)
+    d, s = await default_addresses(endpoint, dest, src)
     route = limits or limits_for(
         *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
     )

@@ -243,7 +243,7 @@ class Pool:
                     )
                 src = None
                 if endpoint.scheme == "udp" and entries:
-                    dest, first_src = default_addresses(
+                    dest, first_src = await default_addresses(
                         endpoint, self.connect_options.get("dest"), self.connect_options.get("src")
                     )
                     used = {e.src.node for e in entries if e.src is not None} | {

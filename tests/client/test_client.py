@@ -12,7 +12,8 @@ from aiofins.protocol.errors import CommandError, FinsTimeout, WriteNotPossibleE
 from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.limits import NetworkType
 from aiofins.simulator.faults import FaultRule
-from aiofins.simulator.runner import Simulator
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator, run_simulator
 
 pytestmark = pytest.mark.anyio
 
@@ -131,3 +132,19 @@ async def test_client_word_order_is_the_default_for_typed_values(url: str) -> No
         await plc.write_value("D502", 0x12345678, "uint32:CDAB")  # the spec's order wins
         assert await plc.read("D502", 2) == [0x5678, 0x1234]
         assert await plc.read_value("D500", "uint32") == 0x12345678
+
+
+async def test_udp_host_name_is_resolved_for_the_node_defaults() -> None:
+    """DA1 is the last octet of the PLC's IPv4 address, also when the URL names the host.
+
+    ``127.7`` is not a dotted quad: the resolver (not our parser) makes it 127.0.0.7. The
+    virtual PLC is node 7 and ignores frames for any other node, so a DA1 left at the
+    fallback (1) would time out.
+    """
+    async with (
+        run_simulator(VirtualPLC(node=7), udp=("127.0.0.7", 0)) as sim,
+        connect(f"udp://127.7:{sim.udp_port}", timeout=1, retries=0) as plc,
+    ):
+        assert plc.session.dest.node == 7
+        await plc.write("D0", [77])
+        assert await plc.read("D0") == [77]
