@@ -21,12 +21,12 @@ def as_decode_error(what: str | None, end_code: int = PARAMETER_ERROR) -> Iterat
     """Re-raise :class:`CommandError` / :class:`AddressError` as :class:`DecodeError`.
 
     The message is ``"{what}: {error}"`` (just the error's when ``what`` is ``None``). The
-    end code is the error's own ``end_code`` attribute when it has one (a builder that knows
-    the PLC's answer, e.g. ``1103`` address range error), else ``end_code``.
+    end code is the error's own ``end_code`` when set (a builder that knows the PLC's answer,
+    e.g. ``1103`` address range error), else ``end_code``.
     """
     try:
         yield
     except (CommandError, AddressError) as exc:
         message = str(exc) if what is None else f"{what}: {exc}"
-        code: int = getattr(exc, "end_code", end_code)
+        code = end_code if exc.end_code is None else exc.end_code
         raise DecodeError(message, end_code=code) from exc

@@ -18,11 +18,27 @@ class FinsError(Exception):
 
 
 class AddressError(FinsError, ValueError):
-    """An I/O memory address that cannot be parsed or is out of the area's range."""
+    """An I/O memory address that cannot be parsed or is out of the area's range.
+
+    ``end_code``: the FINS end code a PLC answers when a command it received carries this
+    address (e.g. ``0x1103`` address range error), where the check knows it; else ``None``.
+    """
+
+    def __init__(self, message: str, *, end_code: int | None = None) -> None:
+        super().__init__(message)
+        self.end_code = end_code
 
 
 class CommandError(FinsError, ValueError):
-    """A command argument that cannot be encoded (count over a limit, odd size, bad value)."""
+    """A command argument that cannot be encoded (count over a limit, odd size, bad value).
+
+    ``end_code``: the FINS end code a PLC answers when a command it received carries this
+    argument (e.g. ``0x110C`` parameter error), where the check knows it; else ``None``.
+    """
+
+    def __init__(self, message: str, *, end_code: int | None = None) -> None:
+        super().__init__(message)
+        self.end_code = end_code
 
 
 class DecodeError(FinsError):

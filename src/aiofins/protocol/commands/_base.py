@@ -22,7 +22,7 @@ from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
 from ..codec import Reader
 from ..decoding import as_decode_error
-from ..errors import AddressError, CommandError, DecodeError
+from ..errors import CommandError, DecodeError
 
 R = TypeVar("R")
 Q = TypeVar("Q", bound="Request[Any]")
@@ -98,25 +98,6 @@ class ParameterlessRequest(NoParameters[None]):
         expect_no_data(self, data)
 
 
-class _Rejected(CommandError):
-    """A :class:`CommandError` that also names the end code a PLC answers for it.
-
-    :func:`.as_decode_error` passes that end code on to the :class:`DecodeError`.
-    """
-
-    def __init__(self, message: str, end_code: int) -> None:
-        super().__init__(message)
-        self.end_code = end_code
-
-
-class _RejectedAddress(AddressError):
-    """An :class:`AddressError` that also names the end code a PLC answers for it."""
-
-    def __init__(self, message: str, end_code: int) -> None:
-        super().__init__(message)
-        self.end_code = end_code
-
-
 def finish(cls: type[Q], r: Reader, *args: Any, **kwargs: Any) -> Q:
     """End of a command's decoding: no bytes may follow (end code 1001), then build
     ``cls(*args, **kwargs)`` with invalid values turned into :class:`DecodeError` (110C).
@@ -145,4 +126,4 @@ def _member(kind: type[E], value: int, what: str, choices: str) -> E:
     try:
         return kind(value)
     except ValueError:
-        raise _Rejected(f"{what} {value!r} not one of {choices}", 0x110C) from None
+        raise CommandError(f"{what} {value!r} not one of {choices}", end_code=0x110C) from None

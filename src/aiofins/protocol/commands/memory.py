@@ -21,8 +21,6 @@ from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
 from ._base import (
     Request,
     _decode_fields,
-    _Rejected,
-    _RejectedAddress,
     expect_no_data,
 )
 
@@ -58,7 +56,7 @@ def _size_of(address: MemoryAddress) -> int:
     try:
         return element_size(address.area_code)
     except AddressError as exc:
-        raise _RejectedAddress(str(exc), 0x1101) from None
+        raise AddressError(str(exc), end_code=0x1101) from None
 
 
 def _check_address(address: MemoryAddress, what: str = "address") -> int:
@@ -67,14 +65,14 @@ def _check_address(address: MemoryAddress, what: str = "address") -> int:
         raise CommandError(f"{what} must be a MemoryAddress, got {type(address).__name__}")
     size = _size_of(address)
     if size == 1 and address.bit > 0x0F:
-        raise _RejectedAddress(
-            f"{what} {address}: bit number {address.bit} out of range 0..15", 0x1103
+        raise AddressError(
+            f"{what} {address}: bit number {address.bit} out of range 0..15", end_code=0x1103
         )
     if (size != 1 or address.area_code in _BIT_ALWAYS_ZERO) and address.bit != 0:
-        raise _RejectedAddress(
+        raise AddressError(
             f"{what} {address}: bit number must be 0 for area code {address.area_code:02X} "
             f"(got {address.bit})",
-            0x1103,
+            end_code=0x1103,
         )
     return size
 
@@ -82,9 +80,9 @@ def _check_address(address: MemoryAddress, what: str = "address") -> int:
 def _check_writable(address: MemoryAddress, what: str = "address") -> int:
     size = _check_address(address, what)
     if address.area_code in _NOT_WRITABLE:
-        raise _RejectedAddress(
+        raise AddressError(
             f"{what} {address}: memory area code {address.area_code:02X} cannot be written",
-            0x1101,
+            end_code=0x1101,
         )
     return size
 
@@ -92,15 +90,15 @@ def _check_writable(address: MemoryAddress, what: str = "address") -> int:
 def _check_word_area(address: MemoryAddress, what: str) -> None:
     size = _check_writable(address, what)
     if size != 2 or address.area_code in _NOT_WORD_AREA:
-        raise _RejectedAddress(
+        raise AddressError(
             f"{what} {address}: memory area code {address.area_code:02X} is not a word area",
-            0x1101,
+            end_code=0x1101,
         )
 
 
 def _check_count(name: str, value: int, high: int, end_code: int) -> None:
     if not isinstance(value, int) or not 0 <= value <= high:
-        raise _Rejected(f"{name} {value} out of range 0..{high}", end_code)
+        raise CommandError(f"{name} {value} out of range 0..{high}", end_code=end_code)
 
 
 def _element_values(data: bytes, size: int) -> tuple[int, ...]:
@@ -122,9 +120,9 @@ def _check_bit_data(address: MemoryAddress, data: bytes, size: int) -> None:
     if size == 1:
         for index, byte in enumerate(data):
             if byte > 1:
-                raise _Rejected(
+                raise CommandError(
                     f"bit value {byte} at element {index} of {address} out of range 0..1",
-                    0x110C,
+                    end_code=0x110C,
                 )
 
 
@@ -184,10 +182,10 @@ class MemoryAreaRead(Request[MemoryAreaReadResult]):
         size = _check_address(self.address)
         _check_count("number of elements", self.count, MAX_READ_ELEMENTS, 0x110B)
         if self.count * size > MAX_RESPONSE_DATA:
-            raise _Rejected(
+            raise CommandError(
                 f"{self.count} elements of {size} bytes exceed the {MAX_RESPONSE_DATA}-byte "
                 f"response: number of elements out of range 0..{MAX_RESPONSE_DATA // size}",
-                0x110B,
+                end_code=0x110B,
             )
 
     @property
@@ -233,10 +231,10 @@ class MemoryAreaWrite(Request[None]):
         object.__setattr__(self, "data", bytes(self.data))
         size = _check_writable(self.address)
         if len(self.data) % size:
-            raise _Rejected(
+            raise CommandError(
                 f"{len(self.data)} data bytes are not a multiple of the element size {size} "
                 f"of area {self.address.area_code:02X}",
-                0x1003,
+                end_code=0x1003,
             )
         count = len(self.data) // size
         high = min(MAX_WRITE_ELEMENTS, (MAX_COMMAND_PARAMS - 6) // size)

@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 from ..codec import Reader
 from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, _Rejected, expect_no_data
+from ._base import Request, expect_no_data
 
 #: Words per 02 01 / 02 02 command (manual 5-3-7, 5-3-8).
 MAX_PARAMETER_WORDS = 498
@@ -52,27 +52,29 @@ def _area_words(area_code: int) -> int:
     try:
         return PARAMETER_AREA_WORDS[area_code]
     except (KeyError, TypeError):
-        raise _Rejected(
-            f"parameter area code {area_code!r} not one of {_CODES_TEXT}", 0x1101
+        raise CommandError(
+            f"parameter area code {area_code!r} not one of {_CODES_TEXT}", end_code=0x1101
         ) from None
 
 
 def _check_span(area_code: int, begin_word: int, count: int, max_count: int) -> None:
     size = _area_words(area_code)
     if not isinstance(begin_word, int) or not 0 <= begin_word < size:
-        raise _Rejected(
+        raise CommandError(
             f"beginning word {begin_word!r} out of range 0..{size - 1} "
             f"of parameter area {area_code:04X}",
-            0x1103,
+            end_code=0x1103,
         )
     if not isinstance(count, int) or not 0 <= count <= max_count:
-        raise _Rejected(f"number of words {count!r} out of range 0..{max_count}", 0x1108)
+        raise CommandError(
+            f"number of words {count!r} out of range 0..{max_count}", end_code=0x1108
+        )
     if begin_word + count > size:
-        raise _Rejected(
+        raise CommandError(
             f"words {begin_word}..{begin_word + count - 1} exceed parameter area "
             f"{area_code:04X} (words 0..{size - 1}): number of words out of range "
             f"0..{size - begin_word}",
-            0x1104,
+            end_code=0x1104,
         )
 
 

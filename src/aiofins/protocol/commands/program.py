@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 from ..codec import Reader
 from ..decoding import as_decode_error
 from ..errors import CommandError, DecodeError
-from ._base import Request, _member, _Rejected, expect_no_data, finish
+from ._base import Request, _member, expect_no_data, finish
 
 #: Bytes per 03 06 command (manual 5-3-10).
 MAX_PROGRAM_READ_BYTES = 992
@@ -39,16 +39,20 @@ class ProgramClearCode(IntEnum):
 # manual wins: the wire-format notes say the address must be even; 5-3-10 says a multiple of 4.
 def _check_address(address: int) -> None:
     if not isinstance(address, int) or not 0 <= address <= 0xFFFFFFFF:
-        raise _Rejected(f"beginning address {address!r} out of range 0..0xFFFFFFFF", 0x1103)
+        raise CommandError(
+            f"beginning address {address!r} out of range 0..0xFFFFFFFF", end_code=0x1103
+        )
     if address % 4:
-        raise _Rejected(f"beginning address {address:08X} is not a multiple of 4", 0x1102)
+        raise CommandError(
+            f"beginning address {address:08X} is not a multiple of 4", end_code=0x1102
+        )
 
 
 def _check_byte_count(count: int, high: int, end_code: int) -> None:
     if not 0 <= count <= high:
-        raise _Rejected(f"number of bytes {count} out of range 0..{high}", end_code)
+        raise CommandError(f"number of bytes {count} out of range 0..{high}", end_code=end_code)
     if count % 4:
-        raise _Rejected(f"number of bytes {count} is not a multiple of 4", 0x1102)
+        raise CommandError(f"number of bytes {count} is not a multiple of 4", end_code=0x1102)
 
 
 def _read_program_number(r: Reader, name: str) -> None:
