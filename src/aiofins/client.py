@@ -16,11 +16,11 @@ from typing import Any, TypeVar
 from ._commands import CommandMethods
 from .chunking import plan_memory
 from .protocol.addresses import parse_address
-from .protocol.areas import MemoryAddress
+from .protocol.areas import MemoryAddress, check_span
 from .protocol.commands import Request
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
 from .protocol.endcodes import EndCode
-from .protocol.errors import CommandError, EndCodeError
+from .protocol.errors import AddressError, CommandError, EndCodeError
 from .protocol.header import FinsAddress
 from .protocol.limits import RouteLimits, limits_for
 from .protocol.values import (
@@ -191,9 +191,9 @@ class Client(CommandMethods):
         Transfers over the route's limit go as several 0101 frames, sent pipelined and
         reassembled in order.
         """
-        start = _address(address)
         if count < 0:
             raise CommandError(f"count must not be negative, got {count}")
+        start = _start(address, count)
         chunks = plan_memory(start, count, self.limits.memory_read_words)
         if len(chunks) == 1:
             result = await self.call(
@@ -233,7 +233,7 @@ class Client(CommandMethods):
         the PLC's program may run between them and see half-old, half-new data, and a failure
         midway leaves a partial write. It is refused unless ``allow_split=True``.
         """
-        start = _address(address)
+        start = _start(address, len(values))
         chunks = plan_memory(start, len(values), self.limits.memory_write_words)
         if len(chunks) > 1 and not allow_split:
             raise CommandError(
@@ -364,5 +364,19 @@ class Client(CommandMethods):
         return self._run_words(plan, i, response)
 
 
-def _address(address: AddressLike) -> MemoryAddress:
-    return address if isinstance(address, MemoryAddress) else parse_address(address)
+def _start(address: AddressLike, count: int) -> MemoryAddress:
+    """The address of the first of ``count`` elements.
+
+    Address text (CS/CJ notation) is also checked for room for all ``count`` elements, so a
+    transfer running past the end of its area fails here (:class:`AddressError`, end code
+    1104) before anything is sent, instead of at the PLC, possibly after part of a split
+    write. A :class:`MemoryAddress` is sent as given (it may be meant for another series).
+    """
+    if isinstance(address, MemoryAddress):
+        return address
+    start = parse_address(address)
+    try:
+        check_span(start, count)
+    except AddressError as exc:
+        raise AddressError(f"{address!r}: {exc}", end_code=exc.end_code) from None
+    return start

@@ -23,8 +23,8 @@ from typing import Any
 
 from .chunking import plan_multiple
 from .protocol.addresses import parse_address
-from .protocol.areas import MemoryAddress
-from .protocol.errors import CommandError, DecodeError
+from .protocol.areas import MemoryAddress, check_span
+from .protocol.errors import AddressError, CommandError, DecodeError
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
 
 #: Bit area code → the word area code holding the same bits (CS/CJ codes).
@@ -86,6 +86,11 @@ def parse_tag(name: str, spec: str) -> Tag:
         raise CommandError(f"tag {name!r}: {text} is a bit; drop the type or use ':bit'")
     if vtype.kind != "bit" and address.area_code not in WORD_AREAS:
         raise CommandError(f"tag {name!r}: {text} cannot hold a {vtype} (not a word area)")
+    if vtype.kind != "bit":
+        try:
+            check_span(address, vtype.words)
+        except AddressError as exc:
+            raise AddressError(f"tag {name!r}: {exc}", end_code=exc.end_code) from None
     return Tag(name, address, vtype, spec)
 
 

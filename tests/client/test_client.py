@@ -8,7 +8,7 @@ import pytest
 import aiofins
 from aiofins.connection import connect
 from aiofins.protocol.commands.status import CpuMode
-from aiofins.protocol.errors import CommandError, FinsTimeout, WriteNotPossibleError
+from aiofins.protocol.errors import AddressError, CommandError, FinsTimeout, WriteNotPossibleError
 from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.limits import NetworkType
 from aiofins.simulator.faults import FaultRule
@@ -148,3 +148,27 @@ async def test_udp_host_name_is_resolved_for_the_node_defaults() -> None:
         assert plc.session.dest.node == 7
         await plc.write("D0", [77])
         assert await plc.read("D0") == [77]
+
+
+async def test_transfers_past_the_end_of_an_area_fail_before_sending(
+    sim: Simulator, url: str
+) -> None:
+    """The client refuses what the PLC would answer 1104 for, so nothing half-happens."""
+    async with connect(url, timeout=1) as plc:
+        await plc.write("D32760", [1] * 8)
+        sent = sim.counters.requests
+        with pytest.raises(AddressError) as info:
+            await plc.read("D32000", 1000)
+        assert info.value.end_code == 0x1104 and "at most 768" in str(info.value)
+        with pytest.raises(AddressError):  # 1,200 words: a split write, refused whole
+            await plc.write("D31600", [7] * 1200, allow_split=True)
+        with pytest.raises(AddressError):
+            await plc.write_value("D32767", 1.5, "float32")
+        with pytest.raises(AddressError):
+            await plc.read("CIO 6143.15", 2)
+        assert sim.counters.requests == sent  # nothing was sent
+        assert await plc.read("D31600", 2) == [0, 0]  # and nothing written
+        assert await plc.read("D32760", 8) == [1] * 8  # up to the last word is fine
+        assert await plc.read("A440", 16) == [0] * 16  # A0-A447 and A448-A959 are one area
+        with pytest.raises(AddressError, match="tag 'x'"):
+            plc.compile_tags({"x": "D32767:int32"})

@@ -13,6 +13,7 @@ from aiofins.protocol.areas import (
     area_codes,
     area_specs,
     check_address,
+    check_span,
 )
 from aiofins.protocol.errors import AddressError
 from aiofins.simulator.memory import (
@@ -107,3 +108,35 @@ def test_accepts_exactly_what_the_protocol_accepts(code: int, word: int, bit: in
     end_code = accepts(memory, code, word, bit)
     assert end_code in (0, 0x1103)
     assert (end_code == 0) == valid
+
+
+@st.composite
+def spans(draw: st.DrawFn) -> tuple[int, int, int, int]:
+    """A valid start (code, word, bit) and a count around the room its area has left."""
+    code = draw(st.sampled_from(CS_CJ_CODES))
+    spec = draw(st.sampled_from(area_specs(code)))
+    word = draw(
+        st.sampled_from([spec.first_word, spec.last_word])
+        | st.integers(spec.first_word, spec.last_word)
+    )
+    bit = draw(st.integers(0, spec.max_bit))
+    room = sum(s.count for s in area_specs(code)) * (16 if spec.max_bit else 1)
+    count = draw(st.integers(1, 4) | st.integers(1, room + 2))
+    return code, word, bit, count
+
+
+@settings(max_examples=400, deadline=None)
+@given(spans())
+def test_span_refused_exactly_where_the_plc_answers_1104(span: tuple[int, int, int, int]) -> None:
+    """check_span (the client's check before sending) agrees with the virtual PLC's 1104."""
+    code, word, bit, count = span
+    memory = IOMemory(em_banks=25)
+    address = MemoryAddress(code, word, bit)
+    try:
+        check_span(address, count, Series.CS_CJ)
+        refused = None
+    except AddressError as exc:
+        refused = exc.end_code
+    end_code = accepts(memory, code, word, bit, count)
+    assert end_code in (0, 0x1104)
+    assert refused == (end_code or None)

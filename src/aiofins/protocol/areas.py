@@ -271,6 +271,34 @@ def check_address(address: MemoryAddress, series: Series = Series.CS_CJ) -> Area
     return spec
 
 
+def check_span(address: MemoryAddress, count: int, series: Series = Series.CS_CJ) -> None:
+    """Refuse ``count`` elements from ``address`` that run past the end of its area.
+
+    The area is the run of manual 5-2-2 rows of the address's area code that follow one
+    another without a gap (A0-A447 and A448-A959 read as one). Elements are bits in a bit
+    area, else words (or flags). A PLC answers such a command with end code 1104 (address
+    range exceeded); this raises :class:`AddressError` carrying that end code instead. An
+    address outside every row is left to :func:`check_address`.
+    """
+    spec = find_spec(address.area_code, address.word, series)
+    if spec is None or count <= 1:
+        return
+    last_word = spec.last_word
+    following = find_spec(address.area_code, last_word + 1, series)
+    while following is not None:
+        last_word = following.last_word
+        following = find_spec(address.area_code, last_word + 1, series)
+    per_word = 16 if spec.max_bit else 1
+    room = (last_word - address.word + 1) * per_word - (address.bit if spec.max_bit else 0)
+    if count > room:
+        unit = "bits" if spec.max_bit else "words" if spec.element_size >= 2 else "flags"
+        raise AddressError(
+            f"{count} {unit} from {address} run past the end of the {spec.name} "
+            f"(word {last_word:04X} hex): at most {room} from there",
+            end_code=0x1104,
+        )
+
+
 @dataclass(frozen=True, slots=True)
 class MemoryAddress:
     """An I/O memory designation: area code (1 byte), word (2 bytes), bit (1 byte).
