@@ -149,7 +149,7 @@ async def connect(
         source=s,
         dest=d,
         gct=gct,
-        max_in_flight=max_in_flight or 5,
+        max_in_flight=5 if max_in_flight is None else max_in_flight,
         timeout=float(timeout_text) if timeout_text else timeout,
         retries=retries,
     )

@@ -6,6 +6,7 @@ command, which replies to send and when, so it can misbehave on purpose.
 
 from __future__ import annotations
 
+import re
 import socket
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -16,6 +17,7 @@ import pytest
 from anyio.abc import TaskGroup
 
 from aiofins.protocol.errors import (
+    CommandError,
     CommandRejectedError,
     FinsTimeout,
     ParameterError,
@@ -369,3 +371,40 @@ def test_under_uvloop() -> None:
             assert session.stats.timeouts == 1
 
     anyio.run(main, backend="asyncio", backend_options={"use_uvloop": True})
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("max_in_flight", 0, "max_in_flight 0 out of range 1..255"),
+        ("timeout", 0, "timeout 0 must be positive"),
+        ("retries", -1, "retries -1 must not be negative"),
+        ("busy_retries", -1, "busy_retries -1 must not be negative"),
+        ("busy_backoff", -0.1, "busy_backoff -0.1 must not be negative"),
+        ("quarantine_factor", 0, "quarantine_factor 0 must be positive"),
+        ("reconnect_backoff", (1.0, 0.5), "reconnect_backoff (1.0, 0.5) must be (min, max)"),
+        ("gct", 256, "GCT 256 out of range"),
+    ],
+)
+def test_bad_session_options_are_refused(option: str, value: object, message: str) -> None:
+    with pytest.raises(CommandError, match=re.escape(message)):
+        Session(
+            UdpTransport("127.0.0.1", 9600),
+            source=FinsAddress(0, 2, 0),
+            dest=FinsAddress(0, 1, 0),
+            **{option: value},  # type: ignore[arg-type]
+        )
+
+
+@pytest.mark.anyio
+async def test_bad_per_call_timeout_or_retries_are_refused_before_sending() -> None:
+    async with udp_responder(answer) as responder, session_for(responder) as s:
+        for kwargs, message in (
+            ({"timeout": 0}, "timeout 0 must be positive"),
+            ({"retries": -1}, "retries -1 must not be negative"),
+        ):
+            with pytest.raises(CommandError, match=message):
+                await s.request(0x01, 0x01, read_params(0), **kwargs)  # type: ignore[arg-type]
+            with pytest.raises(CommandError, match=message):
+                await s.request_many([(0x01, 0x01, read_params(0))] * 2, **kwargs)  # type: ignore[arg-type]
+        assert responder.received == []

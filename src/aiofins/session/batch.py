@@ -355,8 +355,12 @@ async def request_many(
         dest = session.dest
     if timeout is None:
         timeout = session.timeout
+    elif timeout <= 0:
+        raise CommandError(f"timeout {timeout} must be positive")
     if retries is None:
         retries = session.retries if idempotent else 0
+    elif retries < 0:
+        raise CommandError(f"retries {retries} must not be negative")
     for mrc, src, params in commands:
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which

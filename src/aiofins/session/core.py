@@ -90,6 +90,19 @@ class Session:
             raise CommandError(f"max_in_flight {max_in_flight} out of range 1..255")
         if timeout <= 0:
             raise CommandError(f"timeout {timeout} must be positive")
+        for name, count in (("retries", retries), ("busy_retries", busy_retries)):
+            if count < 0:
+                raise CommandError(f"{name} {count} must not be negative")
+        if busy_backoff < 0 or quarantine_factor <= 0:
+            raise CommandError(
+                f"busy_backoff {busy_backoff} must not be negative and quarantine_factor "
+                f"{quarantine_factor} must be positive"
+            )
+        low, high = reconnect_backoff
+        if not 0 <= low <= high:
+            raise CommandError(
+                f"reconnect_backoff {reconnect_backoff} must be (min, max), 0 <= min <= max"
+            )
         self.transport = transport
         self.source = source
         self.dest = dest
@@ -379,8 +392,12 @@ class Session:
             dest = self.dest
         if timeout is None:
             timeout = self.timeout
+        elif timeout <= 0:
+            raise CommandError(f"timeout {timeout} must be positive")
         if retries is None:
             retries = self.retries if idempotent else 0
+        elif retries < 0:
+            raise CommandError(f"retries {retries} must not be negative")
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which
         attempt = busy = 0
