@@ -12,8 +12,9 @@ Node addressing defaults, all overridable:
 
 from __future__ import annotations
 
+import inspect
 import socket
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Mapping, Set
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -111,6 +112,20 @@ async def default_addresses(
     return d, s
 
 
+#: Keyword options of :func:`connect` beyond its named parameters: serial settings, and the
+#: client node asked for in the FINS/TCP handshake.
+TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node"}
+
+
+def check_options(options: Mapping[str, Any], known: Set[str]) -> None:
+    """Refuse option names not in ``known``, naming them (before anything is opened)."""
+    unknown = set(options) - known
+    if unknown:
+        raise CommandError(
+            f"unknown option(s): {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})"
+        )
+
+
 @asynccontextmanager
 async def connect(
     url: str,
@@ -135,9 +150,7 @@ async def connect(
     query or keyword arguments.
     """
     endpoint = parse_endpoint(url)
-    unknown = set(transport_options) - SERIAL_SETTINGS - {"tcp_node"}
-    if unknown:
-        raise CommandError(f"unknown option(s): {', '.join(sorted(unknown))}")
+    check_options(transport_options, CONNECT_OPTIONS)
     d, s = await default_addresses(endpoint, dest, src)
     route = limits or limits_for(
         *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
@@ -163,3 +176,14 @@ async def connect(
         ):
             session.dest = FinsAddress(0, transport.remote_node, 0)
         yield Client(session, limits=route, word_order=word_order)
+
+
+#: Every keyword option :func:`connect` takes (what :class:`Pool` passes on to it).
+CONNECT_OPTIONS = (
+    frozenset(
+        name
+        for name, parameter in inspect.signature(connect).parameters.items()
+        if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+    )
+    | TRANSPORT_OPTIONS
+)

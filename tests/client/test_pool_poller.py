@@ -7,9 +7,10 @@ from collections.abc import AsyncIterator, Callable
 import anyio
 import pytest
 
+from aiofins.connection import connect
 from aiofins.poller import Poller, Quality
 from aiofins.pool import Pool
-from aiofins.protocol.errors import ConnectionLost
+from aiofins.protocol.errors import CommandError, ConnectionLost
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
@@ -154,3 +155,16 @@ async def test_pool_health_checks_and_closes_idle_sessions(sim: Simulator) -> No
         async with pool.client(url) as plc:
             await plc.read("D0")
         await _until(lambda: pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 0)
+
+
+def test_unknown_options_are_refused_when_the_pool_is_made() -> None:
+    """Not at the first borrow, where a poller would only show them as a scan error."""
+    with pytest.raises(CommandError, match=r"unknown option\(s\): connect_options \(known: "):
+        Pool(connect_options={"timeout": 1})
+    Pool(timeout=0.5, retries=0, baudrate=115200, tcp_node=5)  # connect's own options
+
+
+async def test_connect_names_its_options_when_refusing_one() -> None:
+    with pytest.raises(CommandError, match=r"unknown option\(s\): foo \(known: .*timeout"):
+        async with connect("udp://127.0.0.1:9", foo=1):
+            pass
