@@ -253,21 +253,6 @@ async def test_cancellation_frees_slots_and_quarantines_sids() -> None:
         assert_idle(s)
 
 
-def test_under_uvloop() -> None:
-    pytest.importorskip("uvloop")
-
-    async def main() -> None:
-        async with udp_responder() as peer, session_for(peer, max_in_flight=20) as s:
-            results = await s.request_many(reads(range(500)))
-            assert [r.data for r in results] == [expected(w) for w in range(500)]
-            peer.handler = lambda cmd: []
-            with pytest.raises(FinsTimeout):
-                await s.request_many(reads(range(3)), timeout=0.05)
-            assert_idle(s)
-
-    anyio.run(main, backend="asyncio", backend_options={"use_uvloop": True})
-
-
 @pytest.mark.anyio
 async def test_other_callers_share_the_destinations_slots_with_a_batch() -> None:
     async with udp_responder() as peer, session_for(peer, max_in_flight=4) as s:

@@ -19,7 +19,6 @@ from anyio.abc import TaskGroup
 from aiofins.protocol.errors import (
     CommandError,
     CommandRejectedError,
-    FinsTimeout,
     ParameterError,
     RelayError,
 )
@@ -348,29 +347,6 @@ async def test_relay_error_from_the_relay_point_reaches_its_request() -> None:
             await session.request(0x01, 0x01, read_params(0), dest=FinsAddress(5, 9, 0))
         assert (info.value.network, info.value.node) == (0, 7)
         assert info.value.code == 0x0501
-
-
-def test_under_uvloop() -> None:
-    """uvloop takes its own UDP path (its datagram transport calls the session directly)."""
-    pytest.importorskip("uvloop")
-
-    async def main() -> None:
-        async with udp_responder() as peer, session_for(peer, timeout=1) as session:
-            results: dict[int, bytes] = {}
-
-            async def one(word: int) -> None:
-                results[word] = (await session.request(0x01, 0x01, read_params(word))).data
-
-            async with anyio.create_task_group() as tg:
-                for word in range(50):
-                    tg.start_soon(one, word)
-            assert results == {w: (0x1000 | w).to_bytes(2, "big") for w in range(50)}
-            peer.handler = lambda cmd: []
-            with pytest.raises(FinsTimeout):
-                await session.request(0x01, 0x01, read_params(0), timeout=0.05)
-            assert session.stats.timeouts == 1
-
-    anyio.run(main, backend="asyncio", backend_options={"use_uvloop": True})
 
 
 @pytest.mark.parametrize(
