@@ -15,24 +15,26 @@ from aiofins.cli import main
 from aiofins.cli.demo import demo
 
 
-@pytest.fixture(scope="module")
-def sim_url() -> Iterator[str]:
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "aiofins.cli",
-            "simulate",
-            "--udp",
-            "127.0.0.1:0",
-            "--tcp",
-            "127.0.0.1:0",
-            "--mode",
-            "program",
-        ],
+def simulate(*options: str) -> subprocess.Popen[str]:
+    """``aiofins simulate`` on free loopback ports, in its own process."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "aiofins.cli", "simulate", "--udp", "127.0.0.1:0", *options],
         stdout=subprocess.PIPE,
         text=True,
     )
+
+
+def udp_url_of(proc: subprocess.Popen[str]) -> str:
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if line.startswith("listening on udp://"):
+            return line.split()[-1]
+    raise AssertionError("simulator did not report its UDP address")
+
+
+@pytest.fixture(scope="module")
+def sim_url() -> Iterator[str]:
+    proc = simulate("--tcp", "127.0.0.1:0", "--mode", "program")
     assert proc.stdout is not None
     url = ""
     for line in proc.stdout:
@@ -154,3 +156,25 @@ def test_backup_restore_and_files(
     assert run(capsys, "files", sim_url, "delete", "NOTES.TXT")[0] == 0
     code, out, _ = run(capsys, "files", sim_url, "list", "--json")
     assert "NOTES.TXT" not in out
+
+
+@pytest.mark.parametrize(
+    ("flags", "said"), [("40", "a non-fatal"), ("C0", "a fatal and a non-fatal")]
+)
+def test_cpu_error_flags_succeed_with_a_warning_on_stderr(
+    flags: str, said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    proc = simulate("--flags", flags)
+    try:
+        url = udp_url_of(proc)
+        code, out, err = run(capsys, "read", url, "D0", "2", "--json")
+        assert code == 0 and json.loads(out)["values"] == [0, 0]  # stdout: the JSON, unchanged
+        assert f"warning: the PLC reports {said} CPU error (end code 00{flags})" in err
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_no_warning_without_flags(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "read", sim_url, "D0")
+    assert code == 0 and err == ""

@@ -1,7 +1,8 @@
 """``aiofins read|write|status|info|clock|ping URL ...``: one-shot commands against a PLC.
 
 Stable interface (scripts depend on it): ``--json`` prints one JSON document on stdout; errors
-go to stderr with a non-zero exit code. ``--dest NET.NODE.UNIT``, ``--src NET.NODE.UNIT`` and
+go to stderr with a non-zero exit code. A response with the CPU error flags (end code bits 6/7)
+still succeeds; a warning goes to stderr. ``--dest NET.NODE.UNIT``, ``--src NET.NODE.UNIT`` and
 ``--timeout S`` work on every command.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
 from collections.abc import Awaitable, Callable
 from datetime import datetime
@@ -20,6 +22,7 @@ import anyio
 
 from ..client import Client
 from ..connection import connect
+from ..protocol.endcodes import EndCode
 from ..protocol.values import TYPE_NAMES, Value, parse_value_type
 
 Handler = Callable[[Client, argparse.Namespace], Awaitable[Any]]
@@ -79,7 +82,29 @@ def _runner(handler: Handler) -> Callable[[argparse.Namespace], int]:
 
 async def _with_client(handler: Handler, args: argparse.Namespace) -> Any:
     async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
-        return await handler(plc, args)
+        result = await handler(plc, args)
+        _warn_of_cpu_errors(plc.last_end_code)
+        return result
+
+
+def _warn_of_cpu_errors(end_code: EndCode | None) -> None:
+    """End code bits 6/7 do not fail a command; say on stderr that the PLC has an error."""
+    if end_code is None:
+        return
+    kinds = [
+        kind
+        for kind, flag in (
+            ("fatal", end_code.fatal_cpu_error),
+            ("non-fatal", end_code.non_fatal_cpu_error),
+        )
+        if flag
+    ]
+    if kinds:
+        print(
+            f"aiofins: warning: the PLC reports a {' and a '.join(kinds)} CPU error "
+            f"(end code {end_code.raw:04X}); 'aiofins status' shows which",
+            file=sys.stderr,
+        )
 
 
 def _json_default(value: object) -> object:
