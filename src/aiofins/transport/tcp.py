@@ -8,7 +8,9 @@ allocated node as SA1. Command 3 (error notification) ends the connection with
 on every path out (a leaked connection holds one of the PLC's node slots).
 
 Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session from
-``data_received`` and sends synchronously; under trio a reader task on an anyio stream does.
+``data_received`` and sends synchronously: a frame alone in flight at once, frames sent while
+others are in flight gathered into one write per event-loop step. Under trio a reader task on
+an anyio stream receives, and each frame is written on its own.
 """
 
 from __future__ import annotations
@@ -52,6 +54,9 @@ class _TcpProtocol(asyncio.Protocol):
         self.transport = cast(asyncio.Transport, transport)
 
     def send(self, frame: bytes) -> None:
+        """Write ``frame`` now if its request is the only one in flight, else at the end of
+        this event-loop step together with the other frames sent in it (one system call for
+        many frames; order kept)."""
         transport = self.transport
         if transport is None or transport.is_closing():
             raise ConnectionLost(f"{self.owner.description} is not connected")
@@ -65,6 +70,7 @@ class _TcpProtocol(asyncio.Protocol):
             transport.write(encode_frame(frame))
 
     def send_many(self, frames: list[bytes]) -> None:
+        """Write ``frames`` in one write (behind frames gathered earlier in this step)."""
         transport = self.transport
         if transport is None or transport.is_closing():
             raise ConnectionLost(f"{self.owner.description} is not connected")
@@ -86,18 +92,12 @@ class _TcpProtocol(asyncio.Protocol):
         if not self.handshake.done():
             self.before_handshake(data)
             return
-        decoder = self.decoder
-        received = self.sink.frame_received
         try:
-            message = decoder.feed_frames(data, received)
-            while message is not None:
-                error = _deliver(self.owner, message, self.sink)
-                if error is not None:
-                    self.fail(error)
-                    return
-                message = decoder.feed_frames(b"", received)
+            error = _deliver_all(self.owner, self.decoder, data, self.sink)
         except FrameError as exc:
-            self.fail(exc)
+            error = exc
+        if error is not None:
+            self.fail(error)
 
     def before_handshake(self, data: bytes) -> None:
         try:
@@ -152,6 +152,25 @@ def _deliver(owner: TcpTransport, message: TcpMessage, sink: FrameSink) -> Frame
         return _error_notification(owner, message.error_code)
     elif command != TcpCommand.CONNECTION_CONFIRMATION:
         sink.frame_dropped(f"unexpected FINS/TCP command {command}")
+    return None
+
+
+def _deliver_all(
+    owner: TcpTransport, decoder: TcpDecoder, data: bytes, sink: FrameSink
+) -> FrameError | None:
+    """Hand every whole message of the stream so far (with ``data``) to the sink, in order.
+
+    FINS frames go straight to ``sink.frame_received``; other messages through
+    :func:`_deliver`. Returns the error that ends the connection, if any; a broken stream
+    (bad magic or length) raises :class:`FrameError`.
+    """
+    received = sink.frame_received
+    message = decoder.feed_frames(data, received)
+    while message is not None:
+        error = _deliver(owner, message, sink)
+        if error is not None:
+            return error
+        message = decoder.feed_frames(b"", received)
     return None
 
 
@@ -293,14 +312,10 @@ class TcpTransport(Transport):
                 error = _deliver(self, early, sink)
                 if error is not None:
                     raise error
-            received = sink.frame_received
             while True:
-                message = decoder.feed_frames(await stream.receive(), received)
-                while message is not None:
-                    error = _deliver(self, message, sink)
-                    if error is not None:
-                        raise error
-                    message = decoder.feed_frames(b"", received)
+                error = _deliver_all(self, decoder, await stream.receive(), sink)
+                if error is not None:
+                    raise error
         except FrameError as err:  # FinsTcpError included: the stream is unusable now
             exc = err
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError) as err:
