@@ -178,3 +178,19 @@ def test_cpu_error_flags_succeed_with_a_warning_on_stderr(
 def test_no_warning_without_flags(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run(capsys, "read", sim_url, "D0")
     assert code == 0 and err == ""
+
+
+def test_values_that_do_not_parse_are_errors_not_tracebacks(
+    sim_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for argv, said in (
+        (("D30", "12a", "--type", "bcd16"), "value '12a' is not an integer"),
+        (("D30", "abc"), "value 'abc' is not an integer"),
+        (("D30", "1,5", "--type", "float32"), "value '1,5' is not a number"),
+    ):
+        code, out, err = run(capsys, "write", sim_url, *argv)
+        assert code == 1 and out == "" and f"CommandError: {said}" in err
+    code, _, _ = run(capsys, "write", sim_url, "D40", "--type", "float64", "--", "-1e10")
+    assert code == 0
+    code, out, _ = run(capsys, "read", sim_url, "D40", "--type", "float64", "--json")
+    assert json.loads(out)["values"] == [-1e10]

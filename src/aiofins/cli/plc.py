@@ -23,6 +23,7 @@ import anyio
 from ..client import Client
 from ..connection import connect
 from ..protocol.endcodes import EndCode
+from ..protocol.errors import CommandError
 from ..protocol.values import TYPE_NAMES, Value, parse_value_type
 
 Handler = Callable[[Client, argparse.Namespace], Awaitable[Any]]
@@ -48,7 +49,12 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     p = sub.add_parser("write", help="write words, bits or typed values")
     _common(p)
     p.add_argument("address")
-    p.add_argument("values", nargs="+", help="values to write (0x.. hex accepted for integers)")
+    p.add_argument(
+        "values",
+        nargs="+",
+        help="values to write (0x.. hex accepted for integers; put -- before the values if one "
+        "starts with - and is not a plain number, e.g. -- -1e10)",
+    )
     p.add_argument("--type", default=None, help=types)
     p.add_argument(
         "--allow-split", action="store_true", help="allow a non-atomic write of several frames"
@@ -143,11 +149,14 @@ async def _read(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _parse_value(text: str, kind: str) -> Value:
+    """A command-line value of a type's kind; :class:`CommandError` says what was expected."""
     if kind == "string":
         return text
-    if kind.startswith("float"):
-        return float(text)
-    return int(text, 0)
+    try:
+        return float(text) if kind.startswith("float") else int(text, 0)
+    except ValueError:
+        expected = "a number" if kind.startswith("float") else "an integer (0x.. hex accepted)"
+        raise CommandError(f"value {text!r} is not {expected}") from None
 
 
 async def _write(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
@@ -158,7 +167,7 @@ async def _write(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
             args.address, values, args.type, allow_split=args.allow_split, timeout=args.timeout
         )
     else:
-        words = [int(v, 0) for v in args.values]
+        words = [int(_parse_value(v, "int")) for v in args.values]
         await plc.write(args.address, words, allow_split=args.allow_split, timeout=args.timeout)
     return {"address": args.address, "written": len(args.values)}
 
