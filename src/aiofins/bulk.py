@@ -50,10 +50,15 @@ async def backup_program(client: Client, progress: Progress | None = None) -> by
             raise DecodeError("program area read returned no data and no last-block bit")
 
 
-async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:
-    """Write a program backup (0307, last block flagged); the PLC must be in PROGRAM mode."""
+def check_program_image(program: bytes) -> None:
+    """Refuse a program image :func:`restore_program` cannot write (before anything is sent)."""
     if len(program) % PROGRAM_BLOCK_UNIT:
         raise CommandError(f"program image must be a multiple of 4 bytes, got {len(program)}")
+
+
+async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:
+    """Write a program backup (0307, last block flagged); the PLC must be in PROGRAM mode."""
+    check_program_image(program)
     status = await client.cpu_unit_status_read()
     if status.mode != CpuMode.PROGRAM:
         raise CommandError(
@@ -94,15 +99,34 @@ async def backup_parameters(
     return out
 
 
+def check_parameter_backup(backup: dict[int, tuple[int, ...]]) -> None:
+    """Refuse a parameter backup with an unknown area, a wrong size or a word out of 0..FFFF."""
+    for area, words in backup.items():
+        expected = PARAMETER_AREA_WORDS.get(area)
+        if expected is None:
+            known = ", ".join(f"{a:04X}" for a in PARAMETER_AREA_WORDS)
+            raise CommandError(f"parameter area {area:04X} unknown (known: {known})")
+        if len(words) != expected:
+            raise CommandError(
+                f"parameter area {area:04X}: backup has {len(words)} words, the area {expected}"
+            )
+        bad = next((w for w in words if not (isinstance(w, int) and 0 <= w <= 0xFFFF)), None)
+        if bad is not None:
+            raise CommandError(f"parameter area {area:04X}: word {bad!r} out of range 0..FFFF")
+
+
 async def restore_parameters(
     client: Client, backup: dict[int, tuple[int, ...]], progress: Progress | None = None
 ) -> None:
-    """Write parameter areas back (0202, 498 words a frame)."""
+    """Write parameter areas back (0202, 498 words a frame).
+
+    The whole backup is checked first (:func:`check_parameter_backup`), so a bad area never
+    leaves the PLC with the areas before it restored and the rest not.
+    """
+    check_parameter_backup(backup)
     total = sum(len(w) for w in backup.values())
     done = 0
     for area, words in backup.items():
-        if len(words) != PARAMETER_AREA_WORDS.get(area, -1):
-            raise CommandError(f"parameter area {area:04X}: backup has {len(words)} words")
         for block in plan_parameter(0, len(words), client.limits.parameter_write_words):
             await client.parameter_area_write(
                 area, block.start, tuple(words[block.start : block.start + block.size])

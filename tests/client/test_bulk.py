@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from aiofins.bulk import (
@@ -57,6 +59,22 @@ async def test_parameter_backup_and_restore(url: str) -> None:
         changed[0x8010] = tuple((i * 3) & 0xFFFF for i in range(512))
         await restore_parameters(plc, changed)
         assert (await backup_parameters(plc))[0x8010] == changed[0x8010]
+
+
+async def test_a_bad_area_in_a_parameter_backup_writes_nothing(url: str) -> None:
+    """The whole backup is checked first: no area restored before the bad one."""
+    async with connect(url, timeout=2) as plc:
+        await plc.stop()
+        before = await backup_parameters(plc)
+        good = tuple((i * 7) & 0xFFFF for i in range(512))
+        for bad, said in (
+            ({0x8012: (1, 2)}, "parameter area 8012: backup has 2 words, the area 1280"),
+            ({0x8099: (0,) * 512}, "parameter area 8099 unknown"),
+            ({0x8013: (0x10000,) * 512}, "word 65536 out of range 0..FFFF"),
+        ):
+            with pytest.raises(CommandError, match=re.escape(said)):
+                await restore_parameters(plc, {0x8010: good, **bad})
+        assert await backup_parameters(plc) == before
 
 
 @pytest.mark.parametrize("networks", [(), (NetworkType.SYSMAC_LINK,)])

@@ -20,6 +20,8 @@ import anyio
 from ..bulk import (
     backup_parameters,
     backup_program,
+    check_parameter_backup,
+    check_program_image,
     download_file,
     list_files,
     restore_parameters,
@@ -28,6 +30,7 @@ from ..bulk import (
 )
 from ..client import Client
 from ..connection import connect
+from ..protocol.errors import CommandError
 from ..protocol.files import Disk
 
 
@@ -118,23 +121,42 @@ async def _backup(plc: Client, args: argparse.Namespace) -> int:
 
 
 async def _restore(plc: Client, args: argparse.Namespace) -> int:
+    # Read and check the file before anything is sent: a bad file must not stop the PLC.
+    image = b""
+    backup: dict[int, tuple[int, ...]] = {}
+    if args.what == "program":
+        image = args.file.read_bytes()
+        check_program_image(image)
+        size = len(image)
+    else:
+        backup = _parameter_backup(args.file)
+        check_parameter_backup(backup)
+        size = sum(len(v) for v in backup.values())
     bar = ProgressBar(f"restore {args.what}", "bytes" if args.what == "program" else "words")
     try:
         if args.stop:
             await plc.stop()
         if args.what == "program":
-            image = args.file.read_bytes()
             await restore_program(plc, image, progress=bar)
-            size = len(image)
         else:
-            raw = json.loads(args.file.read_text())
-            backup = {int(k, 16): tuple(int(w) for w in v) for k, v in raw.items()}
             await restore_parameters(plc, backup, progress=bar)
-            size = sum(len(v) for v in backup.values())
     finally:
         bar.close()
     print(f"{args.what}: {size} {bar.unit} restored from {args.file}")
     return 0
+
+
+def _parameter_backup(path: Path) -> dict[int, tuple[int, ...]]:
+    """A parameter backup file (``{"8010": [words...], ...}``) as words by area code."""
+    try:
+        raw = json.loads(path.read_text())
+        if not isinstance(raw, dict):
+            raise ValueError("not a JSON object")
+        return {int(k, 16): tuple(int(w) for w in v) for k, v in raw.items()}
+    except (ValueError, TypeError) as exc:
+        raise CommandError(
+            f'{path} is not a parameter backup ({{"8010": [words...], ...}}): {exc}'
+        ) from None
 
 
 async def _files(plc: Client, args: argparse.Namespace) -> int:
