@@ -58,7 +58,10 @@ def parse_endpoint(url: str) -> Endpoint:
             f"{url!r} is not a connection URL; use udp://HOST[:PORT], tcp://HOST[:PORT] or "
             "serial://DEVICE?baudrate=N"
         )
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except ValueError as exc:  # e.g. an unclosed [ of an IPv6 address
+        raise CommandError(f"{url!r}: {exc}") from None
     scheme = parts.scheme.lower()
     options = tuple(parse_qsl(parts.query, keep_blank_values=False))
     if scheme == "serial":

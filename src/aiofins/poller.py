@@ -34,10 +34,11 @@ import anyio
 from anyio.abc import TaskGroup
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
+from .endpoint import parse_endpoint
 from .pool import event_loop_clock
 from .protocol.errors import CommandError, FinsError
 from .protocol.values import Value
-from .tags import ReadPlan
+from .tags import ReadPlan, parse_tag
 
 if TYPE_CHECKING:
     from .pool import Pool
@@ -123,13 +124,22 @@ class Poller:
         interval: float = 1.0,
         timeout: float | None = None,
     ) -> ScanGroup:
-        """Add a scan group; starts at once if the poller is running."""
+        """Add a scan group; starts at once if the poller is running.
+
+        The URL and every tag are checked here (a bad one raises :class:`CommandError` or
+        :class:`AddressError` now, not as an error in every scan).
+        """
         if name in self.groups:
             raise CommandError(f"scan group {name!r} exists already")
         if not interval > 0 or not math.isfinite(interval):
             raise CommandError(f"interval must be a positive number of seconds, got {interval}")
+        if timeout is not None and not timeout > 0:
+            raise CommandError(f"timeout must be a positive number of seconds, got {timeout}")
         if not tags:
             raise CommandError(f"scan group {name!r} has no tags")
+        parse_endpoint(url)
+        for tag_name, spec in tags.items():
+            parse_tag(tag_name, spec)
         group = ScanGroup(name, url, dict(tags), interval, timeout)
         self.groups[name] = group
         if self._tg is not None:

@@ -194,3 +194,41 @@ def test_values_that_do_not_parse_are_errors_not_tracebacks(
     assert code == 0
     code, out, _ = run(capsys, "read", sim_url, "D40", "--type", "float64", "--json")
     assert json.loads(out)["values"] == [-1e10]
+
+
+def test_restore_with_a_bad_file_does_not_stop_the_plc(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The file is read and checked before --stop sends anything."""
+    proc = simulate()  # RUN mode
+    try:
+        url = udp_url_of(proc)
+        for content, what in (
+            ("{bad", "parameters"),
+            ('{"8010": [1, 2]}', "parameters"),
+            ("123", "program"),  # 3 bytes: not a multiple of 4
+        ):
+            path = tmp_path / f"backup.{what}"
+            path.write_text(content)
+            code, out, err = run(capsys, "restore", url, str(path), "--what", what, "--stop")
+            assert code == 1 and out == "" and "CommandError" in err, err
+        code, out, _ = run(capsys, "status", url, "--json")
+        assert json.loads(out)["mode"] == "RUN"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_poll_refuses_bad_tags_and_intervals_before_polling(
+    sim_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for argv, said in (
+        (("x=Q0",), "AddressError: 'Q0': unknown area 'Q'"),
+        (("x=D0:float99",), "CommandError: unknown value type 'float99'"),
+        (("=D0",), "CommandError: tag '=D0' is not ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]"),
+        (("x=D0", "--interval", "0"), "CommandError: interval must be a positive number"),
+    ):
+        code, out, err = run(capsys, "poll", sim_url, *argv, "--count", "1")
+        assert code == 1 and out == "" and said in err, err
+    code, out, err = run(capsys, "read", "udp://[::1", "D0")
+    assert code == 1 and "CommandError: 'udp://[::1': Invalid IPv6 URL" in err

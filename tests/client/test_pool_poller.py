@@ -10,7 +10,7 @@ import pytest
 from aiofins.connection import connect
 from aiofins.poller import Poller, Quality
 from aiofins.pool import Pool
-from aiofins.protocol.errors import CommandError, ConnectionLost
+from aiofins.protocol.errors import AddressError, CommandError, ConnectionLost
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
@@ -168,3 +168,18 @@ async def test_connect_names_its_options_when_refusing_one() -> None:
     with pytest.raises(CommandError, match=r"unknown option\(s\): foo \(known: .*timeout"):
         async with connect("udp://127.0.0.1:9", foo=1):
             pass
+
+
+def test_add_group_checks_its_url_tags_and_timing_at_once() -> None:
+    poller = Poller(Pool())
+    with pytest.raises(AddressError, match="unknown area 'Q'"):
+        poller.add_group("g", "udp://127.0.0.1", {"x": "Q0"})
+    with pytest.raises(CommandError, match="unknown scheme"):
+        poller.add_group("g", "http://127.0.0.1", {"x": "D0"})
+    with pytest.raises(CommandError, match="timeout must be a positive"):
+        poller.add_group("g", "udp://127.0.0.1", {"x": "D0"}, timeout=0)
+    with pytest.raises(AddressError, match="run past the end"):
+        poller.add_group("g", "udp://127.0.0.1", {"x": "D32767:float32"})
+    assert poller.groups == {}
+    poller.add_group("g", "udp://127.0.0.1", {"x": "D0:float32"})
+    assert list(poller.groups) == ["g"]

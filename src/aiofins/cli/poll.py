@@ -13,6 +13,7 @@ import anyio
 
 from ..poller import Poller, Snapshot
 from ..pool import Pool
+from ..protocol.errors import CommandError
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -35,6 +36,8 @@ def parse_tags(texts: list[str]) -> dict[str, str]:
         name, sep, spec = text.partition("=")
         if not sep:
             name, spec = text, text
+        if not name.strip() or not spec.strip():
+            raise CommandError(f"tag {text!r} is not ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
         tags[name.strip()] = spec.strip()
     return tags
 
@@ -68,8 +71,11 @@ def to_json(snap: Snapshot) -> str:
 async def poll(args: argparse.Namespace) -> None:
     tags = parse_tags(args.tags)
     options = {"timeout": args.timeout, "dest": args.dest, "src": args.src}
-    async with Pool(**options) as pool, Poller(pool, changes_only=args.changes_only) as poller:
-        poller.add_group("cli", args.url, tags, interval=args.interval, timeout=args.timeout)
+    pool = Pool(**options)
+    poller = Poller(pool, changes_only=args.changes_only)
+    # Before anything opens: a bad URL, tag or interval is an error, not a scan error.
+    poller.add_group("cli", args.url, tags, interval=args.interval, timeout=args.timeout)
+    async with pool, poller:
         seen = 0
         async for snap in poller:
             print(to_json(snap) if args.json else format_line(snap), flush=True)
