@@ -384,3 +384,20 @@ async def test_bad_per_call_timeout_or_retries_are_refused_before_sending() -> N
             with pytest.raises(CommandError, match=message):
                 await s.request_many([(0x01, 0x01, read_params(0))] * 2, **kwargs)  # type: ignore[arg-type]
         assert responder.received == []
+
+
+@pytest.mark.anyio
+async def test_parameters_that_are_not_bytes_leave_nothing_behind() -> None:
+    """A bad parameter block raises before the request is registered: no SID held (so no
+    late timeout), nothing sent."""
+    async with udp_responder(answer) as responder, session_for(responder, timeout=0.2) as s:
+        with pytest.raises(TypeError):
+            await s.request(0x01, 0x01, "abc")  # type: ignore[arg-type]
+        assert s.stats.in_flight == 0
+        with pytest.raises(TypeError, match="command parameters must be bytes, got str"):
+            await s.request_many([(0x01, 0x01, read_params(0)), (0x01, 0x01, "abc")])  # type: ignore[list-item]
+        assert s.stats.in_flight == 0
+        assert (await s.request(0x01, 0x01, read_params(5))).data == (
+            (PLC.node << 12) ^ 5
+        ).to_bytes(2, "big")
+        assert len(responder.received) == 1 and s.stats.timeouts == 0

@@ -65,6 +65,8 @@ def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:
 
 def check_command(mrc: int, src: int, params: bytes) -> None:
     """Refuse a command code or parameter block no FINS frame can carry, before sending."""
+    if not isinstance(params, (bytes, bytearray, memoryview)):
+        raise TypeError(f"command parameters must be bytes, got {type(params).__name__}")
     if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
         raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
     if len(params) > MAX_PARAMETER_SIZE:
@@ -362,8 +364,12 @@ async def request_many(
     elif retries < 0:
         raise CommandError(f"retries {retries} must not be negative")
     for mrc, src, params in commands:
-        if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
-            check_command(mrc, src, params)  # raises the error that says which
+        if (
+            type(params) is not bytes
+            or len(params) > MAX_PARAMETER_SIZE
+            or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF)
+        ):
+            check_command(mrc, src, params)  # raises the error that says which (if any)
     if window is not None and window < 1:
         raise CommandError(f"window {window} must be at least 1")
     if not commands:

@@ -420,6 +420,9 @@ class Session:
                         key = await self._wait_for_sid(state, timeout)
                     else:
                         state.cursor = (key + 1) & 0xFF
+                    # Built before the request is registered: bad parameters (not bytes) raise
+                    # here and leave nothing behind.
+                    frame = _pack_head(state.prefix, key & 0xFF, mrc, src) + params
                     now = monotonic()
                     deadline = now + timeout
                     fut: asyncio.Future[bytes] | None = None
@@ -438,7 +441,6 @@ class Session:
                         self._deadlines.add(p)
                     if deadline < self._timer_at:
                         self._arm(deadline)
-                    frame = _pack_head(state.prefix, key & 0xFF, mrc, src) + params
                     try:
                         fast_send = transport.fast_send
                         if fast_send is not None:
