@@ -127,7 +127,7 @@ class CommandMethods:
         self,
         request: Request[R],
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> R:  # pragma: no cover - provided by Client
@@ -138,7 +138,7 @@ class CommandMethods:
         address: MemoryAddress,
         count: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> MemoryAreaReadResult:
@@ -155,7 +155,7 @@ class CommandMethods:
         address: MemoryAddress,
         data: bytes,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -170,7 +170,7 @@ class CommandMethods:
         count: int,
         value: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -186,7 +186,7 @@ class CommandMethods:
         self,
         addresses: tuple[MemoryAddress, ...],
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> MultipleMemoryAreaReadResult:
@@ -201,7 +201,7 @@ class CommandMethods:
         destination: MemoryAddress,
         count: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -219,7 +219,7 @@ class CommandMethods:
         begin_word: int,
         count: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ParameterAreaReadResult:
@@ -238,7 +238,7 @@ class CommandMethods:
         words: tuple[int, ...],
         last: bool | None = None,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -255,7 +255,7 @@ class CommandMethods:
         area_code: int,
         count: int | None = None,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -272,7 +272,7 @@ class CommandMethods:
         address: int,
         byte_count: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ProgramAreaReadResult:
@@ -290,7 +290,7 @@ class CommandMethods:
         data: bytes,
         last: bool = False,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ProgramAreaWriteResult:
@@ -306,7 +306,7 @@ class CommandMethods:
         self,
         clear_code: int = ProgramClearCode.WITHOUT_INTERRUPT_TASKS,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -319,7 +319,7 @@ class CommandMethods:
         self,
         mode: int = RunMode.MONITOR,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -329,7 +329,7 @@ class CommandMethods:
     async def stop(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -340,7 +340,7 @@ class CommandMethods:
         self,
         data_type: int | None = None,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> CpuUnitData:
@@ -354,7 +354,7 @@ class CommandMethods:
         unit_address: int = 0,
         count: int | None = None,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ConnectionData:
@@ -369,7 +369,7 @@ class CommandMethods:
     async def cpu_unit_status_read(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> CpuUnitStatus:
@@ -380,7 +380,7 @@ class CommandMethods:
         self,
         parameter: CycleTimeParameter = CycleTimeParameter.READ,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> CycleTime | None:
@@ -392,7 +392,7 @@ class CommandMethods:
     async def clock_read(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ClockData:
@@ -405,7 +405,7 @@ class CommandMethods:
         day_of_week: int | None = None,
         with_second: bool = True,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -421,7 +421,7 @@ class CommandMethods:
         self,
         mask: int = 255,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> Messages:
@@ -432,7 +432,7 @@ class CommandMethods:
         self,
         mask: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -443,7 +443,7 @@ class CommandMethods:
         self,
         number: int,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FalFalsMessage:
@@ -456,7 +456,7 @@ class CommandMethods:
         self,
         program_number: int = 65535,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> AccessRightHolder | None:
@@ -472,7 +472,7 @@ class CommandMethods:
         self,
         program_number: int = 65535,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -488,7 +488,7 @@ class CommandMethods:
         self,
         program_number: int = 65535,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -504,7 +504,7 @@ class CommandMethods:
         self,
         error_code: int = 65534,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -518,7 +518,7 @@ class CommandMethods:
         beginning_record: int = 0,
         count: int = 20,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ErrorLog:
@@ -533,7 +533,7 @@ class CommandMethods:
     async def error_log_clear(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -545,7 +545,7 @@ class CommandMethods:
         beginning_record: int = 0,
         count: int = 20,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FinsWriteAccessLog:
@@ -560,7 +560,7 @@ class CommandMethods:
     async def fins_write_access_log_clear(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -576,7 +576,7 @@ class CommandMethods:
         count: int = 20,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FileNameReadResult:
@@ -596,7 +596,7 @@ class CommandMethods:
         length: int = 1988,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> SingleFileReadResult:
@@ -619,7 +619,7 @@ class CommandMethods:
         position: int = 0,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -637,7 +637,7 @@ class CommandMethods:
         self,
         disk: Disk,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -652,7 +652,7 @@ class CommandMethods:
         names: tuple[str, ...],
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FileDeleteResult:
@@ -673,7 +673,7 @@ class CommandMethods:
         source_directory: str = "",
         destination_directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -699,7 +699,7 @@ class CommandMethods:
         new_name: str,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -720,7 +720,7 @@ class CommandMethods:
         name: str,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FileTransferResult:
@@ -744,7 +744,7 @@ class CommandMethods:
         count: int = 65535,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FileTransferResult:
@@ -774,7 +774,7 @@ class CommandMethods:
         byte_count: int = 4294967295,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ProgramAreaFileTransferResult:
@@ -801,7 +801,7 @@ class CommandMethods:
         name: str,
         directory: str = "",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -819,7 +819,7 @@ class CommandMethods:
         areas: CassetteArea = CassetteArea(0),  # noqa: B008
         disk: Disk = Disk.MEMORY_CASSETTE,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> MemoryCassetteDataType | None:
@@ -835,7 +835,7 @@ class CommandMethods:
         self,
         entries: tuple[ForcedSetResetEntry, ...],
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -847,7 +847,7 @@ class CommandMethods:
     async def forced_set_reset_cancel(
         self,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
@@ -858,7 +858,7 @@ class CommandMethods:
         self,
         payload: bytes,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> CompowayFResponse:
@@ -871,7 +871,7 @@ class CommandMethods:
         self,
         payload: bytes,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ModbusRtuResponse:
@@ -884,7 +884,7 @@ class CommandMethods:
         self,
         payload: bytes,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ModbusAsciiResponse:

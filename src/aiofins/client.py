@@ -68,12 +68,13 @@ class Client(CommandMethods):
         self,
         session: Session,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         limits: RouteLimits | None = None,
         word_order: WordOrder | str = WordOrder.LOW_FIRST,
     ) -> None:
         self.session = session
-        self.dest = dest if dest is not None else session.dest
+        self.dest: FinsAddress = session.dest
+        self.dest = self._target(dest)
         self.limits = limits if limits is not None else limits_for()
         self.word_order = WordOrder.parse(word_order)
         #: End code of the latest normal response (look here for the 0040/0080 flags).
@@ -87,7 +88,7 @@ class Client(CommandMethods):
         src: int,
         params: bytes = b"",
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
         idempotent: bool = False,
@@ -96,7 +97,7 @@ class Client(CommandMethods):
 
         Non-normal end codes raise :class:`~aiofins.EndCodeError` subclasses.
         """
-        target = dest or self.dest
+        target = self._target(dest)
         try:
             response = await self.session.request(
                 mrc,
@@ -117,7 +118,7 @@ class Client(CommandMethods):
         self,
         commands: Sequence[tuple[int, int, bytes]],
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
         idempotent: bool = False,
@@ -126,7 +127,7 @@ class Client(CommandMethods):
 
         See :meth:`Session.request_many`; the first error is raised as by :meth:`execute`.
         """
-        target = dest or self.dest
+        target = self._target(dest)
         try:
             responses = await self.session.request_many(
                 commands, dest=target, timeout=timeout, idempotent=idempotent, retries=retries
@@ -138,6 +139,12 @@ class Client(CommandMethods):
             self.last_end_code = responses[-1].end_code
         return responses
 
+    def _target(self, dest: FinsAddress | str | None) -> FinsAddress:
+        """The destination of a call: the client's, or ``dest`` (``"NET.NODE.UNIT"`` too)."""
+        if dest is None:
+            return self.dest
+        return FinsAddress.parse(dest) if isinstance(dest, str) else dest
+
     def _add_addressing_hint(self, exc: EndCodeError, target: FinsAddress) -> None:
         """End codes that usually mean wrong node addressing say which addresses to check."""
         if exc.end_code.code in _ADDRESSING_END_CODES:
@@ -147,7 +154,7 @@ class Client(CommandMethods):
         self,
         request: Request[R],
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> R:
@@ -182,7 +189,7 @@ class Client(CommandMethods):
         address: AddressLike,
         count: int = 1,
         *,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> list[int]:
@@ -223,7 +230,7 @@ class Client(CommandMethods):
         values: Sequence[int],
         *,
         allow_split: bool = False,
-        dest: FinsAddress | None = None,
+        dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:

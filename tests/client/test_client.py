@@ -172,3 +172,14 @@ async def test_transfers_past_the_end_of_an_area_fail_before_sending(
         assert await plc.read("A440", 16) == [0] * 16  # A0-A447 and A448-A959 are one area
         with pytest.raises(AddressError, match="tag 'x'"):
             plc.compile_tags({"x": "D32767:int32"})
+
+
+async def test_per_call_destination_as_text(sim: Simulator, url: str) -> None:
+    """``dest`` per call takes "NET.NODE.UNIT" as connect does (DNA/DA1/DA2 per call)."""
+    async with connect(url, timeout=1) as plc:
+        node = plc.dest.node
+        await plc.write("D0", [42], dest=f"0.{node}.0")
+        assert await plc.read("D0", dest=f"0.{node}") == [42]
+        assert (await plc.cpu_unit_status_read(dest=f"0.{node}.0")).mode is not None
+        with pytest.raises(CommandError, match=r"is not NET\.NODE"):
+            await plc.read("D0", dest="node1")
