@@ -183,3 +183,30 @@ async def test_per_call_destination_as_text(sim: Simulator, url: str) -> None:
         assert (await plc.cpu_unit_status_read(dest=f"0.{node}.0")).mode is not None
         with pytest.raises(CommandError, match=r"is not NET\.NODE"):
             await plc.read("D0", dest="node1")
+
+
+async def test_virtual_plc_memory_by_address_text_agrees_with_fins() -> None:
+    """What a test sets with VirtualPLC.write/write_value a client reads over FINS, and back."""
+    plc = VirtualPLC()
+    plc.write("D100", [1, 2, 0xFFFF])
+    plc.write("CIO 10.14", [1, 1])
+    plc.write_value("D200", -2.5, "float32")
+    plc.write_value("H10", "LOT-42", "string:6")
+    plc.write("A0", [7])  # read-only for FINS, not for the PLC's own program
+    async with (
+        run_simulator(plc, udp=("127.0.0.1", 0)) as sim,
+        connect(f"udp://127.0.0.1:{sim.udp_port}", timeout=1) as client,
+    ):
+        assert await client.read("D100", 3) == [1, 2, 0xFFFF]
+        assert await client.read("CIO 10", 1) == [0xC000]
+        assert await client.read_value("D200", "float32") == -2.5
+        assert await client.read_value("H10", "string:6") == "LOT-42"
+        assert await client.read("A0") == [7]
+        await client.write("D300", [5, 6])
+        await client.write("CIO 20.03", [1, 0, 1])
+        await client.write_value("D400", 123456, "int32")
+        assert plc.read("D300", 2) == [5, 6]
+        assert plc.read("CIO 20.03", 3) == [1, 0, 1]
+        assert plc.read_value("D400", "int32") == 123456
+    with pytest.raises(AddressError, match="run past the end"):
+        plc.read("D32767", 2)

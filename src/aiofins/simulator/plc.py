@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
+from ..protocol.addresses import parse_address
+from ..protocol.areas import check_span
 from ..protocol.commands import Request, operation_for
 from ..protocol.commands.access import AccessRightAcquire
 from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea, ParameterAreaRead
@@ -28,6 +30,7 @@ from ..protocol.endcodes import (
 from ..protocol.errors import DecodeError
 from ..protocol.files import Disk
 from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
+from ..protocol.values import Value, parse_value_type, values_to_words, words_to_values
 from . import restrictions
 from .filememory import FileMemory
 from .handlers import HANDLERS, Call, GatewayHandler, default_gateway
@@ -192,6 +195,42 @@ class VirtualPLC:
         running = int(self._mode is not Mode.PROGRAM)
         self.memory.task_flags[0] = running
         self.memory.task_status[0] = running
+
+    # ---- I/O memory by address text (tests and demos) ----------------------------------------
+
+    def read(self, address: str, count: int = 1) -> list[int]:
+        """``count`` elements from ``address`` (``"D100"``, ``"CIO 0.01"``, ``"T5"``) as
+        :meth:`aiofins.Client.read` would return them: words, or 0/1 for bits and flags.
+
+        Straight from memory: no FINS frame, no restriction checks.
+        """
+        start = parse_address(address)
+        check_span(start, count)
+        memory = self.memory
+        if start.element_size == 1:
+            bits = memory.read_bits(start.area_code, start.word, start.bit, count)
+            return [int(b) for b in bits]
+        return memory.read_words(start.area_code, start.word, count)
+
+    def write(self, address: str, values: Sequence[int]) -> None:
+        """Set elements from ``address`` as the PLC's own program would (read-only areas
+        too): words, or 0/1 for bits."""
+        start = parse_address(address)
+        check_span(start, len(values))
+        memory = self.memory
+        if start.element_size == 1:
+            memory.write_bits(start.area_code, start.word, start.bit, [bool(v) for v in values])
+        else:
+            memory.write_words(start.area_code, start.word, values)
+
+    def read_value(self, address: str, vtype: str = "uint16") -> Value:
+        """One typed value (``"float32"``, ``"string:8"``, ...; Omron's CDAB word order)."""
+        value_type = parse_value_type(vtype)
+        return words_to_values(value_type, self.read(address, value_type.words))[0]
+
+    def write_value(self, address: str, value: Value, vtype: str = "uint16") -> None:
+        """Store one typed value as the PLC program would."""
+        self.write(address, values_to_words(parse_value_type(vtype), [value]))
 
     # ---- time -------------------------------------------------------------------------------
 
