@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -232,3 +233,12 @@ def test_poll_refuses_bad_tags_and_intervals_before_polling(
         assert code == 1 and out == "" and said in err, err
     code, out, err = run(capsys, "read", "udp://[::1", "D0")
     assert code == 1 and "CommandError: 'udp://[::1': Invalid IPv6 URL" in err
+
+
+def test_poll_text_lines_say_why_a_scan_failed(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # a PLC that never answers
+        silent.bind(("127.0.0.1", 0))
+        url = f"udp://127.0.0.1:{silent.getsockname()[1]}"
+        code, out, _ = run(capsys, "poll", url, "x=D0", "--timeout", "0.05", "--count", "1")
+    assert code == 0
+    assert out.startswith("#1 x=None(error)  (FinsTimeout: no response to command 0101"), out

@@ -49,7 +49,8 @@ def format_line(snap: Snapshot) -> str:
         text = f"{value:.6g}" if isinstance(value, float) else str(value)
         mark = "" if reading.quality.value == "good" else f"({reading.quality.value})"
         parts.append(f"{name}={text}{mark}")
-    return f"#{snap.scan} " + " ".join(parts)
+    line = f"#{snap.scan} " + " ".join(parts)
+    return line if snap.error is None else f"{line}  ({snap.error})"
 
 
 def to_json(snap: Snapshot) -> str:
