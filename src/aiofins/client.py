@@ -310,7 +310,11 @@ class Client(CommandMethods):
         self, tags: Mapping[str, str] | ReadPlan, *, timeout: float | None = None
     ) -> dict[str, Value]:
         """Read a tag list (``{"temp": "D100:float32", "run": "CIO 0.01"}``) in few frames."""
-        plan = tags if isinstance(tags, ReadPlan) else self.compile_tags(tags)
+        if isinstance(tags, ReadPlan):
+            plan = tags
+            self._check_plan_fits(plan)
+        else:
+            plan = self.compile_tags(tags)
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
             return plan.decode((await self._read_run(plan, 0, timeout),), ())
@@ -322,6 +326,22 @@ class Client(CommandMethods):
             for m, response in zip(multiple, responses[n_runs:], strict=True)
         ]
         return plan.decode(run_words, multi)
+
+    def _check_plan_fits(self, plan: ReadPlan) -> None:
+        """Refuse a plan compiled for larger frames than this client's route carries."""
+        sizes: tuple[int, int] | None = plan.cache.get("sizes")
+        if sizes is None:
+            sizes = plan.cache["sizes"] = (
+                max((run.count for run in plan.runs), default=0),
+                max((len(frame) for frame in plan.multiple), default=0),
+            )
+        limits = self.limits
+        if sizes[0] > limits.memory_read_words or sizes[1] > limits.multiple_read_elements:
+            raise CommandError(
+                f"the tag plan has frames of up to {sizes[0]} words (0101) and {sizes[1]} "
+                f"elements (0104); this route carries {limits.memory_read_words} and "
+                f"{limits.multiple_read_elements}: compile it with this client (compile_tags)"
+            )
 
     def _scan_commands(
         self, plan: ReadPlan

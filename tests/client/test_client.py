@@ -210,3 +210,19 @@ async def test_virtual_plc_memory_by_address_text_agrees_with_fins() -> None:
         assert plc.read_value("D400", "int32") == 123456
     with pytest.raises(AddressError, match="run past the end"):
         plc.read("D32767", 2)
+
+
+async def test_a_tag_plan_for_bigger_frames_is_refused_on_a_smaller_route(
+    sim: Simulator, url: str
+) -> None:
+    tags = {"first": "D0", "last": "D500"}  # one 501-word 0101 frame on Ethernet
+    async with connect(url, timeout=1) as ethernet:
+        plan = ethernet.compile_tags(tags, max_gap=600)
+        assert [run.count for run in plan.runs] == [501]
+        assert await ethernet.read_tags(plan) == {"first": 0, "last": 0}
+    sent = sim.counters.requests
+    async with connect(url, timeout=1, networks=(NetworkType.SYSMAC_LINK,)) as sysmac:
+        with pytest.raises(CommandError, match=r"up to 501 words .* carries 269"):
+            await sysmac.read_tags(plan)
+        assert sim.counters.requests == sent
+        assert await sysmac.read_tags(tags) == {"first": 0, "last": 0}  # compiled for 269
