@@ -58,7 +58,12 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
     if endpoint.scheme == "udp":
         return UdpTransport(endpoint.host, endpoint.port)
     if endpoint.scheme == "tcp":
-        return TcpTransport(endpoint.host, endpoint.port, node=int(options.get("tcp_node", 0)))
+        return TcpTransport(
+            endpoint.host,
+            endpoint.port,
+            node=int(options.get("tcp_node", 0)),
+            gather_writes=bool(options.get("tcp_gather_writes", True)),
+        )
     settings: dict[str, Any] = dict(endpoint.options)
     settings.update({k: v for k, v in options.items() if k in SERIAL_SETTINGS})
     return SerialTransport(
@@ -112,9 +117,9 @@ async def default_addresses(
     return d, s
 
 
-#: Keyword options of :func:`connect` beyond its named parameters: serial settings, and the
-#: client node asked for in the FINS/TCP handshake.
-TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node"}
+#: Keyword options of :func:`connect` beyond its named parameters: serial settings, the
+#: client node asked for in the FINS/TCP handshake, and whether FINS/TCP gathers writes.
+TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node", "tcp_gather_writes"}
 
 
 def check_options(options: Mapping[str, Any], known: Set[str]) -> None:
@@ -147,7 +152,9 @@ async def connect(
     ``limits`` overrides them altogether. ``max_in_flight`` caps concurrent requests to the
     PLC (default 5; serial lines carry one at a time). Serial settings (``baudrate``,
     ``bytesize``, ``parity``, ``stopbits``, ``unit``, ``response_wait``) come from the URL
-    query or keyword arguments.
+    query or keyword arguments. FINS/TCP: ``tcp_node`` asks the PLC for a client node (0: let
+    it allocate one); ``tcp_gather_writes=False`` writes each frame on its own instead of the
+    frames of one event-loop step together.
     """
     endpoint = parse_endpoint(url)
     check_options(transport_options, CONNECT_OPTIONS)

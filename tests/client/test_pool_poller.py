@@ -161,7 +161,7 @@ def test_unknown_options_are_refused_when_the_pool_is_made() -> None:
     """Not at the first borrow, where a poller would only show them as a scan error."""
     with pytest.raises(CommandError, match=r"unknown option\(s\): connect_options \(known: "):
         Pool(connect_options={"timeout": 1})
-    Pool(timeout=0.5, retries=0, baudrate=115200, tcp_node=5)  # connect's own options
+    Pool(timeout=0.5, retries=0, baudrate=115200, tcp_node=5, tcp_gather_writes=False)
 
 
 async def test_connect_names_its_options_when_refusing_one() -> None:

@@ -261,3 +261,21 @@ async def test_request_many_over_tcp_writes_each_step_once(anyio_backend: object
         assert session.stats.in_flight == 0 and session.stats.completed == 500
         if anyio_backend != "trio":  # the first window: one write of 20 frames
             assert peer.frames_per_read[1] == 20, peer.frames_per_read
+
+
+async def test_gathering_can_be_turned_off(anyio_backend: object) -> None:
+    """``gather_writes=False``: every frame on its own write, the same results."""
+    async with tcp_server(TcpPeer()) as peer:
+        session = Session(
+            TcpTransport("127.0.0.1", peer.port, connect_timeout=2, gather_writes=False),
+            source=FinsAddress(0, 0, 0),
+            dest=FinsAddress(0, 1, 0),
+            max_in_flight=20,
+        )
+        async with session:
+            commands = [(0x01, 0x01, read_params(w)) for w in range(100)]
+            results = await session.request_many(commands, window=20)
+            assert [r.data for r in results] == [
+                (0x1000 | w).to_bytes(2, "big") for w in range(100)
+            ]
+            assert sid_order(peer.frames[:20]) == sorted(sid_order(peer.frames[:20]))

@@ -45,6 +45,7 @@ class _TcpProtocol(asyncio.Protocol):
         self.handshake: asyncio.Future[tuple[int, int]] = asyncio.get_running_loop().create_future()
         self.transport: asyncio.Transport | None = None
         self.outbox: list[bytes] = []
+        self.gather = owner.gather_writes
         self.awaited = replies_awaited(sink)
         self.loop = asyncio.get_running_loop()
 
@@ -63,7 +64,7 @@ class _TcpProtocol(asyncio.Protocol):
         outbox = self.outbox
         if outbox:
             outbox.append(encode_frame(frame))
-        elif len(self.awaited) > 1:
+        elif self.gather and len(self.awaited) > 1:
             outbox.append(encode_frame(frame))
             self.loop.call_soon(self.flush)
         else:
@@ -74,6 +75,10 @@ class _TcpProtocol(asyncio.Protocol):
         transport = self.transport
         if transport is None or transport.is_closing():
             raise ConnectionLost(f"{self.owner.description} is not connected")
+        if not self.gather:
+            for frame in frames:
+                transport.write(encode_frame(frame))
+            return
         data = b"".join([encode_frame(frame) for frame in frames])
         if self.outbox:
             self.outbox.append(data)
@@ -193,6 +198,7 @@ class TcpTransport(Transport):
         *,
         node: int = 0,
         connect_timeout: float = 5.0,
+        gather_writes: bool = True,
     ) -> None:
         if not 0 <= node <= 0xFE:
             raise FrameError(f"FINS/TCP client node {node} out of range 0..254")
@@ -201,6 +207,10 @@ class TcpTransport(Transport):
         #: The client node we ask for in the handshake (0 = let the server allocate).
         self.node = node
         self.connect_timeout = connect_timeout
+        #: Under asyncio, write the frames sent in one event-loop step together (one system
+        #: call). ``False`` writes each frame on its own, for a peer whose TCP stack mishandles
+        #: several FINS/TCP messages in one segment (TCP itself may still join them).
+        self.gather_writes = gather_writes
         self._stream: SocketStream | None = None
         self._aio: _TcpProtocol | None = None
         self._send_lock = anyio.Lock()
