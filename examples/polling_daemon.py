@@ -4,12 +4,14 @@
     python examples/polling_daemon.py udp://10.0.0.5 udp://10.0.0.6
 
 Each PLC is one scan group with its own interval; a slow or dead PLC does not delay the others
-and its tags turn STALE (last good value kept) and then ERROR. Stop with Ctrl-C.
+and its tags turn STALE (last good value kept) and then ERROR. Ctrl-C (SIGINT) or SIGTERM (as
+systemd and Docker stop a service) ends it cleanly: sessions closed, exit code 0.
 """
 
 from __future__ import annotations
 
 import json
+import signal
 import sys
 from contextlib import AsyncExitStack
 
@@ -28,6 +30,22 @@ TAGS = {
 
 
 async def main(urls: list[str], duration: float | None) -> None:
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(stop_on_signals, tg.cancel_scope)
+        await poll(urls, duration)
+        tg.cancel_scope.cancel()
+
+
+async def stop_on_signals(scope: anyio.CancelScope) -> None:
+    """SIGINT or SIGTERM: stop polling, close the sessions, exit 0."""
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async for signum in signals:
+            print(f"stopping on {signal.Signals(signum).name}", file=sys.stderr, flush=True)
+            scope.cancel()
+            return
+
+
+async def poll(urls: list[str], duration: float | None) -> None:
     async with AsyncExitStack() as stack:
         if not urls:  # no PLC given: run two virtual ones
             for _ in range(2):

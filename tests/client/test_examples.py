@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -44,3 +45,26 @@ def test_fastapi_app_serves_reads_and_writes() -> None:
         assert http.get("/plc/D40000").status_code == 400
         assert http.get("/status").json()["mode"] == "PROGRAM"
         assert http.get("/plc/D100/value", params={"type": "uint32"}).json()["value"] == 0x20001
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_polling_daemon_stops_cleanly_on_a_signal(signum: signal.Signals) -> None:
+    """As systemd, Docker or Ctrl-C stop it: exit code 0, no traceback."""
+    proc = subprocess.Popen(
+        [sys.executable, str(ROOT / "examples" / "polling_daemon.py")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        first = json.loads(proc.stdout.readline())  # polling has started
+        assert first["plc"] in ("plc0", "plc1")
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == 0, err
+    assert f"stopping on {signum.name}" in err and "Traceback" not in err, err
