@@ -73,8 +73,7 @@ class Client(CommandMethods):
         word_order: WordOrder | str = WordOrder.LOW_FIRST,
     ) -> None:
         self.session = session
-        self.dest: FinsAddress = session.dest
-        self.dest = self._target(dest)
+        self.dest = session.dest if dest is None else FinsAddress.of(dest)
         self.limits = limits if limits is not None else limits_for()
         self.word_order = WordOrder.parse(word_order)
         #: End code of the latest normal response (look here for the 0040/0080 flags).
@@ -141,9 +140,7 @@ class Client(CommandMethods):
 
     def _target(self, dest: FinsAddress | str | None) -> FinsAddress:
         """The destination of a call: the client's, or ``dest`` (``"NET.NODE.UNIT"`` too)."""
-        if dest is None:
-            return self.dest
-        return FinsAddress.parse(dest) if isinstance(dest, str) else dest
+        return self.dest if dest is None else FinsAddress.of(dest)
 
     def _add_addressing_hint(self, exc: EndCodeError, target: FinsAddress) -> None:
         """End codes that usually mean wrong node addressing say which addresses to check."""

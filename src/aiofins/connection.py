@@ -34,9 +34,7 @@ from .transport.udp import UdpTransport
 
 
 def _address(value: FinsAddress | str | None) -> FinsAddress | None:
-    if value is None or isinstance(value, FinsAddress):
-        return value
-    return FinsAddress.parse(value)
+    return None if value is None else FinsAddress.of(value)
 
 
 def local_node_towards(host: str, avoid: int | None = None) -> int:

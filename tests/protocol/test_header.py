@@ -173,6 +173,14 @@ def test_address_validation(kwargs: dict[str, int], match: str) -> None:
         FinsAddress(**kwargs)
 
 
+def test_address_of_text_or_address() -> None:
+    address = FinsAddress(1, 10, 0)
+    assert FinsAddress.of(address) is address
+    assert FinsAddress.of("1.10") == address
+    with pytest.raises(CommandError, match=r"is not NET\.NODE"):
+        FinsAddress.of("node10")
+
+
 def test_address_parse() -> None:
     assert FinsAddress.parse("1.10.0") == FinsAddress(1, 10, 0)
     assert FinsAddress.parse("0.5") == FinsAddress(0, 5, 0)

@@ -68,6 +68,11 @@ class FinsAddress:
         values = [int(p) for p in parts] + [0] * (3 - len(parts))
         return cls(values[0], values[1], values[2])
 
+    @classmethod
+    def of(cls, value: FinsAddress | str) -> FinsAddress:
+        """``value`` itself, or parsed from ``"NET.NODE.UNIT"`` text (:meth:`parse`)."""
+        return value if isinstance(value, FinsAddress) else cls.parse(value)
+
     def __str__(self) -> str:
         return f"{self.network}.{self.node}.{self.unit}"
 
