@@ -15,12 +15,12 @@ from typing import Any, TypeVar
 
 from ._commands import CommandMethods
 from .chunking import plan_memory
-from .protocol.addresses import parse_address
-from .protocol.areas import MemoryAddress, check_span
+from .protocol.addresses import parse_span
+from .protocol.areas import MemoryAddress
 from .protocol.commands import Request
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
 from .protocol.endcodes import EndCode
-from .protocol.errors import AddressError, CommandError, EndCodeError
+from .protocol.errors import CommandError, EndCodeError
 from .protocol.header import FinsAddress
 from .protocol.limits import RouteLimits, limits_for
 from .protocol.values import (
@@ -396,11 +396,4 @@ def _start(address: AddressLike, count: int) -> MemoryAddress:
     1104) before anything is sent, instead of at the PLC, possibly after part of a split
     write. A :class:`MemoryAddress` is sent as given (it may be meant for another series).
     """
-    if isinstance(address, MemoryAddress):
-        return address
-    start = parse_address(address)
-    try:
-        check_span(start, count)
-    except AddressError as exc:
-        raise AddressError(f"{address!r}: {exc}", end_code=exc.end_code) from None
-    return start
+    return address if isinstance(address, MemoryAddress) else parse_span(address, count)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from aiofins.protocol.addresses import format_address, parse_address
+from aiofins.protocol.addresses import format_address, parse_address, parse_span
 from aiofins.protocol.areas import (
     AREAS,
     FLAGS,
@@ -385,3 +385,15 @@ def test_docs_example_runs() -> None:
     doc = (Path(__file__).resolve().parents[2] / "docs" / "addresses.md").read_text()
     code = doc.split("```python\n", 1)[1].split("```", 1)[0]
     exec(compile(code, "docs/addresses.md", "exec"), {})
+
+
+def test_parse_span_checks_the_last_element_too() -> None:
+    assert parse_span("D32760", 8) == parse_address("D32760")
+    assert parse_span("A440", 520) == parse_address("A440")  # A0-A447 and A448-A959: one area
+    with pytest.raises(AddressError) as info:
+        parse_span("D32760", 9)
+    assert info.value.end_code == 0x1104
+    assert str(info.value).startswith("'D32760': 9 words from")
+    assert "at most 8 from there" in str(info.value)
+    with pytest.raises(AddressError, match="'D40000'"):
+        parse_span("D40000", 1)  # the start itself: parse_address's error

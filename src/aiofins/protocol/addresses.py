@@ -20,11 +20,12 @@ from .areas import (
     MemoryAddress,
     Series,
     check_address,
+    check_span,
     find_spec,
 )
 from .errors import AddressError
 
-__all__ = ["format_address", "parse_address"]
+__all__ = ["format_address", "parse_address", "parse_span"]
 
 # Accepted prefixes -> the table's area mnemonic. "" (a bare number) is CIO.
 _PREFIXES: dict[str, str] = {
@@ -102,6 +103,17 @@ def parse_address(text: str, series: Series = Series.CS_CJ) -> MemoryAddress:
         shown = text.strip()
         shown = shown if len(shown) <= 40 else shown[:37] + "..."
         raise AddressError(f"{shown!r}: {exc}") from None
+
+
+def parse_span(text: str, count: int, series: Series = Series.CS_CJ) -> MemoryAddress:
+    """Parse address text for the first of ``count`` elements and check they all fit in its
+    area (:func:`check_span`: :class:`AddressError` with end code 1104, naming the text)."""
+    address = parse_address(text, series)
+    try:
+        check_span(address, count, series)
+    except AddressError as exc:
+        raise AddressError(f"{text!r}: {exc}", end_code=exc.end_code) from None
+    return address
 
 
 def _parse(norm: str, series: Series) -> MemoryAddress:

@@ -15,8 +15,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from ..protocol.addresses import parse_address
-from ..protocol.areas import check_span
+from ..protocol.addresses import parse_span
 from ..protocol.commands import Request, operation_for
 from ..protocol.commands.access import AccessRightAcquire
 from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea, ParameterAreaRead
@@ -204,8 +203,7 @@ class VirtualPLC:
 
         Straight from memory: no FINS frame, no restriction checks.
         """
-        start = parse_address(address)
-        check_span(start, count)
+        start = parse_span(address, count)
         memory = self.memory
         if start.element_size == 1:
             bits = memory.read_bits(start.area_code, start.word, start.bit, count)
@@ -215,8 +213,7 @@ class VirtualPLC:
     def write(self, address: str, values: Sequence[int]) -> None:
         """Set elements from ``address`` as the PLC's own program would (read-only areas
         too): words, or 0/1 for bits."""
-        start = parse_address(address)
-        check_span(start, len(values))
+        start = parse_span(address, len(values))
         memory = self.memory
         if start.element_size == 1:
             memory.write_bits(start.area_code, start.word, start.bit, [bool(v) for v in values])
