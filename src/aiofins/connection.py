@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import inspect
 import socket
-from collections.abc import AsyncIterator, Mapping, Set
+from collections.abc import AsyncIterator, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -120,12 +120,13 @@ async def default_addresses(
 TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node", "tcp_gather_writes"}
 
 
-def check_options(options: Mapping[str, Any], known: Set[str]) -> None:
-    """Refuse option names not in ``known``, naming them (before anything is opened)."""
-    unknown = set(options) - known
+def check_options(options: Mapping[str, Any]) -> None:
+    """Refuse option names :func:`connect` does not take, naming them (before anything opens)."""
+    unknown = set(options) - CONNECT_OPTIONS
     if unknown:
         raise CommandError(
-            f"unknown option(s): {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})"
+            f"unknown option(s): {', '.join(sorted(unknown))} "
+            f"(known: {', '.join(sorted(CONNECT_OPTIONS))})"
         )
 
 
@@ -155,7 +156,7 @@ async def connect(
     frames of one event-loop step together.
     """
     endpoint = parse_endpoint(url)
-    check_options(transport_options, CONNECT_OPTIONS)
+    check_options(transport_options)
     d, s = await default_addresses(endpoint, dest, src)
     route = limits or limits_for(
         *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))

@@ -36,7 +36,7 @@ import anyio
 from anyio.abc import TaskGroup
 
 from .client import Client
-from .connection import CONNECT_OPTIONS, check_options, connect, default_addresses
+from .connection import check_options, connect, default_addresses
 from .endpoint import parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError
 from .protocol.header import FinsAddress
@@ -131,7 +131,7 @@ class Pool:
     ) -> None:
         if max_per_endpoint < 1:
             raise CommandError("max_per_endpoint must be at least 1")
-        check_options(connect_options, CONNECT_OPTIONS)
+        check_options(connect_options)
         self.max_per_endpoint = max_per_endpoint
         self.idle_timeout = idle_timeout
         self.health_interval = health_interval

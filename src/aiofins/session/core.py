@@ -93,11 +93,10 @@ class Session:
         for name, count in (("retries", retries), ("busy_retries", busy_retries)):
             if count < 0:
                 raise CommandError(f"{name} {count} must not be negative")
-        if busy_backoff < 0 or quarantine_factor <= 0:
-            raise CommandError(
-                f"busy_backoff {busy_backoff} must not be negative and quarantine_factor "
-                f"{quarantine_factor} must be positive"
-            )
+        if busy_backoff < 0:
+            raise CommandError(f"busy_backoff {busy_backoff} must not be negative")
+        if quarantine_factor <= 0:
+            raise CommandError(f"quarantine_factor {quarantine_factor} must be positive")
         low, high = reconnect_backoff
         if not 0 <= low <= high:
             raise CommandError(
