@@ -174,9 +174,7 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self.owner._aio is self:
-            self.owner._aio = None
-            self.owner.fast_send = None
-            self.owner.poll_now = None
+            self.owner._detach()
             self.sink.connection_lost(exc)
 
     def close(self) -> None:
@@ -306,20 +304,22 @@ class UdpTransport(Transport):
             except OSError as exc:
                 raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
 
+    def _detach(self) -> None:
+        """No asyncio socket any more: the session's synchronous paths go too."""
+        self._aio = None
+        self.fast_send = None
+        self.poll_now = None
+
     def _lost(self, aio: _AsyncioSocket | _UvloopProtocol, exc: BaseException) -> None:
         if self._aio is aio:
-            self._aio = None
-            self.fast_send = None
-            self.poll_now = None
+            self._detach()
             aio.close()
             aio.sink.connection_lost(exc)
 
     async def aclose(self) -> None:
         aio, sock = self._aio, self._sock
-        self._aio = None
+        self._detach()
         self._sock = None
-        self.fast_send = None
-        self.poll_now = None
         if aio is not None:
             aio.close()
         if sock is not None:
