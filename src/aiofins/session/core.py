@@ -135,6 +135,7 @@ class Session:
         self._open_lock: anyio.Lock | None = None
         self._backoff = 0.0
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
+        self._turn_due = False  # the next polled request yields to the event loop instead
         self.stats = SessionStats(self._pending)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
@@ -450,6 +451,9 @@ class Session:
                                     if self._poll_skip:
                                         self._poll_skip -= 1
                                         self._poll_streak = 0
+                                    elif self._turn_due:  # fair turn: a bare yield
+                                        self._turn_due = False
+                                        await asyncio.sleep(0)
                                     else:
                                         poll()
                                         self._polled(fut)
@@ -497,16 +501,19 @@ class Session:
         again (the peer was merely late); after misses in a row (the peer answers later, e.g.
         from another core) the next 1, 2, 4 ... 64 requests skip the attempt, so it costs next
         to nothing where it never helps. Fair: after :data:`_POLL_STREAK` requests
-        completed this way in a row, one request waits through the event loop, so other
-        tasks, timers and cancellation run. (With many in flight the replies are read in one
-        drain per loop pass instead, which is cheaper and keeps tasks fair.)
+        completed this way in a row, the next request yields to the event loop after its send
+        instead, so other tasks, timers and cancellation run. The yield is a bare one, not a
+        wait for that request's reply: under uvloop a reply already queued is read before the
+        pass that runs anyio's cancellation retry, which then finds the task about to wake
+        with a result and leaves it alone, turn after turn. (With many in flight the replies
+        are read in one drain per loop pass instead, which is cheaper and keeps tasks fair.)
         """
         if fut.done():
             self._poll_backoff = 0
             streak = self._poll_streak + 1
             if streak >= _POLL_STREAK:
                 streak = 0
-                self._poll_skip = 1
+                self._turn_due = True
             self._poll_streak = streak
         else:
             backoff = self._poll_backoff
