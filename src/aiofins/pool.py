@@ -26,6 +26,7 @@ Safe to open in a FastAPI lifespan::
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
@@ -69,7 +70,13 @@ class _Entry:
 
 @dataclass
 class EndpointStats:
-    """Counters summed over an endpoint's sessions (see ``SessionStats`` for each)."""
+    """An endpoint's counters, summed over its sessions (see ``SessionStats`` for each).
+
+    The counters (``completed`` to ``health_failures``) only grow: those of a session the
+    pool closed (idle, failed health check) stay counted. ``sessions``, ``in_use``,
+    ``in_flight`` and the latencies describe the sessions open now. ``connect_failures``
+    counts the pool's failed first connects and its sessions' failed reconnects alike.
+    """
 
     sessions: int = 0
     in_use: int = 0
@@ -80,9 +87,22 @@ class EndpointStats:
     retries: int = 0
     connects: int = 0
     connect_failures: int = 0
+    disconnects: int = 0
     health_failures: int = 0
     latency_mean: float = 0.0
     latency_p99: float = 0.0
+
+
+#: The session counters an endpoint sums (and keeps when a session closes).
+_SUMMED = (
+    "completed",
+    "timeouts",
+    "late_replies",
+    "retries",
+    "connects",
+    "connect_failures",
+    "disconnects",
+)
 
 
 def _users(entry: _Entry) -> int:
@@ -188,11 +208,7 @@ class Pool:
         keys = [parse_endpoint(url).key] if url else list(self._stats)
         out: dict[str, EndpointStats] = {}
         for key in keys:
-            base = self._stats.get(key, EndpointStats())
-            agg = EndpointStats(
-                connect_failures=base.connect_failures,
-                health_failures=base.health_failures,
-            )
+            agg = dataclasses.replace(self._stats.get(key, EndpointStats()))
             for entry in self._entries.get(key, []):
                 if entry.client is None:
                     continue
@@ -200,11 +216,8 @@ class Pool:
                 agg.sessions += 1
                 agg.in_use += entry.users
                 agg.in_flight += s.in_flight
-                agg.completed += s.completed
-                agg.timeouts += s.timeouts
-                agg.late_replies += s.late_replies
-                agg.retries += s.retries
-                agg.connects += s.connects
+                for name in _SUMMED:
+                    setattr(agg, name, getattr(agg, name) + getattr(s, name))
                 agg.latency_mean = max(agg.latency_mean, s.latency_mean)
                 agg.latency_p99 = max(agg.latency_p99, s.latency_p99)
             out[key] = agg
@@ -295,6 +308,10 @@ class Pool:
             lst = self._entries.get(entry.key)
             if lst and entry in lst:
                 lst.remove(entry)
+            if entry.client is not None:  # its counters stay with the endpoint
+                kept, s = self._stats[entry.key], entry.client.session.stats
+                for name in _SUMMED:
+                    setattr(kept, name, getattr(kept, name) + getattr(s, name))
 
     # -- maintenance ----------------------------------------------------------------------
 

@@ -157,6 +157,33 @@ async def test_pool_health_checks_and_closes_idle_sessions(sim: Simulator) -> No
         await _until(lambda: pool.stats(url)[f"udp://127.0.0.1:{sim.udp_port}"].sessions == 0)
 
 
+async def test_pool_counts_lost_connections_and_failed_reconnects(anyio_backend: object) -> None:
+    """A session's own reconnect failures count with the pool's, and the counters of a
+    session the pool closes stay counted (they only grow)."""
+    async with Pool(timeout=0.5, retries=0, idle_timeout=60, health_interval=60) as pool:
+        async with run_simulator(VirtualPLC(), tcp=("127.0.0.1", 0)) as sim:
+            url = f"tcp://127.0.0.1:{sim.tcp_port}"
+            async with pool.client(url) as plc:
+                assert await plc.read("D0") == [0]
+        # The virtual PLC is gone: its server closed the connection.
+        await _until(lambda: pool.stats(url)[url].disconnects == 1)
+        with pytest.raises(ConnectionLost):
+            async with pool.client(url) as plc:
+                await plc.read("D0")  # the session tries to reconnect, and fails
+        stats = pool.stats(url)[url]
+        assert (stats.sessions, stats.connects, stats.completed) == (1, 1, 1)
+        assert (stats.disconnects, stats.connect_failures) == (1, 1)
+        await pool.aclose()  # the session closes; its counters stay with the endpoint
+        stats = pool.stats(url)[url]
+        assert stats.sessions == 0 and stats.in_flight == 0
+        assert (stats.connects, stats.completed, stats.disconnects, stats.connect_failures) == (
+            1,
+            1,
+            1,
+            1,
+        )
+
+
 def test_unknown_options_are_refused_when_the_pool_is_made() -> None:
     """Not at the first borrow, where a poller would only show them as a scan error."""
     with pytest.raises(CommandError, match=r"unknown option\(s\): connect_options \(known: "):

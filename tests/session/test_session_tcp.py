@@ -193,12 +193,14 @@ async def test_server_restart_mid_flight_then_next_call_reconnects() -> None:
                     await anyio.sleep(0)
                 await peer.stop()  # the PLC goes away
             assert len(outcome) == 1 and "closed" in str(outcome[0])
+            assert session.stats.disconnects == 1
             async with tcp_server(TcpPeer(port=port, assign_node=0x33)):
                 with anyio.fail_after(3):
                     r = await session.request(0x01, 0x01, read_params(2))
                 assert r.data == bytes.fromhex("1002")
                 assert session.source.node == 0x33
                 assert session.stats.connects == 2
+                assert session.stats.disconnects == 1 and session.stats.connect_failures == 0
 
 
 async def test_connect_refused_raises_connection_lost() -> None:
@@ -212,6 +214,7 @@ async def test_connect_refused_raises_connection_lost() -> None:
     with pytest.raises(ConnectionLost):
         async with session:
             pass
+    assert session.stats.connect_failures == 1 and session.stats.connects == 0
 
 
 async def test_timeout_over_tcp() -> None:

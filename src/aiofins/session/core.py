@@ -207,6 +207,7 @@ class Session:
             try:
                 await self.transport.open(self, self._background)
             except (OSError, FinsError) as exc:
+                self.stats.connect_failures += 1
                 low, high = self.reconnect_backoff
                 self._backoff = min(high, max(low, self._backoff * 2))
                 if isinstance(exc, FinsError):
@@ -285,6 +286,7 @@ class Session:
     def connection_lost(self, exc: BaseException | None) -> None:
         if self._closed:
             return
+        self.stats.disconnects += 1
         if isinstance(exc, FinsError):
             err: FinsError = exc
         else:

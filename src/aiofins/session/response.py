@@ -90,7 +90,9 @@ class SessionStats:
         "busy_retries",
         "cancelled",
         "completed",
+        "connect_failures",
         "connects",
+        "disconnects",
         "duplicates",
         "end_code_errors",
         "late_replies",
@@ -115,6 +117,8 @@ class SessionStats:
         self.busy_retries = 0
         self.end_code_errors = 0
         self.connects = 0
+        self.connect_failures = 0  # reconnects that failed (the request got ConnectionLost)
+        self.disconnects = 0  # connections lost while open (peer closed, socket error)
         self._lat_sum = 0.0
         self._lat_count = 0
         self._lat_ring: list[float] = [0.0] * _RING
