@@ -49,8 +49,14 @@ def _addressing_hint(dest: FinsAddress, source: FinsAddress) -> str:
     )
 
 
-#: Commands whose response with this end code still carries a complete, shorter result.
-_PARTIAL_RESULTS: dict[int, int] = {0x2102: 0x1104, 0x2140: 0x1104}
+#: Commands whose response with one of these end codes, when it carries data, still holds a
+#: complete, shorter result: the records that exist. The manual (5-3-28) calls the end code
+#: of a short ERROR LOG READ an "address range overflow", a name it gives 1103 in 5-3-30 and
+#: the end-code table gives 1104, so both are taken.
+_PARTIAL_RESULTS: dict[int, frozenset[int]] = {
+    0x2102: frozenset({0x1103, 0x1104}),
+    0x2140: frozenset({0x1103, 0x1104}),
+}
 
 AddressLike = str | MemoryAddress
 
@@ -173,7 +179,7 @@ class Client(CommandMethods):
             )
         except EndCodeError as exc:
             partial = _PARTIAL_RESULTS.get((request.MRC << 8) | request.SRC)
-            if partial is None or exc.end_code.code != partial or not exc.data:
+            if partial is None or exc.end_code.code not in partial or not exc.data:
                 raise
             self.last_end_code = exc.end_code
             return request.decode_response(exc.data)

@@ -2,18 +2,29 @@
 
 from __future__ import annotations
 
+from datetime import datetime
+
 import anyio
 import pytest
 
 import aiofins
 from aiofins.connection import connect
+from aiofins.protocol.commands.errorlog import ErrorLog, ErrorLogRecord
 from aiofins.protocol.commands.status import CpuMode
-from aiofins.protocol.errors import AddressError, CommandError, FinsTimeout, WriteNotPossibleError
+from aiofins.protocol.errors import (
+    AddressError,
+    CommandError,
+    EndCodeError,
+    FinsTimeout,
+    WriteNotPossibleError,
+)
 from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.limits import NetworkType
 from aiofins.simulator.faults import FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
+
+from ..session.test_session_udp import reply, udp_responder
 
 pytestmark = pytest.mark.anyio
 
@@ -226,3 +237,28 @@ async def test_a_tag_plan_for_bigger_frames_is_refused_on_a_smaller_route(
             await sysmac.read_tags(plan)
         assert sim.counters.requests == sent
         assert await sysmac.read_tags(tags) == {"first": 0, "last": 0}  # compiled for 269
+
+
+@pytest.mark.parametrize("end_code", [0x1103, 0x1104], ids=["1103", "1104"])
+async def test_short_error_log_read_returns_the_records_that_exist(
+    anyio_backend: object, end_code: int
+) -> None:
+    """Manual 5-3-28: fewer records than asked come back with an "address range overflow",
+    which 5-3-30 numbers 1103 and the end-code table 1104: the records are kept either way;
+    with no data (start past the stored records) the end code is raised."""
+    records = (
+        ErrorLogRecord(0x80F1, 0, datetime(2026, 11, 30, 8, 15, 2)),
+        ErrorLogRecord(0x0200, 0x0001, datetime(2026, 12, 1, 9, 0, 59)),
+    )
+    body = ErrorLog(100, 2, records).encode()
+    async with (
+        udp_responder(lambda cmd: [(0.0, reply(cmd, end_code, body))]) as peer,
+        connect(f"udp://127.0.0.1:{peer.port}?node=1", timeout=1) as plc,
+    ):
+        log = await plc.error_log_read(0, 20)
+        assert log.records == records and log.stored_records == 2
+        assert plc.last_end_code is not None and plc.last_end_code.code == end_code
+        peer.handler = lambda cmd: [(0.0, reply(cmd, end_code))]  # past the stored ones
+        with pytest.raises(EndCodeError) as info:
+            await plc.error_log_read(5, 20)
+        assert info.value.end_code.code == end_code

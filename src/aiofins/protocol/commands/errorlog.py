@@ -167,7 +167,9 @@ class ErrorLog(_RecordLog[ErrorLogRecord]):
     """Response of ERROR LOG READ.
 
     When the beginning record is past the stored records, the PLC answers with no data at
-    all (manual 5-3-28); that decodes as ``ErrorLog(0, 0, ())``.
+    all (manual 5-3-28, which names no end code). With a normal end code that decodes as
+    ``ErrorLog(0, 0, ())``; with 1103, which the virtual PLC answers (as 5-3-30 says for
+    FINS WRITE ACCESS LOG READ), the client raises :class:`ParameterError` with that end code.
     """
 
     _LOG = "error log"
