@@ -20,7 +20,9 @@ NAME = b"DATA    .BIN"
 NAME2 = b"COPY    .BIN"
 
 # The 5-1-2 table as printed (RUN MONITOR PROGRAM access UM-read DIP network), one line each;
-# "-" is the blank cell of 0702.
+# "-" is the blank cell of 0702. A cell ending in "!" is where the rest of the manual
+# overrides 5-1-2: 2103's access right (5-3-29 and the access-right lists of 5-3-24/25 say
+# No; 5-1-2 says OK).
 MANUAL_5_1_2 = """
 0101 OK OK OK OK OK OK OK
 0102 OK OK OK OK OK OK NO
@@ -46,7 +48,7 @@ MANUAL_5_1_2 = """
 0C03 OK OK OK OK OK OK OK
 2101 OK OK OK NO OK OK NO
 2102 OK OK OK OK OK OK OK
-2103 OK OK OK OK OK OK NO
+2103 OK OK OK NO! OK OK NO
 2140 OK OK OK OK OK OK OK
 2141 OK OK OK NO OK OK NO
 2201 OK OK OK OK OK OK OK
@@ -83,6 +85,8 @@ def test_table_matches_the_manual(code: int, cells: list[str]) -> None:
     for cell, value in zip(cells, got, strict=True):
         if cell == "-":  # 0702's blank cell: refused, per 5-1-1 note 1 and 5-3-20
             assert value is False
+        elif cell.endswith("!"):  # overridden by the command's own table
+            assert value is (cell[:-1] == "OK")
         else:
             assert value is (cell == "OK")
 
@@ -97,6 +101,14 @@ def test_variant_rows() -> None:
     assert from_file is not None and not from_file.run and not from_file.monitor
     to_file = restriction_for(0x220C, b"\x00\x00")
     assert to_file is not None and to_file.run and to_file.dip_write
+    # 220C under DIP-switch protection: only program-to-file (note 3; 5-3-41 note 1)
+    compare = restriction_for(0x220C, b"\x00\x02")
+    assert compare is not None and compare.run and not compare.dip_write
+    # 0920 under network write protection: OK for every variant (5-1-1 note 1, 5-3-21..23)
+    for params in (b"\x00\x01", b"\x40\x01", b"\x80\x01"):
+        row = restriction_for(0x0920, params)
+        assert row is not None and row.network_write
+    assert not is_write_command(0x0920, b"\x40\x01")
     assert restriction_for(0x9999) is None
     assert is_write_command(0x0102) and not is_write_command(0x0101)
 

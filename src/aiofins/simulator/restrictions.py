@@ -137,16 +137,19 @@ _ROWS: dict[Operation | tuple[Operation, str], Restriction] = {
     ClockWrite: _CONTROL,
     # 0920: only MESSAGE CLEAR is refused while another node holds the access right (5-1-2).
     # manual wins: 5-1-2 marks the whole row "Disabled" under network protection, but 5-1-1
-    # note 1 does not list 0920 and 5-3-21..23 say OK; only CLEAR writes, so only it is refused.
+    # note 1 does not list 0920 and the commands' own tables (5-3-21..23, CLEAR's included)
+    # say OK: no variant is refused there (nor logged as a FINS write).
     (MessageRead, "read"): _READ,
-    (MessageClear, "clear"): _CONTROL,
+    (MessageClear, "clear"): _r(OK, OK, OK, NO, OK, OK, OK),
     (FalFalsRead, "fal"): _READ,
     AccessRightAcquire: _CONTROL,
     AccessRightForcedAcquire: _READ,
     AccessRightRelease: _READ,
     ErrorClear: _CONTROL,
     ErrorLogRead: _READ,
-    ErrorLogClear: _r(OK, OK, OK, OK, OK, OK, NO),
+    # manual wins: 5-1-2 says OK while another node holds the access right; the command's
+    # own table (5-3-29) and both access-right lists (5-3-24, 5-3-25) refuse it.
+    ErrorLogClear: _CONTROL,
     FinsWriteAccessLogRead: _READ,
     FinsWriteAccessLogClear: _CONTROL,
     FileNameRead: _READ,
@@ -158,13 +161,14 @@ _ROWS: dict[Operation | tuple[Operation, str], Restriction] = {
     FileNameChange: _CONTROL,
     MemoryAreaFileTransfer: _CONTROL,
     # Notes 1-3: file-to-area transfers are refused in RUN/MONITOR (and 220B under DIP
-    # protection); 220C program-to-file transfers are allowed under DIP protection.
+    # protection); of 220C only program-to-file transfers are allowed under DIP protection
+    # (note 3; 5-3-41 note 1): a compare is refused, as the row's "Disabled" says.
     (ParameterAreaFileTransfer, "to_file"): _CONTROL,
     (ParameterAreaFileTransfer, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
     (ParameterAreaFileTransfer, "compare"): _CONTROL,
     (ProgramAreaFileTransfer, "to_file"): _CONTROL,
     (ProgramAreaFileTransfer, "from_file"): _r(NO, NO, OK, NO, OK, NO, NO),
-    (ProgramAreaFileTransfer, "compare"): _CONTROL,
+    (ProgramAreaFileTransfer, "compare"): _r(OK, OK, OK, NO, OK, NO, NO),
     CreateDeleteDirectory: _CONTROL,
     MemoryCassetteTransfer: _r(NO, NO, OK, NO, OK, OK, NO),
     ForcedSetReset: _DEBUG,
