@@ -33,6 +33,8 @@ WIDE_CODES = [0xDC]  # index registers: 4 bytes, writable
 # Codes addressed down to the bit (bits 0..15); other 1-byte codes always use bit 00.
 BIT_ADDRESSED = frozenset([*BIT_CODES, 0x70, 0x71, 0x72])
 READ_ONLY_CODES = [0xF0, 0xF1, 0xF2, 0x70, 0x71, 0x72, 0x09, 0x49, 0x06, 0x46, 0x07]
+# Forced-status designations: read by 01 04 only (manual 5-3-5; not in 5-3-2's table).
+FORCED_CODES = frozenset([0xF0, 0xF1, 0xF2, 0x70, 0x71, 0x72, 0x49])
 SIZE = {
     **dict.fromkeys(BIT_CODES, 1),
     **dict.fromkeys(WORD_CODES, 2),
@@ -84,12 +86,13 @@ def test_read_bits_golden() -> None:
     assert request.decode_response(H("01 00 01")).values == (1, 0, 1)
 
 
-def test_read_word_with_forced_status_golden() -> None:
-    request = MemoryAreaRead(MemoryAddress(0xF0, 10), 2)
-    assert request.encode() == H("F0 000A 00 0002")
-    result = request.decode_response(H("0000 1234 FFFF 0001"))
-    assert result.element_size == 4
-    assert result.values == (0x00001234, 0xFFFF0001)
+def test_read_word_with_forced_status_is_0104s() -> None:
+    with pytest.raises(AddressError, match="01 04"):
+        MemoryAreaRead(MemoryAddress(0xF0, 10), 2)
+    request = MultipleMemoryAreaRead((MemoryAddress(0xF0, 10), MemoryAddress(0xF0, 11)))
+    assert request.encode() == H("F0000A00 F0000B00")
+    result = request.decode_response(H("F0 0000 1234  F0 FFFF 0001"))
+    assert [item.value for item in result.items] == [0x00001234, 0xFFFF0001]
 
 
 def test_read_zero_elements() -> None:
@@ -226,7 +229,7 @@ def test_multiple_read_limit_is_167() -> None:
     [
         (lambda: MemoryAreaRead(D(0), 1000), CommandError, r"0\.\.999"),
         (lambda: MemoryAreaRead(D(0), -1), CommandError, r"0\.\.999"),
-        (lambda: MemoryAreaRead(MemoryAddress(0xF0, 0), 500), CommandError, r"0\.\.499"),
+        (lambda: MemoryAreaRead(MemoryAddress(0xDC, 0), 500), CommandError, r"0\.\.499"),
         (lambda: MemoryAreaRead(MemoryAddress(0x11, 0), 1), AddressError, "area code 11"),
         (lambda: MemoryAreaRead(MemoryAddress(0x82, 0, 1), 1), AddressError, "must be 0"),
         (lambda: MemoryAreaRead(MemoryAddress(0x30, 0, 16), 1), AddressError, r"0\.\.15"),
@@ -271,7 +274,7 @@ def test_write_limit_997_words_fits_the_frame() -> None:
 
 @st.composite
 def reads(draw: st.DrawFn) -> MemoryAreaRead:
-    address = draw(addresses())
+    address = draw(addresses([code for code in sorted(SIZE) if code not in FORCED_CODES]))
     return MemoryAreaRead(address, draw(st.integers(0, min(999, 1998 // SIZE[address.area_code]))))
 
 
@@ -352,10 +355,52 @@ def test_arbitrary_response_only_raises_decode_error(request: Request[Any], data
 @pytest.mark.parametrize("code", READ_ONLY_CODES, ids=lambda code: f"{code:02X}")
 def test_forced_status_and_flag_areas_are_read_only(code: int) -> None:
     address = MemoryAddress(code, 0)
-    assert MemoryAreaRead(address, 1).element_size == SIZE[code]
+    if code not in FORCED_CODES:
+        assert MemoryAreaRead(address, 1).element_size == SIZE[code]
     assert MultipleMemoryAreaRead((address,)).encode() == address.encode()
     with pytest.raises(AddressError, match="cannot be written"):
         MemoryAreaWrite(address, bytes(SIZE[code]))
     with pytest.raises(DecodeError) as info:
         MemoryAreaWrite.decode(address.encode() + b"\x00\x01" + bytes(SIZE[code]))
     assert info.value.end_code == 0x1101
+
+
+@pytest.mark.parametrize("code", [0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x49, 0x40, 0xC0, 0x41])
+def test_forced_status_is_read_by_0104_not_0101(code: int) -> None:
+    """Manual 5-3-2's area table has no forced-status codes; 5-3-5's (01 04) has them."""
+    address = MemoryAddress(code, 10, 0)
+    with pytest.raises(AddressError, match="MULTIPLE MEMORY AREA READ") as info:
+        MemoryAreaRead(address, 1)
+    assert info.value.end_code == 0x1101
+    MultipleMemoryAreaRead((address,))  # accepted there
+
+
+@pytest.mark.parametrize(
+    ("code", "word", "count", "refused"),
+    [
+        (0xBC, 0x0F00, 1, True),  # CS/CJ: EM current bank number
+        (0xBC, 0x0200, 16, False),  # DR0-DR15
+        (0x9C, 0x0006, 1, True),  # CV: EM current bank number
+        (0x9C, 0x0003, 4, True),  # DR0-DR2, then the bank number
+        (0x9C, 0x0003, 3, False),
+    ],
+)
+def test_0102_cannot_write_the_em_current_bank_number(
+    code: int, word: int, count: int, refused: bool
+) -> None:
+    """Manual 5-3-3's table lists BC/9C as Data Register only (5-3-2's adds the bank No.)."""
+    data = bytes(2 * count)
+    if not refused:
+        MemoryAreaWrite(MemoryAddress(code, word), data)
+        return
+    with pytest.raises(AddressError, match="EM current bank number") as info:
+        MemoryAreaWrite(MemoryAddress(code, word), data)
+    assert info.value.end_code == 0x1101
+    MemoryAreaRead(MemoryAddress(code, word), count)  # reading it is fine
+
+
+def test_0102_cannot_write_cv_bits() -> None:
+    """Manual 5-3-3: the CIO/AR bit rows have "---" in the CV column (code 00)."""
+    with pytest.raises(AddressError, match="cannot be written"):
+        MemoryAreaWrite(MemoryAddress(0x00, 10, 3), b"\x01")
+    MemoryAreaRead(MemoryAddress(0x00, 10, 3), 1)

@@ -303,6 +303,9 @@ def test_forced_set_reset_invalid() -> None:
         ForcedSetResetEntry(ForceSpec.FORCED_SET, MemoryAddress(0x82, 0, 0))
     with pytest.raises(AddressError, match="bit number 16"):
         ForcedSetResetEntry(ForceSpec.FORCED_SET, MemoryAddress(0x30, 0, 16))
+    for flags in (0x09, 0x01):  # completion flags: bit byte always 00 (manual 5-2-1)
+        with pytest.raises(AddressError, match="completion flag"):
+            ForcedSetResetEntry(ForceSpec.FORCED_SET, MemoryAddress(flags, 5, 5))
     with pytest.raises(CommandError, match="designation"):
         ForcedSetResetEntry(0x0002, MemoryAddress(0x30, 0, 0))  # type: ignore[arg-type]
     for bad, code in (
@@ -323,11 +326,11 @@ def test_forced_set_reset_invalid() -> None:
 entries = st.builds(
     ForcedSetResetEntry,
     st.sampled_from(list(ForceSpec)),
-    st.builds(
-        MemoryAddress,
-        st.sampled_from([0x30, 0x31, 0x32, 0x09, 0x00, 0x01]),
-        u16,
-        st.integers(0, 15),
+    st.one_of(
+        st.builds(
+            MemoryAddress, st.sampled_from([0x30, 0x31, 0x32, 0x00]), u16, st.integers(0, 15)
+        ),
+        st.builds(MemoryAddress, st.sampled_from([0x09, 0x01]), u16),  # completion flags: bit 00
     ),
 )
 

@@ -11,6 +11,7 @@ from aiofins.protocol.endcodes import (
     END_CODES,
     MAIN_CODE_NAMES,
     NORMAL,
+    SECTION_END_CODES,
     EndCode,
 )
 from aiofins.protocol.header import FinsAddress, Header, ResponseFrame
@@ -240,3 +241,13 @@ def test_relay_error_message_names_the_relay_point() -> None:
     exc = errors.RelayError(EndCode(0x8205), network=1, node=5)
     assert str(exc).startswith("relay error at network 1 node 5: end code 0205")
     assert exc.network == 1 and exc.node == 5
+
+
+def test_1108_from_parameter_area_read_has_a_name() -> None:
+    """5-3-7 answers 1108 (over 498 words); 5-1-3's table has no such row."""
+    assert 0x1108 not in END_CODES and set(SECTION_END_CODES) == {0x1108}
+    code = EndCode(0x1108)
+    assert code.name == "Parameter error: Too many words"
+    assert "498" in code.cause and "498" in code.correction
+    exc = errors.error_for_end_code(code, command_code=0x0201)
+    assert isinstance(exc, errors.ParameterError) and "Too many words" in str(exc)

@@ -112,13 +112,17 @@ def test_auxiliary_area_read_only_part(plc: VirtualPLC) -> None:
 
 def test_em_banks_and_current_bank(plc: VirtualPLC) -> None:
     assert write(plc, 0xA3, 10, 0, 1, b"\xbe\xef") == 0  # E3_10
-    assert write(plc, 0xBC, 0x0F00, 0, 1, b"\x00\x03") == 0  # current bank ← 3
+    # 01 02 cannot write the bank number (manual 5-3-3); the program's EMBC does, here:
+    assert write(plc, 0xBC, 0x0F00, 0, 1, b"\x00\x03") == 0x1101
+    plc.write("EMBANK", [3])  # current bank ← 3
     assert read(plc, 0x98, 10, 0, 1) == (0, b"\xbe\xef")
     assert read(plc, 0xBC, 0x0F00, 0, 1) == (0, b"\x00\x03")
     assert read(plc, 0x53, 10, 0, 1) == (0, b"\xbe\xef")  # CJ2 alias of bank 3
     assert read(plc, 0x23, 10, 0, 16)[1][:2] == b"\x01\x01"  # E3 bits view
     assert write(plc, 0x64, 0, 0, 1, b"\x00\x07") == 0  # E14_0 (bank 14 hex)
-    assert write(plc, 0xBC, 0x0F00, 0, 1, b"\x00\x19") == 0x110C  # bank 25 does not exist
+    with pytest.raises(CommandFailed, match="EM bank 25 absent") as info:
+        plc.write("EMBANK", [0x19])
+    assert info.value.end_code == 0x110C
 
 
 def test_absent_em_bank_is_area_missing() -> None:

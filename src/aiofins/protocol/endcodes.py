@@ -399,6 +399,22 @@ END_CODES: dict[int, EndCodeInfo]
 MAIN_CODE_NAMES: dict[int, str]
 END_CODES, MAIN_CODE_NAMES = _parse_table(_TABLE)
 
+#: End codes a command's own section gives that 5-1-3's table lacks (named from that section).
+SECTION_END_CODES: dict[int, EndCodeInfo] = {
+    0x1108: EndCodeInfo(
+        0x1108,
+        MAIN_CODE_NAMES[0x11],
+        "Too many words",
+        (
+            EndCodeCause(
+                "Number of words in command data (PARAMETER AREA READ, 5-3-7)",
+                "More than 498 words were asked for; the first 498 were read and returned.",
+                "Read at most 498 words per command.",
+            ),
+        ),
+    ),
+}
+
 
 @dataclass(frozen=True, slots=True)
 class EndCode:
@@ -445,7 +461,8 @@ class EndCode:
 
     @property
     def info(self) -> EndCodeInfo | None:
-        return END_CODES.get(self.code)
+        code = self.code
+        return END_CODES.get(code) or SECTION_END_CODES.get(code)
 
     @property
     def name(self) -> str:

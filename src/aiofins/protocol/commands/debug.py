@@ -30,6 +30,8 @@ class ForceSpec(enum.IntEnum):
 #: Memory area codes whose bits/flags can be forced: CIO, WR, HR bits and T/C completion
 #: flags (CS/CJ 30, 31, 32, 09; CV-series 00, 01).
 FORCEABLE_AREA_CODES = frozenset({0x30, 0x31, 0x32, 0x09, 0x00, 0x01})
+#: Timer/counter completion flags (CS/CJ 09, CV 01): the bit byte is always 00 (5-3-45).
+_COMPLETION_FLAGS = frozenset({0x09, 0x01})
 ENTRY_SIZE = 6
 #: (2000 parameter bytes - 2 count bytes) / 6 bytes per entry.
 MAX_ENTRIES = 333
@@ -43,6 +45,11 @@ def _check_address(address: MemoryAddress) -> None:
         )
     if address.bit > 15:
         raise AddressError(f"bit number {address.bit} out of range 0..15")
+    if address.area_code in _COMPLETION_FLAGS and address.bit != 0:
+        raise AddressError(
+            f"bit number must be 0 for a completion flag (area code {address.area_code:02X}, "
+            f"got {address.bit})"
+        )
 
 
 @dataclass(frozen=True, slots=True)

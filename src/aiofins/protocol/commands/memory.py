@@ -36,10 +36,15 @@ MAX_RESPONSE_DATA = MAX_RESPONSE_DATA_SIZE
 MAX_COMMAND_PARAMS = MAX_PARAMETER_SIZE
 
 # Area codes 01 02 cannot write (manual 5-3-3 table): forced-status views, completion flags,
-# task flags, clock pulses / condition flags (CS/CJ and CV codes).
+# task flags, clock pulses / condition flags (CS/CJ and CV codes), and CV bits (00: "---").
 _NOT_WRITABLE = frozenset(
-    (0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x09, 0x49, 0x06, 0x46, 0x07, 0x40, 0xC0, 0x01, 0x41)
+    (0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x09, 0x49, 0x06, 0x46, 0x07, 0x40, 0xC0, 0x01, 0x41, 0x00)
 )
+# Forced-status designations: read by 01 04 only (its table lists them; 01 01's does not).
+_FORCED_STATUS = frozenset((0x70, 0x71, 0x72, 0xF0, 0xF1, 0xF2, 0x49, 0x40, 0xC0, 0x41))
+# The EM current bank number word, under the DR area code (CS/CJ BC 0F00, CV 9C 0006): read
+# by 01 01 and 01 04, absent from 01 02's table (manual 5-3-2, 5-3-3, 5-3-5).
+_BANK_NUMBER_WORD = {0xBC: 0x0F00, 0x9C: 0x0006}
 # One-byte codes whose bit byte is always 00 (manual 5-2-1: completion flags; 5-2-2: task
 # flags, clock pulses / condition flags are addressed by word with bit 00).
 _BIT_ALWAYS_ZERO = frozenset({0x09, 0x49, 0x01, 0x41, 0x06, 0x46, 0x07})
@@ -180,6 +185,13 @@ class MemoryAreaRead(Request[MemoryAreaReadResult]):
 
     def __post_init__(self) -> None:
         size = _check_address(self.address)
+        if self.address.area_code in _FORCED_STATUS:
+            raise AddressError(
+                f"{self.address}: forced status (area code {self.address.area_code:02X}) is "
+                "read with MULTIPLE MEMORY AREA READ (01 04, multiple_memory_area_read), not "
+                "01 01",
+                end_code=0x1101,
+            )
         _check_count("number of elements", self.count, MAX_READ_ELEMENTS, 0x110B)
         if self.count * size > MAX_RESPONSE_DATA:
             raise CommandError(
@@ -240,6 +252,13 @@ class MemoryAreaWrite(Request[None]):
         high = min(MAX_WRITE_ELEMENTS, (MAX_COMMAND_PARAMS - 6) // size)
         _check_count("number of elements", count, high, 0x1001)
         _check_bit_data(self.address, self.data, size)
+        bank_word = _BANK_NUMBER_WORD.get(self.address.area_code)
+        if bank_word is not None and self.address.word <= bank_word < self.address.word + count:
+            raise AddressError(
+                f"{self.address}: the EM current bank number (area {self.address.area_code:02X} "
+                f"word {bank_word:04X}) cannot be written with 01 02",
+                end_code=0x1101,
+            )
 
     @classmethod
     def from_values(cls, address: MemoryAddress, values: Iterable[int]) -> MemoryAreaWrite:
