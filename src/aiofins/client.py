@@ -284,7 +284,8 @@ class Client(CommandMethods):
     ) -> list[Value]:
         """Read ``count`` consecutive typed values."""
         t = self._type(vtype)
-        return words_to_values(t, await self.read(address, t.words * count, **kw))
+        start = _typed_start(address, t, count)
+        return words_to_values(t, await self.read(start, t.words * count, **kw))
 
     async def write_value(
         self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
@@ -296,7 +297,9 @@ class Client(CommandMethods):
         self, address: AddressLike, values: Sequence[Value], vtype: str | ValueType, **kw: Any
     ) -> None:
         """Write consecutive typed values."""
-        await self.write(address, values_to_words(self._type(vtype), values), **kw)
+        t = self._type(vtype)
+        start = _typed_start(address, t, len(values))
+        await self.write(start, values_to_words(t, values), **kw)
 
     # -- tag lists ----------------------------------------------------------------------
 
@@ -392,6 +395,24 @@ class Client(CommandMethods):
             mrc, src, params, timeout=timeout, idempotent=request.IDEMPOTENT
         )
         return self._run_words(plan, i, response)
+
+
+def _typed_start(address: AddressLike, vtype: ValueType, count: int) -> AddressLike:
+    """:func:`_start` for ``count`` values of ``vtype``, which (but for ``bit``) need words.
+
+    A typed value at a bit address would read its bits as the value's words.
+    """
+    if vtype.kind == "bit":
+        return address
+    start = _start(address, vtype.words * count)
+    size = start.element_size
+    if size != 2:
+        what = "a bit address" if size == 1 else f"an area of {size}-byte elements"
+        raise CommandError(
+            f"{address} is {what}: {vtype.kind} values need word addresses (drop the type, "
+            "or use 'bit' for bits)"
+        )
+    return start
 
 
 def _start(address: AddressLike, count: int) -> MemoryAddress:

@@ -262,3 +262,24 @@ async def test_short_error_log_read_returns_the_records_that_exist(
         with pytest.raises(EndCodeError) as info:
             await plc.error_log_read(5, 20)
         assert info.value.end_code.code == end_code
+
+
+async def test_typed_values_need_word_addresses(url: str) -> None:
+    """A float read at a bit address would read 2 bits as its words: refused before sending."""
+    async with connect(url, timeout=1) as plc:
+        await plc.write("CIO 0", [0xFFFF, 0xFFFF])
+        sent = plc.session.stats.completed
+        for call in (
+            plc.read_value("CIO 0.01", "float32"),
+            plc.read_values("CIO 0.01", "int16", 2),
+            plc.write_value("CIO 0.01", 1.5, "float32"),
+            plc.read_value("IR0", "int32"),  # index registers: 4-byte elements
+        ):
+            with pytest.raises(CommandError, match="need word addresses"):
+                await call
+        assert plc.session.stats.completed == sent  # nothing was sent
+        assert await plc.read_values("CIO 0.01", "bit", 2) == [True, True]
+        await plc.write_values("CIO 0.02", [False], "bit")
+        assert await plc.read("CIO 0", 1) == [0xFFFB]
+        await plc.write_value("D500", 2.5, "float32")  # words: fine
+        assert await plc.read_value("D500", "float32") == 2.5
