@@ -21,7 +21,7 @@ from typing import Any
 import anyio
 
 from .client import Client
-from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, parse_endpoint
+from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, option_value, parse_endpoint
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.limits import NetworkType, RouteLimits, limits_for
@@ -59,19 +59,19 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
         return TcpTransport(
             endpoint.host,
             endpoint.port,
-            node=int(options.get("tcp_node", 0)),
+            node=int(option_value("tcp_node", options.get("tcp_node", 0))),
             gather_writes=bool(options.get("tcp_gather_writes", True)),
         )
     settings: dict[str, Any] = dict(endpoint.options)
     settings.update({k: v for k, v in options.items() if k in SERIAL_SETTINGS})
     return SerialTransport(
         endpoint.device,
-        baudrate=int(settings.get("baudrate", 9600)),
-        bytesize=int(settings.get("bytesize", 8)),
-        parity=str(settings.get("parity", "N")),
-        stopbits=float(settings.get("stopbits", 1)),
-        unit=int(settings.get("unit", 0)),
-        response_wait=int(settings.get("response_wait", 0)),
+        baudrate=int(option_value("baudrate", settings.get("baudrate", 9600))),
+        bytesize=int(option_value("bytesize", settings.get("bytesize", 8))),
+        parity=str(option_value("parity", settings.get("parity", "N"))),
+        stopbits=float(option_value("stopbits", settings.get("stopbits", 1))),
+        unit=int(option_value("unit", settings.get("unit", 0))),
+        response_wait=int(option_value("response_wait", settings.get("response_wait", 0))),
     )
 
 
@@ -105,7 +105,7 @@ async def default_addresses(
         host = await _ipv4_of(host, endpoint.port) or host
     if d is None:
         node_text = endpoint.option("node")
-        node = int(node_text) if node_text else node_from_host(host)
+        node = int(option_value("node", node_text)) if node_text else node_from_host(host)
         d = FinsAddress(0, node if node is not None else 1, 0)
     if s is None:
         if endpoint.scheme == "tcp":
@@ -169,7 +169,7 @@ async def connect(
         dest=d,
         gct=gct,
         max_in_flight=5 if max_in_flight is None else max_in_flight,
-        timeout=float(timeout_text) if timeout_text else timeout,
+        timeout=float(option_value("timeout", timeout_text)) if timeout_text else timeout,
         retries=retries,
     )
     async with session:

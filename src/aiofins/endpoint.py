@@ -24,6 +24,58 @@ SERIAL_SETTINGS = frozenset({"baudrate", "bytesize", "parity", "stopbits", "unit
 _SERIAL_KEYS = SERIAL_SETTINGS | {"timeout"}
 _NET_KEYS = {"dest", "src", "node", "timeout"}
 
+_PARITIES = ("N", "E", "O", "M", "S")
+
+
+def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
+    try:
+        number = int(str(value), 10) if not isinstance(value, int) else value
+    except ValueError:
+        number = None
+    if number is None or number < low or (high is not None and number > high):
+        span = f"{low}..{high}" if high is not None else f"at least {low}"
+        raise CommandError(f"{name} must be a whole number, {span}; got {value!r}")
+    return number
+
+
+def option_value(name: str, value: object) -> int | float | str:
+    """The value of a URL query option (or ``connect`` keyword) ``name``, checked.
+
+    :class:`CommandError` says what is wrong (``?node=abc``, ``?baudrate=-1``, ...).
+    """
+    if name == "timeout":
+        try:
+            seconds = float(str(value))
+        except ValueError:
+            seconds = 0.0
+        if not 0 < seconds < float("inf"):
+            raise CommandError(f"timeout must be a positive number of seconds; got {value!r}")
+        return seconds
+    if name in ("node", "tcp_node"):
+        return _integer(name, value, 0, 254)
+    if name == "baudrate":
+        return _integer("baudrate", value, 1)
+    if name == "bytesize":
+        return _integer("bytesize", value, 5, 8)
+    if name == "unit":
+        return _integer("Host Link unit number", value, 0, 31)
+    if name == "response_wait":
+        return _integer("Host Link response wait time", value, 0, 15)
+    if name == "stopbits":
+        try:
+            bits = float(str(value))
+        except ValueError:
+            bits = 0.0
+        if bits not in (1, 1.5, 2):
+            raise CommandError(f"stopbits must be 1, 1.5 or 2; got {value!r}")
+        return bits
+    if name == "parity":
+        parity = str(value).upper()
+        if parity not in _PARITIES:
+            raise CommandError(f"parity must be one of {', '.join(_PARITIES)}; got {value!r}")
+        return parity
+    return str(value)
+
 
 @dataclass(frozen=True)
 class Endpoint:
@@ -68,12 +120,13 @@ def parse_endpoint(url: str) -> Endpoint:
         device = (parts.netloc + parts.path) if parts.netloc else parts.path
         if not device:
             raise CommandError(f"{url!r}: serial URL needs a device, e.g. serial:///dev/ttyUSB0")
-        for key, _ in options:
+        for key, value in options:
             if key not in _SERIAL_KEYS:
                 raise CommandError(
                     f"{url!r}: unknown serial option {key!r}; known: "
                     f"{', '.join(sorted(_SERIAL_KEYS))}"
                 )
+            _check(url, key, value)
         return Endpoint("serial", device=device, options=options)
     if scheme not in ("udp", "tcp"):
         raise CommandError(f"{url!r}: unknown scheme {scheme!r}; use udp, tcp or serial")
@@ -91,7 +144,15 @@ def parse_endpoint(url: str) -> Endpoint:
             )
         if key in ("dest", "src"):
             FinsAddress.parse(value)
+        _check(url, key, value)
     return Endpoint(scheme, host=host, port=port, options=options)
+
+
+def _check(url: str, key: str, value: str) -> None:
+    try:
+        option_value(key, value)
+    except CommandError as exc:
+        raise CommandError(f"{url!r}: {exc}") from None
 
 
 def node_from_host(host: str) -> int | None:

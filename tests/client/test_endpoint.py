@@ -1,0 +1,49 @@
+"""Connection URLs: every query option is checked when the URL is parsed (no I/O)."""
+
+from __future__ import annotations
+
+import pytest
+
+from aiofins.connection import connect
+from aiofins.endpoint import option_value, parse_endpoint
+from aiofins.protocol.errors import CommandError
+
+
+@pytest.mark.parametrize(
+    ("url", "message"),
+    [
+        ("udp://127.0.0.1?node=abc", "node must be a whole number, 0..254; got 'abc'"),
+        ("tcp://127.0.0.1?node=255", "node must be a whole number, 0..254; got '255'"),
+        ("udp://127.0.0.1?timeout=abc", "timeout must be a positive number of seconds"),
+        ("udp://127.0.0.1?timeout=0", "timeout must be a positive number of seconds"),
+        ("udp://127.0.0.1?timeout=inf", "timeout must be a positive number of seconds"),
+        ("serial:///dev/ttyS0?baudrate=abc", "baudrate must be a whole number, at least 1"),
+        ("serial:///dev/ttyS0?bytesize=9", "bytesize must be a whole number, 5..8"),
+        ("serial:///dev/ttyS0?parity=X", "parity must be one of N, E, O, M, S; got 'X'"),
+        ("serial:///dev/ttyS0?stopbits=3", "stopbits must be 1, 1.5 or 2"),
+        ("serial:///dev/ttyS0?unit=32", "Host Link unit number must be a whole number, 0..31"),
+        ("serial:///dev/ttyS0?response_wait=x", "response wait time must be a whole number"),
+        ("serial:///dev/ttyS0?timeout=-1", "timeout must be a positive number"),
+    ],
+)
+def test_bad_option_values_are_refused_naming_the_url(url: str, message: str) -> None:
+    with pytest.raises(CommandError, match=message) as info:
+        parse_endpoint(url)
+    assert str(info.value).startswith(repr(url))
+
+
+def test_good_option_values_parse() -> None:
+    endpoint = parse_endpoint("serial:///dev/ttyS0?baudrate=115200&parity=e&stopbits=1.5&unit=3")
+    assert endpoint.option("parity") == "e"
+    assert [option_value(k, v) for k, v in endpoint.options] == [115200, "E", 1.5, 3]
+    assert option_value("timeout", "0.25") == 0.25 and option_value("node", 7) == 7
+
+
+@pytest.mark.anyio
+async def test_connect_checks_serial_keywords_too(anyio_backend: object) -> None:
+    with pytest.raises(CommandError, match="baudrate must be a whole number"):
+        async with connect("serial:///dev/ttyS0", baudrate="fast"):
+            pass
+    with pytest.raises(CommandError, match=r"tcp_node must be a whole number, 0\.\.254"):
+        async with connect("tcp://127.0.0.1:1", tcp_node=300):
+            pass
