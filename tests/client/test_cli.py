@@ -242,3 +242,26 @@ def test_poll_text_lines_say_why_a_scan_failed(capsys: pytest.CaptureFixture[str
         code, out, _ = run(capsys, "poll", url, "x=D0", "--timeout", "0.05", "--count", "1")
     assert code == 0
     assert out.startswith("#1 x=None(error)  (FinsTimeout: no response to command 0101"), out
+
+
+def test_simulate_startup_errors_are_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    """Port in use, unknown host, no such device, bad unit: a line on stderr, no traceback."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        port = busy.getsockname()[1]
+        code, _, err = run(capsys, "simulate", "--udp", f"127.0.0.1:{port}")
+    assert code == 1 and "Traceback" not in err
+    assert err.splitlines()[0] == (
+        f"aiofins simulate: [Errno 98] cannot serve FINS/UDP on 127.0.0.1:{port}: "
+        "Address already in use"
+    )
+    code, _, err = run(capsys, "simulate", "--serial", "/nonexistent/tty")
+    assert code == 1 and "could not open port /nonexistent/tty" in err
+    code, _, err = run(capsys, "simulate", "--serial", "/dev/null", "--serial-unit", "40")
+    assert code == 2 and err == "aiofins simulate: --serial-unit 40 out of range 0..31\n"
+
+
+def test_errors_inside_task_groups_are_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "demo", "--interval", "0")
+    assert code == 1
+    assert err == "aiofins: CommandError: interval must be a positive number of seconds, got 0.0\n"

@@ -45,6 +45,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def leaf_errors(exc: BaseException) -> list[BaseException]:
+    """``exc`` itself, or every exception inside it if it is an exception group (a task
+    group's error), flattened."""
+    inner = getattr(exc, "exceptions", None)
+    if not isinstance(inner, tuple):
+        return [exc]
+    return [leaf for e in inner for leaf in leaf_errors(e)]
+
+
+def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException], ...]) -> bool:
+    """Print ``exc`` (each error of a group) on stderr if all are ``expected``; whether it did.
+
+    A :class:`FinsError` is printed with its type name, anything else as its message.
+    """
+    leaves = leaf_errors(exc)
+    if not all(isinstance(e, expected) for e in leaves):
+        return False
+    for e in leaves:
+        text = f"{type(e).__name__}: {e}" if isinstance(e, FinsError) else str(e)
+        print(f"{prefix}: {text}", file=sys.stderr)
+    return True
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (errors go to stderr)."""
     args = build_parser().parse_args(argv)
@@ -53,12 +76,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return handler(args)
     except KeyboardInterrupt:
         return 130
-    except FinsError as exc:
-        print(f"aiofins: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f"aiofins: {exc}", file=sys.stderr)
-        return 1
+    except Exception as exc:  # a FinsError or OSError, maybe from inside a task group
+        if report("aiofins", exc, (FinsError, OSError)):
+            return 1
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

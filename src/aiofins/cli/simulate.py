@@ -13,11 +13,13 @@ from typing import TYPE_CHECKING, Any
 
 import anyio
 
+from ..protocol.errors import FinsError
 from ..protocol.tcp import DEFAULT_PORT
 from ..simulator.faults import Delay, FaultPlan, FaultRule, FrameLog
 from ..simulator.runner import Simulator, run_simulator
 from ..simulator.serial import SerialSettings
 from ..simulator.tcp import DEFAULT_MAX_CONNECTIONS
+from . import report
 
 if TYPE_CHECKING:
     SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
@@ -190,6 +192,12 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.node <= 254:
         print(f"aiofins simulate: --node {args.node} out of range 1..254", file=sys.stderr)
         return 2
+    if not 0 <= args.serial_unit <= 31:
+        print(
+            f"aiofins simulate: --serial-unit {args.serial_unit} out of range 0..31",
+            file=sys.stderr,
+        )
+        return 2
     try:
         plan = build_plan(args)
     except (ValueError, OSError) as exc:
@@ -199,9 +207,10 @@ def run(args: argparse.Namespace) -> int:
         anyio.run(_serve, args, plan, backend=args.backend)
     except KeyboardInterrupt:
         pass
-    except OSError as exc:
-        print(f"aiofins simulate: {exc}", file=sys.stderr)
-        return 1
+    except Exception as exc:  # cannot listen (port in use, bad host, no such serial device)
+        if report("aiofins simulate", exc, (OSError, FinsError)):
+            return 1
+        raise
     finally:
         if plan.log is not None:
             plan.log.close()

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Sequence
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Iterator, Sequence
+from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
 
 import anyio
@@ -57,6 +57,24 @@ class Simulator:
         return out
 
 
+@contextmanager
+def _naming_the_endpoint(what: str, where: tuple[str, int]) -> Iterator[None]:
+    """An OSError from binding (maybe inside a server's task group) says which endpoint:
+    ``[Errno 98] Address already in use`` alone does not."""
+    try:
+        yield
+    except Exception as exc:
+        error: BaseException = exc
+        while isinstance(getattr(error, "exceptions", None), tuple) and len(error.exceptions) == 1:  # type: ignore[attr-defined]
+            error = error.exceptions[0]  # type: ignore[attr-defined]
+        if not isinstance(error, OSError):
+            raise
+        host, port = where
+        raise OSError(
+            error.errno, f"cannot serve {what} on {_host(host)}:{port}: {error.strerror or error}"
+        ) from exc
+
+
 def _host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
 
@@ -92,7 +110,8 @@ async def run_simulator(
     async with anyio.create_task_group() as tg:
         if udp is not None:
             sim.udp = UdpServer(dispatcher, udp[0], udp[1])
-            await tg.start(sim.udp.serve)
+            with _naming_the_endpoint("FINS/UDP", udp):
+                await tg.start(sim.udp.serve)
         if tcp is not None:
             sim.tcp = TcpServer(
                 dispatcher,
@@ -102,7 +121,8 @@ async def run_simulator(
                 node_pool=node_pool,
                 max_connections=max_connections,
             )
-            await tg.start(sim.tcp.serve)
+            with _naming_the_endpoint("FINS/TCP", tcp):
+                await tg.start(sim.tcp.serve)
         if serial is not None:
             sim.serial = SerialServer(
                 dispatcher, serial, unit=serial_unit, settings=serial_settings
