@@ -228,8 +228,10 @@ def test_poll_refuses_bad_tags_and_intervals_before_polling(
         (("x=D0:float99",), "CommandError: unknown value type 'float99'"),
         (("=D0",), "CommandError: tag '=D0' is not ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]"),
         (("x=D0", "--interval", "0"), "CommandError: interval must be a positive number"),
+        (("a=D0", "a=D1"), "CommandError: tag name 'a' is given twice"),
+        (("x=D0", "--count", "-1"), "CommandError: --count -1: give a number of scans"),
     ):
-        code, out, err = run(capsys, "poll", sim_url, *argv, "--count", "1")
+        code, out, err = run(capsys, "poll", sim_url, "--count", "1", *argv)
         assert code == 1 and out == "" and said in err, err
     code, out, err = run(capsys, "read", "udp://[::1", "D0")
     assert code == 1 and "CommandError: 'udp://[::1': Invalid IPv6 URL" in err
@@ -265,3 +267,21 @@ def test_errors_inside_task_groups_are_one_line(capsys: pytest.CaptureFixture[st
     code, _, err = run(capsys, "demo", "--interval", "0")
     assert code == 1
     assert err == "aiofins: CommandError: interval must be a positive number of seconds, got 0.0\n"
+
+
+def test_poll_changes_only_counts_scans_not_printed_lines(
+    sim_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Unchanged scans print nothing, but --count N still stops after N scans."""
+    run(capsys, "write", sim_url, "D60", "7", "8")
+    argv = ["poll", sim_url, "a=D60", "b=D61", "--interval", "0.02", "--count", "4"]
+    done = subprocess.run(  # in a process: it used to wait for a change forever
+        [sys.executable, "-m", "aiofins.cli", *argv, "--changes-only", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=20,
+        check=False,
+    )
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert done.returncode == 0 and len(lines) == 1, done  # the first scan: all changed
+    assert lines[0]["scan"] == 1 and set(lines[0]["tags"]) == {"a", "b"}

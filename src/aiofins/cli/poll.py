@@ -7,6 +7,7 @@ Each scan prints one line (or, with ``--json``, one JSON document per line).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
 import anyio
@@ -38,6 +39,8 @@ def parse_tags(texts: list[str]) -> dict[str, str]:
             name, spec = text, text
         if not name.strip() or not spec.strip():
             raise CommandError(f"tag {text!r} is not ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
+        if name.strip() in tags:
+            raise CommandError(f"tag name {name.strip()!r} is given twice")
         tags[name.strip()] = spec.strip()
     return tags
 
@@ -71,17 +74,23 @@ def to_json(snap: Snapshot) -> str:
 
 async def poll(args: argparse.Namespace) -> None:
     tags = parse_tags(args.tags)
+    if args.count < 0:
+        raise CommandError(f"--count {args.count}: give a number of scans, or 0 to run until ^C")
     options = {"timeout": args.timeout, "dest": args.dest, "src": args.src}
     pool = Pool(**options)
-    poller = Poller(pool, changes_only=args.changes_only)
+    # Every scan is delivered (--count counts scans); --changes-only filters here.
+    poller = Poller(pool)
     # Before anything opens: a bad URL, tag or interval is an error, not a scan error.
     poller.add_group("cli", args.url, tags, interval=args.interval, timeout=args.timeout)
     async with pool, poller:
-        seen = 0
         async for snap in poller:
-            print(to_json(snap) if args.json else format_line(snap), flush=True)
-            seen += 1
-            if args.count and seen >= args.count:
+            shown: Snapshot | None = snap
+            if args.changes_only:
+                changed = {n: r for n, r in snap.readings.items() if n in snap.changed}
+                shown = dataclasses.replace(snap, readings=changed) if changed else None
+            if shown is not None:
+                print(to_json(shown) if args.json else format_line(shown), flush=True)
+            if args.count and snap.scan >= args.count:
                 break
 
 
