@@ -10,6 +10,7 @@ sending anything.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 
 from .chunking import PROGRAM_BLOCK_UNIT, plan_parameter, plan_program
@@ -51,9 +52,21 @@ async def backup_program(client: Client, progress: Progress | None = None) -> by
 
 
 def check_program_image(program: bytes) -> None:
-    """Refuse a program image :func:`restore_program` cannot write (before anything is sent)."""
+    """Refuse a program image :func:`restore_program` cannot write (before anything is sent):
+    empty, not whole 4-byte units, or a JSON document (a parameter backup, most likely)."""
+    if not program:
+        raise CommandError("program image is empty")
     if len(program) % PROGRAM_BLOCK_UNIT:
         raise CommandError(f"program image must be a multiple of 4 bytes, got {len(program)}")
+    if program.lstrip()[:1] in (b"{", b"["):
+        try:
+            json.loads(program)
+        except ValueError:
+            return
+        raise CommandError(
+            "this is a JSON document (a parameter backup?), not a program image; a parameter "
+            "backup goes to restore_parameters (on the command line: --what parameters)"
+        )
 
 
 async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:

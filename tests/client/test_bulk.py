@@ -9,6 +9,7 @@ import pytest
 from aiofins.bulk import (
     backup_parameters,
     backup_program,
+    check_program_image,
     download_file,
     list_files,
     restore_parameters,
@@ -90,3 +91,16 @@ async def test_file_upload_list_download(url: str, networks: tuple[NetworkType, 
         )
         assert got == data
         assert len(seen) == (6 if not networks else 20)
+
+
+def test_program_images_that_are_not_programs_are_refused() -> None:
+    check_program_image(bytes(range(8)))
+    check_program_image(b"{not json}  ")  # binary that happens to start with '{'
+    for image, said in (
+        (b"", "empty"),
+        (b"123", "multiple of 4"),
+        (b'{"8010": [1, 2, 3, 4]}  ', "JSON document"),
+        (b"[1, 2, 3, 4]", "JSON document"),
+    ):
+        with pytest.raises(CommandError, match=said):
+            check_program_image(image)

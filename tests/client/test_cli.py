@@ -208,6 +208,8 @@ def test_restore_with_a_bad_file_does_not_stop_the_plc(
             ("{bad", "parameters"),
             ('{"8010": [1, 2]}', "parameters"),
             ("123", "program"),  # 3 bytes: not a multiple of 4
+            ("", "program"),  # empty
+            ('{"8010": [1, 2, 3, 4]}  ', "program"),  # 24 bytes, but a parameter backup
         ):
             path = tmp_path / f"backup.{what}"
             path.write_text(content)
