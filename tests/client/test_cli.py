@@ -154,9 +154,11 @@ def test_backup_restore_and_files(
     back = tmp_path / "back.txt"
     assert run(capsys, "files", sim_url, "get", "NOTES.TXT", str(back))[0] == 0
     assert back.read_bytes() == local.read_bytes()
-    assert run(capsys, "files", sim_url, "delete", "NOTES.TXT")[0] == 0
+    assert run(capsys, "files", sim_url, "delete", "NOTES.TXT") == (0, "NOTES.TXT: deleted\n", "")
     code, out, _ = run(capsys, "files", sim_url, "list", "--json")
     assert "NOTES.TXT" not in out
+    code, out, err = run(capsys, "files", sim_url, "delete", "NOTES.TXT", "--json")
+    assert (code, out) == (1, "") and err == "aiofins: NOTES.TXT: no such file, nothing deleted\n"
 
 
 @pytest.mark.parametrize(

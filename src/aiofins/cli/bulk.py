@@ -185,7 +185,11 @@ async def _files(plc: Client, args: argparse.Namespace) -> int:
         print("aiofins: files get/put/delete need a file name", file=sys.stderr)
         return 2
     if args.action == "delete":
-        await plc.file_delete(disk, (args.name,), args.directory)
+        result = await plc.file_delete(disk, (args.name,), args.directory)
+        if not result.deleted:  # the PLC skips a name that does not exist
+            print(f"aiofins: {args.name}: no such file, nothing deleted", file=sys.stderr)
+            return 1
+        print(json.dumps({"deleted": result.deleted}) if args.json else f"{args.name}: deleted")
         return 0
     local: Path = args.local or Path(args.name)
     bar = ProgressBar(f"{args.action} {args.name}")
