@@ -221,6 +221,21 @@ async def test_virtual_plc_memory_by_address_text_agrees_with_fins() -> None:
         assert plc.read_value("D400", "int32") == 123456
     with pytest.raises(AddressError, match="run past the end"):
         plc.read("D32767", 2)
+    # What the client refuses, the virtual PLC refuses too (no silent masking).
+    for address, values, limit in (
+        ("D0", [70000], "0..65535"),
+        ("D0", [-1], "0..65535"),
+        ("CIO 0.00", [2], "0..1"),
+        ("IR0", [1 << 32], "0..4294967295"),
+    ):
+        with pytest.raises(CommandError, match=f"{address}: value .* out of range {limit}"):
+            plc.write(address, values)
+    plc.write("CIO 0.00", [True])
+    assert plc.read("CIO 0.00") == [1]
+    with pytest.raises(CommandError, match="count must not be negative"):
+        plc.read("D0", -1)
+    with pytest.raises(CommandError, match=r"node 0 out of range 1\.\.254"):
+        VirtualPLC(node=0)
 
 
 async def test_a_tag_plan_for_bigger_frames_is_refused_on_a_smaller_route(

@@ -26,7 +26,7 @@ from ..protocol.endcodes import (
     RELAY_ERROR_FLAG,
     EndCode,
 )
-from ..protocol.errors import DecodeError
+from ..protocol.errors import CommandError, DecodeError
 from ..protocol.files import Disk
 from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
 from ..protocol.values import Value, parse_value_type, values_to_words, words_to_values
@@ -141,6 +141,8 @@ class VirtualPLC:
         clock: Callable[[], float] = time.time,
         gateway: GatewayHandler = default_gateway,
     ) -> None:
+        if not 1 <= node <= 254:
+            raise CommandError(f"node {node} out of range 1..254 (a PLC's FINS node number)")
         self.address = FinsAddress(network, node, unit)
         self.memory = IOMemory(em_banks=em_banks, clock=clock)
         self.mode = mode
@@ -203,6 +205,8 @@ class VirtualPLC:
 
         Straight from memory: no FINS frame, no restriction checks.
         """
+        if count < 0:
+            raise CommandError(f"count must not be negative, got {count}")
         start = parse_span(address, count)
         memory = self.memory
         if start.element_size == 1:
@@ -214,6 +218,10 @@ class VirtualPLC:
         """Set elements from ``address`` as the PLC's own program would (read-only areas
         too): words, or 0/1 for bits."""
         start = parse_span(address, len(values))
+        limit = (1 << (8 * start.element_size)) - 1 if start.element_size > 1 else 1
+        for value in values:  # as the client refuses them: no silent masking
+            if not isinstance(value, int) or not 0 <= value <= limit:
+                raise CommandError(f"{address}: value {value!r} out of range 0..{limit}")
         memory = self.memory
         if start.element_size == 1:
             memory.write_bits(start.area_code, start.word, start.bit, [bool(v) for v in values])
