@@ -82,7 +82,7 @@ async def write(address: str, values: list[int]) -> dict[str, Any]:
 
 @app.get("/status")
 async def status() -> dict[str, Any]:
-    async with STATE["pool"].client(STATE["url"]) as plc:
+    async with _plc() as plc:
         s = await plc.cpu_unit_status_read()
         return {"mode": s.mode.name, "error_code": s.error_code, "message": s.error_message}
 

@@ -4,8 +4,9 @@
     python examples/polling_daemon.py udp://10.0.0.5 udp://10.0.0.6
 
 Each PLC is one scan group with its own interval; a slow or dead PLC does not delay the others
-and its tags turn STALE (last good value kept) and then ERROR. Ctrl-C (SIGINT) or SIGTERM (as
-systemd and Docker stop a service) ends it cleanly: sessions closed, exit code 0.
+and its tags turn STALE (the last good value kept, with its timestamp; tags never read are
+ERROR). Ctrl-C (SIGINT) or SIGTERM (as systemd and Docker stop a service) ends it cleanly:
+sessions closed, exit code 0.
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -45,6 +46,26 @@ def test_fastapi_app_serves_reads_and_writes() -> None:
         assert http.get("/plc/D40000").status_code == 400
         assert http.get("/status").json()["mode"] == "PROGRAM"
         assert http.get("/plc/D100/value", params={"type": "uint32"}).json()["value"] == 0x20001
+
+
+def test_fastapi_app_answers_504_when_the_plc_is_silent(monkeypatch: pytest.MonkeyPatch) -> None:
+    """/status went through the pool without the app's error mapping: a 500 and a traceback."""
+    pytest.importorskip("fastapi", reason="FastAPI is optional (pip install fastapi httpx2)")
+    if importlib.util.find_spec("httpx2") is None:
+        pytest.importorskip("httpx", reason="the FastAPI test client needs httpx2 (or httpx)")
+    from fastapi.testclient import TestClient
+
+    sys.path.insert(0, str(ROOT))
+    try:
+        from examples.fastapi_app import app
+    finally:
+        sys.path.remove(str(ROOT))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        monkeypatch.setenv("AIOFINS_PLC", f"udp://127.0.0.1:{silent.getsockname()[1]}?timeout=0.1")
+        with TestClient(app, raise_server_exceptions=True) as http:
+            reply = http.get("/status")
+            assert reply.status_code == 504 and "no response to command 0601" in reply.text
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
