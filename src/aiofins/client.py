@@ -342,11 +342,21 @@ class Client(CommandMethods):
                 max((len(frame) for frame in plan.multiple), default=0),
             )
         limits = self.limits
-        if sizes[0] > limits.memory_read_words or sizes[1] > limits.multiple_read_elements:
+        too_big = []
+        if sizes[0] > limits.memory_read_words:
+            too_big.append(
+                f"0101 frames of up to {sizes[0]} words (the route carries "
+                f"{limits.memory_read_words})"
+            )
+        if sizes[1] > limits.multiple_read_elements:
+            too_big.append(
+                f"0104 frames of up to {sizes[1]} elements (the route carries "
+                f"{limits.multiple_read_elements})"
+            )
+        if too_big:
             raise CommandError(
-                f"the tag plan has frames of up to {sizes[0]} words (0101) and {sizes[1]} "
-                f"elements (0104); this route carries {limits.memory_read_words} and "
-                f"{limits.multiple_read_elements}: compile it with this client (compile_tags)"
+                f"the tag plan has {' and '.join(too_big)}: compile it with this client "
+                "(compile_tags)"
             )
 
     def _scan_commands(

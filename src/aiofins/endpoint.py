@@ -91,7 +91,8 @@ class Endpoint:
     def key(self) -> str:
         if self.scheme == "serial":
             return f"serial://{self.device}"
-        return f"{self.scheme}://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{self.scheme}://{host}:{self.port}"
 
     def option(self, name: str, default: str | None = None) -> str | None:
         for key, value in self.options:

@@ -165,17 +165,31 @@ def test_backup_restore_and_files(
     ("flags", "said"), [("40", "a non-fatal"), ("C0", "a fatal and a non-fatal")]
 )
 def test_cpu_error_flags_succeed_with_a_warning_on_stderr(
-    flags: str, said: str, capsys: pytest.CaptureFixture[str]
+    flags: str, said: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     proc = simulate("--flags", flags)
     try:
         url = udp_url_of(proc)
         code, out, err = run(capsys, "read", url, "D0", "2", "--json")
         assert code == 0 and json.loads(out)["values"] == [0, 0]  # stdout: the JSON, unchanged
-        assert f"warning: the PLC reports {said} CPU error (end code 00{flags})" in err
+        warning = f"warning: the PLC reports {said} CPU error (end code 00{flags})"
+        assert warning in err
+        # poll (once, however many scans), files and backup warn too
+        code, out, err = run(capsys, "poll", url, "x=D0", "--interval", "0.02", "--count", "2")
+        assert code == 0 and len(out.splitlines()) == 2 and err.count(warning) == 1, err
+        code, _, err = run(capsys, "files", url, "list")
+        assert code == 0 and warning in err
+        code, _, err = run(capsys, "backup", url, str(tmp_path / "p.bin"))
+        assert code == 0 and warning in err
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def test_ping_count_must_be_positive(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    for count in ("0", "-1"):
+        code, out, err = run(capsys, "ping", sim_url, "--count", count)
+        assert (code, out) == (1, "") and f"CommandError: --count {count}: give the" in err
 
 
 def test_no_warning_without_flags(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -47,3 +47,13 @@ async def test_connect_checks_serial_keywords_too(anyio_backend: object) -> None
     with pytest.raises(CommandError, match=r"tcp_node must be a whole number, 0\.\.254"):
         async with connect("tcp://127.0.0.1:1", tcp_node=300):
             pass
+
+
+def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
+    from aiofins.transport.tcp import TcpTransport
+    from aiofins.transport.udp import UdpTransport
+
+    assert parse_endpoint("udp://[::1]:9601").key == "udp://[::1]:9601"
+    assert UdpTransport("::1", 9601).description == "udp://[::1]:9601"
+    assert TcpTransport("::1").description == "tcp://[::1]:9600"
+    assert TcpTransport("10.0.0.5").description == "tcp://10.0.0.5:9600"

@@ -32,6 +32,7 @@ from ..client import Client
 from ..connection import connect
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
+from .plc import warn_of_cpu_errors
 
 
 class ProgressBar:
@@ -100,7 +101,9 @@ def _sync(handler: Any) -> Any:
 
 async def _with_client(handler: Any, args: argparse.Namespace) -> int:
     async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
-        return int(await handler(plc, args))
+        code = int(await handler(plc, args))
+        warn_of_cpu_errors(plc.last_end_code)
+        return code
 
 
 async def _backup(plc: Client, args: argparse.Namespace) -> int:

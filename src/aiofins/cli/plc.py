@@ -89,14 +89,15 @@ def _runner(handler: Handler) -> Callable[[argparse.Namespace], int]:
 async def _with_client(handler: Handler, args: argparse.Namespace) -> Any:
     async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
         result = await handler(plc, args)
-        _warn_of_cpu_errors(plc.last_end_code)
+        warn_of_cpu_errors(plc.last_end_code)
         return result
 
 
-def _warn_of_cpu_errors(end_code: EndCode | None) -> None:
-    """End code bits 6/7 do not fail a command; say on stderr that the PLC has an error."""
+def warn_of_cpu_errors(end_code: EndCode | None) -> bool:
+    """End code bits 6/7 do not fail a command; say on stderr that the PLC has an error
+    (and return whether it did)."""
     if end_code is None:
-        return
+        return False
     kinds = [
         kind
         for kind, flag in (
@@ -111,6 +112,7 @@ def _warn_of_cpu_errors(end_code: EndCode | None) -> None:
             f"(end code {end_code.raw:04X}); 'aiofins status' shows which",
             file=sys.stderr,
         )
+    return bool(kinds)
 
 
 def _json_default(value: object) -> object:
@@ -222,8 +224,10 @@ async def _clock(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
 
 
 async def _ping(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
+    if args.count < 1:
+        raise CommandError(f"--count {args.count}: give the number of pings, at least 1")
     times: list[float] = []
-    for _ in range(max(1, args.count)):
+    for _ in range(args.count):
         start = time.perf_counter()
         await plc.cpu_unit_status_read(timeout=args.timeout)
         times.append((time.perf_counter() - start) * 1000)

@@ -15,6 +15,7 @@ import anyio
 from ..poller import Poller, Snapshot
 from ..pool import Pool
 from ..protocol.errors import CommandError
+from .plc import warn_of_cpu_errors
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -83,7 +84,11 @@ async def poll(args: argparse.Namespace) -> None:
     # Before anything opens: a bad URL, tag or interval is an error, not a scan error.
     poller.add_group("cli", args.url, tags, interval=args.interval, timeout=args.timeout)
     async with pool, poller:
+        warned = False
         async for snap in poller:
+            if not warned and snap.error is None:  # CPU error flags (0040/0080): say so once
+                async with pool.client(args.url) as client:
+                    warned = warn_of_cpu_errors(client.last_end_code)
             shown: Snapshot | None = snap
             if args.changes_only:
                 changed = {n: r for n, r in snap.readings.items() if n in snap.changed}

@@ -223,7 +223,8 @@ class TcpTransport(Transport):
 
     @property
     def description(self) -> str:
-        return f"tcp://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"tcp://{host}:{self.port}"
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:

@@ -210,7 +210,8 @@ class UdpTransport(Transport):
 
     @property
     def description(self) -> str:
-        return f"udp://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"udp://{host}:{self.port}"
 
     @property
     def local_address(self) -> tuple[str, int] | None:
