@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -29,7 +30,8 @@ def test_polling_daemon_prints_changes_of_two_plcs() -> None:
     assert lines[0]["changed"]["temperature"] == [0.0, "good"], seen
 
 
-def test_fastapi_app_serves_reads_and_writes() -> None:
+def fastapi_client() -> Any:
+    """A FastAPI test client of examples/fastapi_app.py (skips without FastAPI)."""
     pytest.importorskip("fastapi", reason="FastAPI is optional (pip install fastapi httpx2)")
     if importlib.util.find_spec("httpx2") is None:
         pytest.importorskip("httpx", reason="the FastAPI test client needs httpx2 (or httpx)")
@@ -40,7 +42,11 @@ def test_fastapi_app_serves_reads_and_writes() -> None:
         from examples.fastapi_app import app
     finally:
         sys.path.remove(str(ROOT))
-    with TestClient(app) as http:
+    return TestClient(app)
+
+
+def test_fastapi_app_serves_reads_and_writes() -> None:
+    with fastapi_client() as http:
         assert http.put("/plc/D100", json=[1, 2, 3]).json() == {"written": 3}
         assert http.get("/plc/D100", params={"count": 3}).json()["values"] == [1, 2, 3]
         assert http.get("/plc/D40000").status_code == 400
@@ -50,20 +56,10 @@ def test_fastapi_app_serves_reads_and_writes() -> None:
 
 def test_fastapi_app_answers_504_when_the_plc_is_silent(monkeypatch: pytest.MonkeyPatch) -> None:
     """/status went through the pool without the app's error mapping: a 500 and a traceback."""
-    pytest.importorskip("fastapi", reason="FastAPI is optional (pip install fastapi httpx2)")
-    if importlib.util.find_spec("httpx2") is None:
-        pytest.importorskip("httpx", reason="the FastAPI test client needs httpx2 (or httpx)")
-    from fastapi.testclient import TestClient
-
-    sys.path.insert(0, str(ROOT))
-    try:
-        from examples.fastapi_app import app
-    finally:
-        sys.path.remove(str(ROOT))
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
         silent.bind(("127.0.0.1", 0))
         monkeypatch.setenv("AIOFINS_PLC", f"udp://127.0.0.1:{silent.getsockname()[1]}?timeout=0.1")
-        with TestClient(app, raise_server_exceptions=True) as http:
+        with fastapi_client() as http:
             reply = http.get("/status")
             assert reply.status_code == 504 and "no response to command 0601" in reply.text
 
