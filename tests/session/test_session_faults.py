@@ -6,6 +6,7 @@ Runs the session against the in-test UDP responder of ``test_session_udp`` (real
 from __future__ import annotations
 
 import random
+from time import monotonic
 
 import anyio
 import pytest
@@ -15,7 +16,8 @@ from hypothesis import strategies as st
 from aiofins.protocol.errors import ConnectionLost, FinsTimeout, ParameterError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
-from aiofins.session.slots import Pending
+from aiofins.session.matching import LATE_REPLY_GRACE
+from aiofins.session.slots import Pending, SlotTimeout
 from aiofins.transport import UdpTransport
 
 from .test_session_udp import (
@@ -384,3 +386,76 @@ async def test_deadline_heap_stays_small_behind_a_slow_request() -> None:
             assert len(session._deadlines) <= 64 + 4 * session.stats.in_flight
             peer.send(reply(first[0], 0, b"\x00\x00"), client_address(session))
         assert session.stats.completed == 400
+
+
+@pytest.mark.anyio
+async def test_a_reply_later_than_the_quarantine_factor_never_reaches_the_sids_next_request() -> (
+    None
+):
+    """Found in a chaos run: a reply later than quarantine_factor x timeout was handed to the
+    next request with that SID (the same command code): another address's value, silently.
+    The quarantine lasts min_quarantine (15 s) at least; until then the SID is skipped."""
+    held: list[bytes] = []
+    first_sid: list[int] = []
+
+    def handler(cmd: bytes) -> list[Reply]:
+        if not first_sid:  # the first read's reply is held back: it times out
+            first_sid.append(cmd[9])
+            held.append(reply(cmd, 0, b"\xde\xad"))
+            return []
+        replies = [(0.0, reply(cmd, 0, word_data(cmd)))]
+        if cmd[9] == (first_sid[0] - 1) & 0xFF:  # the 255th read after it: now the late one
+            replies.insert(0, (0.0, held[0]))
+        return replies
+
+    async with (
+        udp_responder(handler) as peer,
+        session_for(peer, timeout=0.05, quarantine_factor=1.0) as session,
+    ):
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(0))
+        await anyio.sleep(0.15)  # past quarantine_factor x timeout: the old quarantine's end
+        for word in range(1, 300):  # SIDs wrap around: the first read's SID comes up again
+            response = await session.request(0x01, 0x01, read_params(word))
+            assert response.data == (0x1000 | word).to_bytes(2, "big"), word
+        sids = [frame[9] for frame in peer.received]
+        assert sids.count(first_sid[0]) == 1  # never used again while quarantined
+        assert session.stats.late_replies == 1 and session.stats.duplicates == 0
+
+
+@pytest.mark.anyio
+async def test_a_late_reply_ends_its_sids_quarantine() -> None:
+    def late(cmd: bytes) -> list[Reply]:
+        return [(0.05, reply(cmd, 0, word_data(cmd)))]
+
+    async with udp_responder(late) as peer, session_for(peer, timeout=0.01) as session:
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(0))
+        (key,) = session._quarantine
+        assert session._quarantine[key] - monotonic() > 14  # min_quarantine: 15 s
+        with anyio.fail_after(5):
+            while session.stats.late_replies == 0:
+                await anyio.sleep(0.01)
+        assert session._quarantine[key] - monotonic() <= LATE_REPLY_GRACE
+
+
+@pytest.mark.anyio
+async def test_waiting_for_a_free_sid_is_bounded_by_the_requests_timeout() -> None:
+    """All 256 SIDs quarantined (a silent peer): request and request_many give up after
+    their timeout with SlotTimeout, instead of waiting for the quarantines to end."""
+    async with (
+        udp_responder(lambda c: []) as peer,
+        session_for(peer, timeout=5.0, max_in_flight=64) as session,
+    ):
+        for _ in range(256):
+            with anyio.move_on_after(0.002):
+                await session.request(0x01, 0x01, read_params(0))
+        assert len(session._quarantine) + session.stats.in_flight == 256
+        for call in (
+            session.request(0x01, 0x01, read_params(1), timeout=0.2),
+            session.request_many([(0x01, 0x01, read_params(1))] * 3, timeout=0.2),
+        ):
+            start = monotonic()
+            with pytest.raises(SlotTimeout, match=r"no free SID for 0\.1\.0 within 0\.2 s"):
+                await call
+            assert 0.15 < monotonic() - start < 1.5

@@ -358,6 +358,7 @@ async def test_relay_error_from_the_relay_point_reaches_its_request() -> None:
         ("busy_retries", -1, "busy_retries -1 must not be negative"),
         ("busy_backoff", -0.1, "busy_backoff -0.1 must not be negative"),
         ("quarantine_factor", 0, "quarantine_factor 0 must be positive"),
+        ("min_quarantine", -1, "min_quarantine -1 must be 0 or more seconds"),
         ("reconnect_backoff", (1.0, 0.5), "reconnect_backoff (1.0, 0.5) must be (min, max)"),
         ("gct", 256, "GCT 256 out of range"),
     ],

@@ -34,7 +34,7 @@ from ..protocol.errors import (
 )
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
 from .response import Response, new_response
-from .slots import DestState, Pending
+from .slots import DestState, Pending, SlotTimeout, no_free_sid_message
 
 if TYPE_CHECKING:
     from .core import Session
@@ -118,6 +118,7 @@ class Batch:
         "results",
         "retries",
         "session",
+        "sid_waits",
         "state",
         "timeout",
         "window",
@@ -145,6 +146,8 @@ class Batch:
         self.next = 0  # the next command not yet sent
         self.held = 0  # slots of the destination this batch holds
         self.handles: set[asyncio.TimerHandle] = set()
+        #: Command index -> when it first found no free SID (it gives up after ``timeout``).
+        self.sid_waits: dict[int, float] = {}
         self.error: BaseException | None = None
         self.outbox: list[tuple[BatchPending, bytes]] = []
         self.flush_handle: asyncio.Handle | None = None
@@ -163,8 +166,14 @@ class Batch:
         if key in pending or key in session._quarantine:
             found = session._allocate_sid(state)
             if found is None:  # every SID in use: try again shortly, keeping the slot
+                since = self.sid_waits.setdefault(index, monotonic())
+                if monotonic() - since >= self.timeout:
+                    message = no_free_sid_message(state.address, self.timeout, session._quarantine)
+                    self.finish(SlotTimeout(message))
+                    return
                 self.later(_SID_WAIT, index, attempt, busy)
                 return
+            self.sid_waits.pop(index, None)
             key = found
         else:
             state.cursor = (key + 1) & 0xFF
@@ -314,7 +323,7 @@ class Batch:
             session = self.session
             p.done = True
             session._pending.pop(p.key, None)
-            session._quarantine[p.key] = monotonic() + session.quarantine_factor * self.timeout
+            session._quarantine[p.key] = session.quarantine_until(monotonic(), self.timeout)
             session.stats.cancelled += 1
 
     def cleanup(self) -> None:

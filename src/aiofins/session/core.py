@@ -50,6 +50,7 @@ from .slots import (
     Pending,
     SlotQueue,
     SlotTimeout,
+    no_free_sid_message,
 )
 
 #: Requests completed in a row without an event-loop pass before one is made to wait.
@@ -62,11 +63,13 @@ class Session:
     """Multiplexes FINS requests over one transport.
 
     Use as ``async with Session(transport, source=..., dest=...) as s: await s.request(...)``.
-    ``timeout`` is per attempt (waiting for a free slot and waiting for the reply are each
-    bounded by it). Reads (``idempotent=True``) are retried ``retries`` times after a timeout,
-    each time with a fresh SID; other requests only if the caller passes ``retries``.
-    End codes 2604/2605 (busy) are retried ``busy_retries`` times with a growing pause, as the
-    command was not executed.
+    ``timeout`` is per attempt (waiting for a free slot, for a free SID and for the reply are
+    each bounded by it). A SID given up on stays quarantined until its late reply comes, or
+    for ``max(quarantine_factor x timeout, min_quarantine)`` seconds. Reads
+    (``idempotent=True``) are retried ``retries`` times after a timeout, each time with a
+    fresh SID; other requests only if the caller passes ``retries``. End codes 2604/2605
+    (busy) are retried ``busy_retries`` times with a growing pause, as the command was not
+    executed.
     """
 
     def __init__(
@@ -82,6 +85,7 @@ class Session:
         busy_retries: int = 3,
         busy_backoff: float = 0.01,
         quarantine_factor: float = 2.0,
+        min_quarantine: float = 15.0,
         reconnect_backoff: tuple[float, float] = (0.05, 5.0),
     ) -> None:
         if not 0 <= gct <= 0xFF:
@@ -97,6 +101,8 @@ class Session:
             raise CommandError(f"busy_backoff {busy_backoff} must not be negative")
         if quarantine_factor <= 0:
             raise CommandError(f"quarantine_factor {quarantine_factor} must be positive")
+        if not 0 <= min_quarantine < math.inf:
+            raise CommandError(f"min_quarantine {min_quarantine} must be 0 or more seconds")
         low, high = reconnect_backoff
         if not 0 <= low <= high:
             raise CommandError(
@@ -111,6 +117,7 @@ class Session:
         self.busy_retries = busy_retries
         self.busy_backoff = busy_backoff
         self.quarantine_factor = quarantine_factor
+        self.min_quarantine = min_quarantine
         self.reconnect_backoff = reconnect_backoff
         limit = transport.max_in_flight
         self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
@@ -323,11 +330,17 @@ class Session:
             self._timer_at = deadline
             scope.deadline = anyio.current_time() + (deadline - monotonic())
 
+    def quarantine_until(self, now: float, timeout: float) -> float:
+        """When a SID given up on ``now`` (its request timed out or was cancelled) may be used
+        again, unless its late reply comes first: ``max(quarantine_factor x timeout,
+        min_quarantine)`` from now."""
+        return now + max(self.quarantine_factor * timeout, self.min_quarantine)
+
     def _expire(self, now: float) -> None:
         for p in self._deadlines.due(now):
             self._pending.pop(p.key, None)
             p.done = True
-            self._quarantine[p.key] = now + self.quarantine_factor * (p.deadline - p.sent_at)
+            self._quarantine[p.key] = self.quarantine_until(now, p.deadline - p.sent_at)
             self.stats.timeouts += 1
             p.fail(FinsTimeout("request timed out"))
 
@@ -468,7 +481,7 @@ class Session:
                         if not p.done:  # cancelled or failed to send: the reply may still come
                             p.done = True
                             pending.pop(key, None)
-                            self._quarantine[key] = monotonic() + self.quarantine_factor * timeout
+                            self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
                             self.stats.cancelled += 1
                         raise
                 finally:
@@ -552,10 +565,15 @@ class Session:
         )
 
     async def _wait_for_sid(self, state: DestState, timeout: float) -> int:
-        """A free SID; while all 256 are busy or quarantined, wait for the first release."""
+        """A free SID; while all 256 are busy or quarantined, wait for the first release, up
+        to ``timeout`` (then :class:`SlotTimeout`)."""
         key = self._allocate_sid(state)
+        give_up = monotonic() + timeout
         while key is None:
-            await anyio.sleep(min(_SID_WAIT, timeout))
+            left = give_up - monotonic()
+            if left <= 0:
+                raise SlotTimeout(no_free_sid_message(state.address, timeout, self._quarantine))
+            await anyio.sleep(min(_SID_WAIT, left))
             key = self._allocate_sid(state)
         return key
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from time import monotonic
+
 from .response import SessionStats
 from .slots import Pending
 
@@ -28,17 +30,28 @@ def match_relay_error(pending: dict[int, Pending], frame: bytes) -> Pending | No
     return fits[0] if len(fits) == 1 else None
 
 
+#: A SID whose late reply has come stays quarantined this much longer (at most): room for a
+#: duplicate of that reply, which must not reach the SID's next request either.
+LATE_REPLY_GRACE = 0.5
+
+
 def count_unmatched(
     stats: SessionStats,
     quarantine: dict[int, float],
     recent: dict[int, None],
     key: int,
 ) -> None:
-    """Count a reply no request waits for: late (timed out), duplicate, or unsolicited."""
+    """Count a reply no request waits for: late (timed out), duplicate, or unsolicited.
+
+    A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE`): the reply
+    the quarantine waited for has come.
+    """
     keys = (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF)
     for k in keys:
-        if k in quarantine:
+        until = quarantine.get(k)
+        if until is not None:
             stats.late_replies += 1
+            quarantine[k] = min(until, monotonic() + LATE_REPLY_GRACE)
             return
     for k in keys:
         if k in recent:

@@ -106,10 +106,20 @@ class EventPending(Pending):
 
 
 class SlotTimeout(FinsTimeout):
-    """No request slot became free in time (the destination's queue did not drain).
+    """No request slot (or no free SID) became free in time: the destination's queue did not
+    drain, or all 256 of its SIDs are in flight or quarantined.
 
     Not retried: a retry would only queue again behind the same requests.
     """
+
+
+def no_free_sid_message(dest: object, timeout: float, quarantine: dict[int, float]) -> str:
+    return (
+        f"no free SID for {dest} within {timeout} s: all 256 are in flight or quarantined "
+        f"({len(quarantine)} SIDs of this session wait for late replies to requests that timed "
+        "out or were cancelled; a SID is free again when its late reply arrives or its "
+        "quarantine ends)"
+    )
 
 
 class _Waiter:
