@@ -66,6 +66,8 @@ class _Entry:
     ready: anyio.Event = field(default_factory=anyio.Event)
     closing: anyio.Event = field(default_factory=anyio.Event)
     done: anyio.Event = field(default_factory=anyio.Event)
+    #: Cancels the connect while it is being made (the pool closes meanwhile).
+    connecting: anyio.CancelScope = field(default_factory=anyio.CancelScope)
 
 
 @dataclass
@@ -164,6 +166,7 @@ class Pool:
         self._failures: dict[str, tuple[float, float]] = {}  # key -> (retry_at, backoff)
         self._stats: dict[str, EndpointStats] = {}
         self._tg: TaskGroup | None = None
+        self._closed = False
         self._lock = anyio.Lock()
         self._now = anyio.current_time
 
@@ -187,12 +190,16 @@ class Pool:
         return await tg.__aexit__(exc_type, exc, tb)
 
     async def aclose(self) -> None:
-        """Close every session (in-flight calls fail with ``ConnectionLost``)."""
+        """Close every session (in-flight calls fail with ``ConnectionLost``; so do borrowers
+        waiting for a connection still being made, which is abandoned)."""
+        self._closed = True
         entries = [e for lst in self._entries.values() for e in lst]
         self._entries.clear()
         self._by_url.clear()
         for entry in entries:
             entry.closing.set()
+            if entry.client is None:
+                entry.connecting.cancel()
         with anyio.CancelScope(shield=True):
             for entry in entries:
                 await entry.done.wait()
@@ -240,7 +247,9 @@ class Pool:
 
     async def _acquire(self, url: str) -> _Entry:
         """The slow path of lending (:meth:`_ready_entry` found no session to lend)."""
-        if self._tg is None:
+        if self._tg is None or self._closed:
+            if self._closed:
+                raise ConnectionLost("the pool is closed")
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
         endpoint = parse_endpoint(url)
         key = endpoint.key
@@ -289,12 +298,15 @@ class Pool:
         if entry.src is not None:
             options["src"] = entry.src
         try:
-            async with connect(entry.url, **options) as client:
-                entry.client = client
-                entry.last_used = anyio.current_time()
-                self._failures.pop(entry.key, None)
-                entry.ready.set()
-                await entry.closing.wait()
+            with entry.connecting:  # cancelled only while the connection is being made
+                async with connect(entry.url, **options) as client:
+                    entry.client = client
+                    entry.last_used = anyio.current_time()
+                    self._failures.pop(entry.key, None)
+                    entry.ready.set()
+                    await entry.closing.wait()
+            if entry.client is None:  # the pool closed while connecting
+                entry.error = ConnectionLost(f"{entry.key}: the pool closed while connecting")
         except (OSError, FinsError) as exc:
             entry.error = exc
             self._stats[entry.key].connect_failures += 1

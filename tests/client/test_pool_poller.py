@@ -210,3 +210,46 @@ def test_add_group_checks_its_url_tags_and_timing_at_once() -> None:
     assert poller.groups == {}
     poller.add_group("g", "udp://127.0.0.1", {"x": "D0:float32"})
     assert list(poller.groups) == ["g"]
+
+
+async def test_closing_the_pool_abandons_a_connect_in_progress(anyio_backend: object) -> None:
+    """A FINS/TCP peer that accepts but never answers the handshake: closing the pool does not
+    wait out the connect timeout, and the waiting borrower gets ConnectionLost."""
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1")
+    port = listener.extra(anyio.abc.SocketAttribute.local_port)
+    url = f"tcp://127.0.0.1:{port}"
+    outcome: list[BaseException] = []
+
+    async def borrow(pool: Pool) -> None:
+        try:
+            async with pool.client(url):
+                pass
+        except Exception as exc:  # what the borrower gets (an AssertionError, it was)
+            outcome.append(exc)
+
+    async with listener, anyio.create_task_group() as tg:
+        tg.start_soon(listener.serve, lambda stream: anyio.sleep_forever())
+        with anyio.fail_after(3):  # the connect timeout is 5 s
+            async with Pool() as pool:
+                tg.start_soon(borrow, pool)
+                await anyio.wait_all_tasks_blocked()
+            with pytest.raises(ConnectionLost, match="the pool is closed"):
+                async with pool.client(url):
+                    pass
+            while not outcome:
+                await anyio.sleep(0.01)
+        tg.cancel_scope.cancel()
+    assert len(outcome) == 1 and isinstance(outcome[0], ConnectionLost), outcome
+    assert "the pool closed while connecting" in str(outcome[0])
+
+
+async def test_a_poller_outliving_its_pool_marks_scans_as_errors(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(timeout=0.5) as pool:
+        poller = Poller(pool)
+        group = poller.add_group("g", url, {"a": "D0"}, interval=1)
+        first = await poller.scan_once(group)
+        assert first is not None and first["a"].quality is Quality.GOOD
+    after = await poller.scan_once(group)  # the pool is closed: an error scan, not a crash
+    assert after is not None and after["a"].quality is Quality.STALE
+    assert after.error == "ConnectionLost: the pool is closed"
