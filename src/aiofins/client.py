@@ -313,9 +313,18 @@ class Client(CommandMethods):
         )
 
     async def read_tags(
-        self, tags: Mapping[str, str] | ReadPlan, *, timeout: float | None = None
+        self,
+        tags: Mapping[str, str] | ReadPlan,
+        *,
+        timeout: float | None = None,
+        errors: dict[str, str] | None = None,
     ) -> dict[str, Value]:
-        """Read a tag list (``{"temp": "D100:float32", "run": "CIO 0.01"}``) in few frames."""
+        """Read a tag list (``{"temp": "D100:float32", "run": "CIO 0.01"}``) in few frames.
+
+        A tag whose words are no value of its type (invalid BCD, a string not in its
+        encoding) raises :class:`DecodeError` naming it; given ``errors``, it is left out of
+        the result instead and ``errors[name]`` says why.
+        """
         if isinstance(tags, ReadPlan):
             plan = tags
             self._check_plan_fits(plan)
@@ -323,7 +332,7 @@ class Client(CommandMethods):
             plan = self.compile_tags(tags)
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
-            return plan.decode((await self._read_run(plan, 0, timeout),), ())
+            return plan.decode((await self._read_run(plan, 0, timeout),), (), errors)
         commands, multiple = self._scan_commands(plan)
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
         run_words = [self._run_words(plan, i, responses[i]) for i in range(n_runs)]
@@ -331,7 +340,7 @@ class Client(CommandMethods):
             [item.value for item in m.decode_response(response.data).items]
             for m, response in zip(multiple, responses[n_runs:], strict=True)
         ]
-        return plan.decode(run_words, multi)
+        return plan.decode(run_words, multi, errors)
 
     def _check_plan_fits(self, plan: ReadPlan) -> None:
         """Refuse a plan compiled for larger frames than this client's route carries."""

@@ -9,8 +9,9 @@ consumer is slower than the scans, groups wait for room (backpressure) and the s
 meanwhile are counted the same way.
 
 Every tag of a snapshot carries a quality: ``GOOD`` (read in this scan), ``STALE`` (this scan
-failed; the value is the last good one, with its timestamp) or ``ERROR`` (never read, or the
-tag's address is refused).
+failed, or the tag's words were no value of its type, such as invalid BCD; the value is the
+last good one, with its timestamp) or ``ERROR`` (the same with no good value yet, or the tag's
+address is refused).
 
 ::
 
@@ -200,12 +201,13 @@ class Poller:
         group.scans += 1
         error: str | None = None
         values: dict[str, Value] = {}
+        bad: dict[str, str] = {}  # tags whose words are no value of their type
         try:
             async with self.pool.client(group.url) as client:
                 plan = group.plan
                 if plan is None:
                     plan = group.plan = client.compile_tags(group.tags)
-                values = await client.read_tags(plan, timeout=group.timeout)
+                values = await client.read_tags(plan, timeout=group.timeout, errors=bad)
         except FinsError as exc:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
@@ -215,15 +217,16 @@ class Poller:
         last = group._last
         for name in group.tags:
             previous = last.get(name)
-            if error is None:
+            failed = error if error is not None or not bad else bad.get(name)
+            if failed is None:
                 value: Value | None = values[name]
                 reading = _reading(value, _GOOD, stamp, None)
             elif previous is not None and previous.value is not None:
                 value = previous.value
-                reading = _reading(value, _STALE, previous.timestamp, error)
+                reading = _reading(value, _STALE, previous.timestamp, failed)
             else:
                 value = None
-                reading = _reading(None, _ERROR, None, error)
+                reading = _reading(None, _ERROR, None, failed)
             # Changed unless (value, quality) equal the previous ones (as tuples compare).
             if (
                 previous is None

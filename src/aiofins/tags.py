@@ -132,8 +132,14 @@ class ReadPlan:
         self,
         run_words: Sequence[Sequence[int]],
         multiple_values: Sequence[Sequence[int]],
+        errors: dict[str, str] | None = None,
     ) -> dict[str, Value]:
-        """Values by tag name from each frame's results, in plan order."""
+        """Values by tag name from each frame's results, in plan order.
+
+        A tag whose words are not a value of its type (invalid BCD, a string not in its
+        encoding) raises :class:`DecodeError` naming it, or, given ``errors``, is left out and
+        ``errors[name]`` says why (the other tags are decoded all the same).
+        """
         if len(run_words) != len(self.runs) or len(multiple_values) != len(self.multiple):
             raise DecodeError("results do not match the plan's frames")
         for run, values in zip(self.runs, run_words, strict=True):
@@ -165,8 +171,17 @@ class ReadPlan:
             elif op is _FLAG:
                 out[name] = bool(flat[at] & 1)
             else:
-                out[name] = arg.decode([flat[i] for i in at])
+                try:  # BCD and strings: words that are no value of the type
+                    out[name] = arg.decode([flat[i] for i in at])
+                except DecodeError as exc:
+                    message = f"tag {name!r} ({self._text_of(name)}): {exc}"
+                    if errors is None:
+                        raise DecodeError(message) from None
+                    errors[name] = message
         return out
+
+    def _text_of(self, name: str) -> str:
+        return next((tag.text for tag in self.tags if tag.name == name), "?")
 
 
 # Decoding steps: (tag name, op, index or indices into the flat results, argument).

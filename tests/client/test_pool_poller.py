@@ -10,7 +10,7 @@ import pytest
 from aiofins.connection import connect
 from aiofins.poller import Poller, Quality
 from aiofins.pool import Pool
-from aiofins.protocol.errors import AddressError, CommandError, ConnectionLost
+from aiofins.protocol.errors import AddressError, CommandError, ConnectionLost, DecodeError
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
@@ -253,3 +253,37 @@ async def test_a_poller_outliving_its_pool_marks_scans_as_errors(sim: Simulator)
     after = await poller.scan_once(group)  # the pool is closed: an error scan, not a crash
     assert after is not None and after["a"].quality is Quality.STALE
     assert after.error == "ConnectionLost: the pool is closed"
+
+
+async def test_a_tag_holding_no_value_of_its_type_fails_alone(sim: Simulator) -> None:
+    """Invalid BCD in one tag failed every tag of the scan (and read_tags for all)."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    assert isinstance(sim.plc, VirtualPLC)
+    sim.plc.write("D0", [42])
+    sim.plc.write("D10", [0x1234])
+    tags = {"speed": "D0", "preset": "D10:bcd16", "name": "D20:string:2"}
+    async with Pool(timeout=0.5) as pool:
+        async with pool.client(url) as plc:
+            assert await plc.read_tags(tags) == {"speed": 42, "preset": 1234, "name": ""}
+            sim.plc.write("D10", [0x12AB])
+            with pytest.raises(DecodeError, match=r"tag 'preset' \(D10:bcd16\): 12AB is not"):
+                await plc.read_tags(tags)
+            errors: dict[str, str] = {}
+            assert await plc.read_tags(tags, errors=errors) == {"speed": 42, "name": ""}
+            assert list(errors) == ["preset"]
+        poller = Poller(pool)
+        group = poller.add_group("g", url, tags, interval=1)
+        sim.plc.write("D10", [0x0042])
+        first = await poller.scan_once(group)
+        assert first is not None and first["preset"].value == 42
+        sim.plc.write("D10", [0x12AB])
+        sim.plc.write("D20", [0xFF41])  # not ASCII
+        snap = await poller.scan_once(group)
+        assert snap is not None and snap.error is None
+        assert snap["speed"].quality is Quality.GOOD and snap["speed"].value == 42
+        assert snap["preset"].quality is Quality.STALE and snap["preset"].value == 42
+        assert (
+            snap["preset"].error is not None and "tag 'preset' (D10:bcd16)" in snap["preset"].error
+        )
+        assert snap["name"].quality is Quality.STALE and "tag 'name'" in str(snap["name"].error)
+        assert snap.changed == {"preset", "name"}
