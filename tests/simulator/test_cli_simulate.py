@@ -150,14 +150,26 @@ def test_build_plan_default_and_per_command() -> None:
     plan = build_plan(
         parse("--drop", "0.5", "--delay", "10-20", "--seed", "3", "--max-concurrent", "4")
     )
-    assert plan.rule == FaultRule(drop_request=0.5, delay=Delay(0.01, 0.02), late_after=10.0)
+    assert plan.rule == FaultRule(drop_request=0.5, delay=Delay(0.01, 0.02))
     assert plan.seed == 3
     assert plan.max_concurrent == 4
     assert plan.per_command == {}
     plan = build_plan(parse("--duplicate", "1", "--commands", "0101,0102", "--relay", "1.5"))
     assert plan.rule == FaultRule()
-    expected = FaultRule(duplicate=1.0, late_after=10.0, relay=(1, 5))
+    expected = FaultRule(duplicate=1.0, relay=(1, 5))
     assert plan.per_command == {0x0101: expected, 0x0102: expected}
+    plan = build_plan(parse("--late", "0.2", "--late-after", "500"))
+    assert plan.rule == FaultRule(late=0.2, late_after=0.5)
+
+
+def test_no_fault_option_means_the_fast_path() -> None:
+    """Without fault options the UDP server answers each datagram at once (no task each):
+    the rule simulate builds must equal 'no fault' (late_after was always set)."""
+    from aiofins.simulator.faults import Dispatcher
+    from aiofins.simulator.plc import VirtualPLC
+
+    assert Dispatcher(VirtualPLC(), build_plan(parse())).quiet
+    assert not Dispatcher(VirtualPLC(), build_plan(parse("--late", "0.1"))).quiet
 
 
 def test_a_broken_subcommand_module_fails_loudly(monkeypatch: pytest.MonkeyPatch) -> None:

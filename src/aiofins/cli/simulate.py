@@ -166,7 +166,8 @@ def build_plan(args: argparse.Namespace) -> FaultPlan:
         corrupt=args.corrupt,
         truncate=args.truncate,
         late=args.late,
-        late_after=args.late_after / 1000.0,
+        # only with --late: a rule equal to "no fault" lets the server answer at once
+        late_after=args.late_after / 1000.0 if args.late else 0.0,
         end_code=args.end_code,
         end_code_probability=args.end_code_probability,
         relay=args.relay,
