@@ -349,6 +349,41 @@ async def test_relay_error_from_the_relay_point_reaches_its_request() -> None:
         assert info.value.code == 0x0501
 
 
+@pytest.mark.anyio
+async def test_relay_errors_reach_their_requests_when_several_destinations_share_a_sid() -> None:
+    """Found by an audit: SIDs were counted per destination, so a read of the relay PLC
+    1.10.0 and a read routed through it to 3.5.0 both had SID 0. The relay error for 3.5.0
+    (from 1.10.0) went to the 1.10.0 read, whose own reply was then dropped as a duplicate;
+    two routed reads sharing a SID both timed out. A SID is now unique across destinations."""
+
+    def relay_plc(cmd: bytes) -> list[Reply]:
+        if cmd[3] == 1:  # for the relay PLC itself: an answer, a little later
+            return [(0.02, reply(cmd, 0, b"\x00\x2a"))]
+        frame = bytearray(reply(cmd, 0x8000 | 0x0205, trailer=bytes((1, 10))))
+        frame[6:9] = bytes((1, 10, 0))  # from the relay point 1.10.0
+        return [(0.0, bytes(frame))]
+
+    async with udp_responder(relay_plc) as peer, session_for(peer, timeout=1.0) as session:
+        outcome: dict[str, object] = {}
+
+        async def read(dest: FinsAddress) -> None:
+            try:
+                outcome[str(dest)] = (
+                    await session.request(0x01, 0x01, read_params(0), dest=dest)
+                ).data
+            except RelayError as exc:
+                outcome[str(dest)] = (exc.network, exc.node)
+
+        async with anyio.create_task_group() as tg:
+            for dest in (FinsAddress(1, 10, 0), FinsAddress(3, 5, 0), FinsAddress(4, 6, 0)):
+                tg.start_soon(read, dest)
+        assert outcome == {"1.10.0": b"\x00\x2a", "3.5.0": (1, 10), "4.6.0": (1, 10)}
+        sids = [frame[9] for frame in peer.received]
+        assert len(set(sids)) == 3
+        stats = session.stats
+        assert (stats.timeouts, stats.duplicates, stats.unsolicited) == (0, 0, 0)
+
+
 @pytest.mark.parametrize(
     ("option", "value", "message"),
     [

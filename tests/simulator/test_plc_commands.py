@@ -76,6 +76,10 @@ def test_other_network_gets_a_relay_error(plc: VirtualPLC) -> None:
     reply = plc.handle_frame(frame("0101", bytes.fromhex("82000000 0001"), dest=(3, 1, 0)))
     assert reply is not None
     assert reply[12:16] == bytes.fromhex("8501 0001")  # bit 15 + 0501, relay point net 0 node 1
+    assert reply[6:9] == bytes((0, 1, 0))  # from the relay point itself, not from network 3
+    relay = VirtualPLC(network=1, node=10)
+    reply = relay.handle_frame(frame("0101", bytes.fromhex("82000000 0001"), dest=(3, 5, 0)))
+    assert reply is not None and reply[6:9] == bytes((1, 10, 0)) and reply[14:16] == b"\x01\x0a"
     dropping = VirtualPLC(relay_error=None)
     assert dropping.handle_frame(frame("0601", dest=(3, 1, 0))) is None
 

@@ -163,7 +163,11 @@ class Batch:
         state = self.state
         pending = session._pending
         key = state.base | state.cursor
-        if key in pending or key in session._quarantine:
+        if (
+            key in pending
+            or key in session._quarantine
+            or (session._routed and session._sid_taken(key))
+        ):
             found = session._allocate_sid(state)
             if found is None:  # every SID in use: try again shortly, keeping the slot
                 since = self.sid_waits.setdefault(index, monotonic())

@@ -125,6 +125,9 @@ class Session:
         self._shared_slots = limit == 1
         self._pending: dict[int, Pending] = {}
         self._quarantine: dict[int, float] = {}
+        #: Requests go to more than one destination: a SID is then kept unique across them,
+        #: as a relay error (from the relay point, not the destination) is matched by SID.
+        self._routed = False
         self._recent: dict[int, None] = {}
         self._dests: dict[FinsAddress, DestState] = {}
         self._slots: dict[Any, SlotQueue] = {}
@@ -356,6 +359,7 @@ class Session:
             else:
                 slots = self._slots[dest] = SlotQueue(self.max_in_flight)
             state = self._dests[dest] = DestState(dest, self._prefix(dest), slots)
+            self._routed = len(self._dests) > 1
         self._last_dest, self._last_state = dest, state
         return state
 
@@ -366,6 +370,11 @@ class Session:
             (0x80, 0, self.gct, dest.network, dest.node, dest.unit, s.network, s.node, s.unit)
         )
 
+    def _sid_taken(self, key: int) -> bool:
+        """Whether ``key``'s SID is in flight to another destination."""
+        sid = key & 0xFF
+        return any(k & 0xFF == sid for k in self._pending)
+
     def _allocate_sid(self, state: DestState) -> int | None:
         pending, quarantine = self._pending, self._quarantine
         base, sid = state.base, state.cursor
@@ -373,7 +382,7 @@ class Session:
         for _ in range(256):
             key = base | sid
             sid = (sid + 1) & 0xFF
-            if key in pending:
+            if key in pending or (self._routed and self._sid_taken(key)):
                 continue
             if quarantine:
                 until = quarantine.get(key)
@@ -431,7 +440,11 @@ class Session:
                 try:
                     pending = self._pending
                     key = state.base | state.cursor
-                    if key in pending or key in self._quarantine:
+                    if (
+                        key in pending
+                        or key in self._quarantine
+                        or (self._routed and self._sid_taken(key))
+                    ):
                         key = await self._wait_for_sid(state, timeout)
                     else:
                         state.cursor = (key + 1) & 0xFF

@@ -336,7 +336,12 @@ class VirtualPLC:
         self, command: CommandFrame, end_code: int, data: bytes, relay: bool = False
     ) -> ResponseFrame:
         h = command.header
-        me = FinsAddress(h.destination.network, self.address.node, h.destination.unit)
+        # A relay error comes from the relaying unit itself (its own network, node and unit).
+        me = (
+            self.address
+            if relay
+            else FinsAddress(h.destination.network, self.address.node, h.destination.unit)
+        )
         reply = Header(h.source, me, sid=h.sid, icf=0xC0, rsv=h.rsv, gct=h.gct)
         if not relay:
             if self.fatal_errors:
