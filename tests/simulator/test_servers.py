@@ -7,6 +7,7 @@ import random
 import re
 import shutil
 import subprocess
+import sys
 from collections.abc import AsyncIterator, Iterator
 
 import anyio
@@ -15,6 +16,7 @@ from anyio.abc import SocketStream
 from anyio.streams.buffered import BufferedByteReceiveStream
 
 from aiofins.simulator import FaultPlan, FaultRule, Simulator, VirtualPLC, run_simulator
+from aiofins.simulator import tcp as tcp_server
 
 pytestmark = pytest.mark.anyio
 
@@ -224,6 +226,86 @@ async def test_tcp_max_connections() -> None:
             async with b.stream:
                 assert reply_b == node_response(0, 10, 0x20)
                 assert await b.closed_by_server()
+
+
+async def test_tcp_connection_without_handshake_is_closed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A connection that never sends the handshake held a descriptor forever (enough of
+    them and accept() failed)."""
+    monkeypatch.setattr(tcp_server, "HANDSHAKE_TIMEOUT", 0.1)
+    async with run_simulator(make_plc(), tcp=("127.0.0.1", 0)) as sim:
+        peer = await connect(sim.tcp_port)
+        async with peer.stream:
+            assert await peer.closed_by_server()
+        assert sim.tcp is not None and sim.tcp.handshake_timeouts == 1
+        ok, reply = await handshake(sim.tcp_port)  # a client that does shake hands stays
+        async with ok.stream:
+            assert reply == node_response(239, 10)
+            await anyio.sleep(0.3)
+            await ok.stream.send(tcp_frame(READ_D100))
+            assert (await ok.read_message())[16:18] == b"\xc0\x00"  # the FINS reply
+        assert sim.tcp.handshake_timeouts == 1
+
+
+async def test_tcp_accept_failure_does_not_stop_the_simulator(tmp_path: object) -> None:
+    """Out of file descriptors (EMFILE), accept() failed and the whole simulator (UDP
+    included) exited. In a process with a low descriptor limit: fill it, then it must
+    still answer over UDP and, once descriptors are free, over TCP."""
+    script = (
+        "import resource, sys; resource.setrlimit(resource.RLIMIT_NOFILE, (48, 48)); "
+        "from aiofins.cli import main; sys.exit(main(sys.argv[1:]))"
+    )
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            script,
+            "simulate",
+            "--udp",
+            "127.0.0.1:0",
+            "--tcp",
+            "127.0.0.1:0",
+            "--node",
+            "10",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        urls = {}
+        for line in proc.stdout:
+            if line.startswith("listening on "):
+                url = line.split()[-1]
+                urls[url[:3]] = int(url.rsplit(":", 1)[1])
+            if len(urls) == 2:
+                break
+        streams = []
+        for _ in range(60):  # more than the process has descriptors for
+            streams.append(await anyio.connect_tcp("127.0.0.1", urls["tcp"]))
+        await anyio.sleep(0.3)  # the simulator's accepts fail meanwhile
+        for stream in streams:
+            await stream.aclose()
+        assert proc.poll() is None  # still running
+        async with await anyio.create_connected_udp_socket("127.0.0.1", urls["udp"]) as udp:
+            await udp.send(READ_D100)
+            with anyio.fail_after(5):
+                assert (await udp.receive())[:2] == b"\xc0\x00"
+        with anyio.fail_after(10):
+            while True:  # TCP comes back as the closed connections free descriptors
+                try:
+                    ok, reply = await handshake(urls["tcp"])
+                    break
+                except (OSError, anyio.EndOfStream, anyio.BrokenResourceError):
+                    await anyio.sleep(0.1)
+        async with ok.stream:
+            assert reply == node_response(239, 10)
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=10)
+    assert "Traceback" not in err and "tcp_accept_errors=" in err, err
 
 
 async def test_tcp_split_and_merged_frames(sim: Simulator) -> None:

@@ -268,5 +268,8 @@ async def _wait_for_signal() -> None:
 
 def _report(sim: Simulator) -> None:
     counts = sim.counters.as_dict()
+    if sim.tcp is not None:
+        counts["tcp_accept_errors"] = sim.tcp.accept_errors
+        counts["tcp_handshake_timeouts"] = sim.tcp.handshake_timeouts
     text = " ".join(f"{k}={v}" for k, v in counts.items() if v)
     print(f"stopped: {text or 'no frames'}", file=sys.stderr, flush=True)

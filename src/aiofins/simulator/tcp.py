@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import anyio
-from anyio.abc import SocketAttribute, SocketStream, TaskGroup, TaskStatus
+from anyio.abc import SocketAttribute, SocketListener, SocketStream, TaskGroup, TaskStatus
 
 from ..protocol.errors import FinsTcpError
 from ..protocol.tcp import (
@@ -44,6 +44,8 @@ from .faults import Dispatcher
 DEFAULT_NODE_POOL = tuple(range(239, 255))
 #: FINS/TCP connections per Ethernet Unit (W421).
 DEFAULT_MAX_CONNECTIONS = 16
+#: A connection that has not completed the FINS/TCP handshake by then is closed.
+HANDSHAKE_TIMEOUT = 10.0
 _SA1 = 7
 _logger = logging.getLogger(__name__)
 
@@ -87,6 +89,10 @@ class TcpServer:
         self.max_connections = max_connections
         #: FINS frames whose SA1 was not the connection's node (rewritten).
         self.source_node_rewrites = 0
+        #: accept() failures (e.g. no file descriptors left): the listener goes on.
+        self.accept_errors = 0
+        #: Connections closed for not completing the handshake within HANDSHAKE_TIMEOUT.
+        self.handshake_timeouts = 0
         self._open: set[_Connection] = set()
         self._nodes: dict[int, _Connection] = {}
 
@@ -103,7 +109,23 @@ class TcpServer:
         async with listener, anyio.create_task_group() as tg:
             self.port = int(listener.extra(SocketAttribute.local_port))
             task_status.started(self.port)
-            await listener.serve(self._connection, task_group=tg)
+            for one in listener.listeners:  # one per address family of the host
+                assert isinstance(one, SocketListener)
+                tg.start_soon(self._accept, one, tg)
+
+    async def _accept(self, listener: SocketListener, tg: TaskGroup) -> None:
+        while True:
+            try:
+                stream = await listener.accept()
+            except anyio.ClosedResourceError:
+                return
+            except (OSError, anyio.BrokenResourceError) as exc:
+                # e.g. EMFILE: one failed accept must not take the simulator down
+                self.accept_errors += 1
+                _logger.warning("FINS/TCP accept failed: %s", exc)
+                await anyio.sleep(0.05)
+                continue
+            tg.start_soon(self._connection, stream)
 
     async def _connection(self, stream: SocketStream) -> None:
         address = stream.extra(SocketAttribute.remote_address)
@@ -112,6 +134,7 @@ class TcpServer:
         self._open.add(conn)
         try:
             async with stream, anyio.create_task_group() as tg:
+                tg.start_soon(self._handshake_deadline, conn, tg.cancel_scope)
                 await self._run(conn, tg)
                 tg.cancel_scope.cancel()
         except Exception:
@@ -121,6 +144,13 @@ class TcpServer:
             self._open.discard(conn)
             if conn.node is not None and self._nodes.get(conn.node) is conn:
                 del self._nodes[conn.node]
+
+    async def _handshake_deadline(self, conn: _Connection, scope: anyio.CancelScope) -> None:
+        """Close a connection that holds a descriptor without ever completing the handshake."""
+        await anyio.sleep(HANDSHAKE_TIMEOUT)
+        if conn.node is None:
+            self.handshake_timeouts += 1
+            scope.cancel()
 
     async def _run(self, conn: _Connection, tg: TaskGroup) -> None:
         """Read messages until the peer closes or breaks the protocol."""
