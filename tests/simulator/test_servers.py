@@ -226,6 +226,7 @@ async def test_tcp_max_connections() -> None:
             async with b.stream:
                 assert reply_b == node_response(0, 10, 0x20)
                 assert await b.closed_by_server()
+        assert sim.tcp is not None and sim.tcp.handshake_refusals == 1
 
 
 async def test_tcp_connection_without_handshake_is_closed(
@@ -352,6 +353,7 @@ async def test_tcp_bad_envelope_gets_error_notification(
             "46494E53 00000008 00000003"
         ) + error.to_bytes(4, "big")
         assert await peer.closed_by_server()
+    assert sim.tcp is not None and sim.tcp.error_notifications == 1
 
 
 async def test_tcp_second_handshake_gets_command_3(sim: Simulator) -> None:

@@ -271,5 +271,9 @@ def _report(sim: Simulator) -> None:
     if sim.tcp is not None:
         counts["tcp_accept_errors"] = sim.tcp.accept_errors
         counts["tcp_handshake_timeouts"] = sim.tcp.handshake_timeouts
+        counts["tcp_handshake_refusals"] = sim.tcp.handshake_refusals
+        counts["tcp_error_notifications"] = sim.tcp.error_notifications
+    if sim.serial is not None:
+        counts["serial_ignored_lines"] = sim.serial.ignored_lines
     text = " ".join(f"{k}={v}" for k, v in counts.items() if v)
     print(f"stopped: {text or 'no frames'}", file=sys.stderr, flush=True)

@@ -93,6 +93,10 @@ class TcpServer:
         self.accept_errors = 0
         #: Connections closed for not completing the handshake within HANDSHAKE_TIMEOUT.
         self.handshake_timeouts = 0
+        #: Error notifications sent (command 3: bad magic or length, unexpected command).
+        self.error_notifications = 0
+        #: Handshakes refused (node in use, none free, out of range, all connections in use...).
+        self.handshake_refusals = 0
         self._open: set[_Connection] = set()
         self._nodes: dict[int, _Connection] = {}
 
@@ -145,6 +149,10 @@ class TcpServer:
             if conn.node is not None and self._nodes.get(conn.node) is conn:
                 del self._nodes[conn.node]
 
+    async def _notify_error(self, conn: _Connection, code: int) -> None:
+        self.error_notifications += 1
+        await conn.send(encode_error_notification(code))
+
     async def _handshake_deadline(self, conn: _Connection, scope: anyio.CancelScope) -> None:
         """Close a connection that holds a descriptor without ever completing the handshake."""
         await anyio.sleep(HANDSHAKE_TIMEOUT)
@@ -161,7 +169,7 @@ class TcpServer:
                 try:
                     messages = decoder.feed(chunk)
                 except FinsTcpError as exc:
-                    await conn.send(encode_error_notification(exc.tcp_error_code))
+                    await self._notify_error(conn, exc.tcp_error_code)
                     return
                 for message in messages:
                     if not await self._message(conn, message, over_limit, tg):
@@ -175,11 +183,11 @@ class TcpServer:
         """Handle one message; ``False`` closes the connection."""
         if conn.node is None:
             if message.command != TcpCommand.NODE_ADDRESS_REQUEST or len(message.payload) != 4:
-                await conn.send(encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED))
+                await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
                 return False
             return await self._handshake(conn, parse_node_request(message), over_limit)
         if message.command != TcpCommand.FRAME:
-            await conn.send(encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED))
+            await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
             return False
         frame = message.payload
         if len(frame) > _SA1 and frame[_SA1] != conn.node:
@@ -224,6 +232,7 @@ class TcpServer:
                     await holder.send(encode_message(TcpCommand.CONNECTION_CONFIRMATION))
         await conn.send(encode_node_response(node, self.server_node, error))
         if error:
+            self.handshake_refusals += 1
             return False
         conn.node = node
         self._nodes[node] = conn
