@@ -131,12 +131,20 @@ def check_parameter_backup(backup: dict[int, tuple[int, ...]]) -> None:
 async def restore_parameters(
     client: Client, backup: dict[int, tuple[int, ...]], progress: Progress | None = None
 ) -> None:
-    """Write parameter areas back (0202, 498 words a frame).
+    """Write parameter areas back (0202, 498 words a frame); the PLC must be in PROGRAM mode.
 
-    The whole backup is checked first (:func:`check_parameter_backup`), so a bad area never
-    leaves the PLC with the areas before it restored and the rest not.
+    The whole backup is checked first (:func:`check_parameter_backup`), and so is the mode
+    (the I/O table and some PLC Setup words are written in PROGRAM mode only, manual 5-3-8),
+    so a bad area or a wrong mode never leaves the PLC with some areas restored and the rest
+    not.
     """
     check_parameter_backup(backup)
+    status = await client.cpu_unit_status_read()
+    if status.mode != CpuMode.PROGRAM:
+        raise CommandError(
+            f"the PLC is in {status.mode.name} mode; restoring parameter areas needs PROGRAM "
+            "mode (send STOP first: client.stop())"
+        )
     total = sum(len(w) for w in backup.values())
     done = 0
     for area, words in backup.items():

@@ -76,6 +76,11 @@ async def test_a_bad_area_in_a_parameter_backup_writes_nothing(url: str) -> None
             with pytest.raises(CommandError, match=re.escape(said)):
                 await restore_parameters(plc, {0x8010: good, **bad})
         assert await backup_parameters(plc) == before
+        # Not in PROGRAM mode: nothing written (the I/O table would be refused half-way).
+        await plc.run()
+        with pytest.raises(CommandError, match="restoring parameter areas needs PROGRAM mode"):
+            await restore_parameters(plc, {0x8010: good, 0x8012: before[0x8012]})
+        assert await backup_parameters(plc) == before
 
 
 @pytest.mark.parametrize("networks", [(), (NetworkType.SYSMAC_LINK,)])
