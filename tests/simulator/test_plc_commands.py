@@ -312,6 +312,21 @@ def test_error_clear_modes(plc: VirtualPLC) -> None:
     assert call(plc, "2101", "4105") == (0, b"")
 
 
+def test_the_most_serious_error_is_reported_and_cleared_first(plc: VirtualPLC) -> None:
+    """0601 reports "the most serious" error and FFFE clears "the highest priority" one
+    (5-3-17, 5-3-27): the fatal one, whatever order they were raised in."""
+    plc.raise_error(0x00F7)  # battery error: non-fatal, raised first
+    plc.raise_error(0x80F1)  # memory error: fatal
+    assert call(plc, "0601")[1][8:10] == b"\x80\xf1"  # the error code
+    plc.mode = Mode.RUN
+    assert call(plc, "2101", "FFFE")[0] == 0x2206 | 0x00C0  # the fatal one: PROGRAM mode only
+    assert plc.current_errors == [0x00F7, 0x80F1]
+    plc.mode = Mode.PROGRAM
+    assert call(plc, "2101", "FFFE")[0] == 0x0040  # the battery error is still there
+    assert plc.current_errors == [0x00F7]
+    assert call(plc, "0601")[1][8:10] == b"\x00\xf7"
+
+
 # ---- file memory ---------------------------------------------------------------------------
 
 NAME = b"DATA    .BIN"

@@ -280,6 +280,15 @@ class VirtualPLC:
         self.log_error(code)
         self.refresh_error_state()
 
+    def most_serious_error(self) -> int | None:
+        """The current error 0601 reports and 2101 FFFE clears ("the most serious", manual
+        5-3-17; "the highest priority error", 5-3-27): fatal before non-fatal, then the
+        earliest raised."""
+        errors = self.current_errors
+        if not errors:
+            return None
+        return min(errors, key=lambda code: (not error_bit(code)[0], errors.index(code)))
+
     def refresh_error_state(self) -> None:
         """Recompute the 0601 error words and error code from the current errors."""
         self.fatal_errors = self.non_fatal_errors = 0
@@ -289,7 +298,7 @@ class VirtualPLC:
                 self.fatal_errors |= bit
             else:
                 self.non_fatal_errors |= bit
-        self.error_code = self.current_errors[0] if self.current_errors else 0
+        self.error_code = self.most_serious_error() or 0
         if not self.current_errors:
             self.error_message = ""
 

@@ -50,7 +50,8 @@ MAX_RESPONSE_DATA = 1998
 
 def error_clear(plc: VirtualPLC, call: Call) -> bytes:
     code = request_of(call, ErrorClear).error_code
-    target = plc.current_errors[0] if code == CLEAR_CURRENT_ERROR and plc.current_errors else code
+    serious = plc.most_serious_error()
+    target = serious if code == CLEAR_CURRENT_ERROR and serious is not None else code
     if (code in _PROGRAM_ONLY or target in _PROGRAM_ONLY) and plc.mode is not Mode.PROGRAM:
         raise CommandFailed(MODE_END_CODES[plc.mode], message="clearable in PROGRAM mode only")
     if code == CLEAR_ALL_ERRORS:
