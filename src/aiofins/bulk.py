@@ -24,7 +24,7 @@ from .protocol.commands.file import (
 )
 from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
 from .protocol.commands.status import CpuMode
-from .protocol.errors import CommandError, DecodeError
+from .protocol.errors import CommandError, DecodeError, EndCodeError
 from .protocol.files import Disk, FileEntry, FileWriteMode
 
 Progress = Callable[[int, "int | None"], None]
@@ -158,6 +158,9 @@ async def restore_parameters(
 
 # -- file memory ---------------------------------------------------------------------------
 
+#: End code of a file that does not exist (manual 5-1-3: "File missing").
+FILE_NOT_FOUND = 0x2006
+
 
 async def list_files(client: Client, disk: Disk, directory: str = "") -> list[FileEntry]:
     """Every file entry of a directory (2201, 20 names a frame)."""
@@ -197,11 +200,30 @@ async def upload_file(
     *,
     overwrite: bool = True,
 ) -> None:
-    """Write a whole file (2203: a new file, then appends), replacing it if ``overwrite``."""
+    """Write a whole file (2203: a new file, then appends), replacing it if ``overwrite``.
+
+    The disk's free space is checked first (2201; with ``overwrite``, plus the old file's
+    size, 2202): the first frame replaces the old file, so running out of space half-way
+    would leave a truncated file under its name and the old contents gone.
+    """
     room = client.limits.max_parameter_bytes - FILE_WRITE_OVERHEAD - len(directory)
     limit = min(MAX_FILE_WRITE - len(directory), room)
     if limit < 1:
         raise CommandError(f"directory {directory!r} leaves no room for file data")
+    free = (await client.file_name_read(disk, 0, 1, directory)).disk_data.unused_capacity
+    old = 0
+    if overwrite:
+        try:
+            old = (await client.single_file_read(disk, name, 0, 0, directory)).file_capacity
+        except EndCodeError as exc:
+            if exc.end_code.code != FILE_NOT_FOUND:
+                raise
+    if len(data) > free + old:
+        raise CommandError(
+            f"{name}: {len(data)} bytes do not fit: the disk has {free} bytes free"
+            + (f" and the old file frees {old}" if old else "")
+            + "; nothing written"
+        )
     first_mode = FileWriteMode.NEW_OVERWRITE if overwrite else FileWriteMode.NEW
     offset = 0
     while True:

@@ -109,3 +109,18 @@ def test_program_images_that_are_not_programs_are_refused() -> None:
     ):
         with pytest.raises(CommandError, match=said):
             check_program_image(image)
+
+
+async def test_an_upload_that_does_not_fit_leaves_the_old_file(url: str) -> None:
+    """The first frame replaces the old file: running out of space half-way left a truncated
+    file of zeros under its name (1104 at the 60th frame). The space is checked first."""
+    async with connect(url, timeout=2) as plc:
+        disk = Disk.EM_FILE_MEMORY
+        await upload_file(plc, disk, "CFG.BIN", b"good old contents")
+        free = (await plc.file_name_read(disk, 0, 1)).disk_data.unused_capacity
+        await upload_file(plc, disk, "FILL.BIN", bytes(free - 1000))
+        with pytest.raises(CommandError, match=r"CFG\.BIN: 2017 bytes do not fit: .* nothing"):
+            await upload_file(plc, disk, "CFG.BIN", bytes(2017))
+        assert await download_file(plc, disk, "CFG.BIN") == b"good old contents"
+        await upload_file(plc, disk, "CFG.BIN", bytes(1000))  # fits with the old file's room
+        assert await download_file(plc, disk, "CFG.BIN") == bytes(1000)
