@@ -159,6 +159,12 @@ def test_program_area_write_read_with_last_flag(plc: VirtualPLC) -> None:
         bytes.fromhex("FFFF 00000008 8004 090A0B0C"),
     )
     assert call(plc, "0306", "FFFF 00000002 0004")[0] == 0x1102  # not a multiple of 4
+    # A shorter program written over it: nothing of the old one's tail comes back.
+    assert call(plc, "0307", "FFFF 00000000 8004 0D0E0F10")[0] == 0
+    assert call(plc, "0306", "FFFF 00000000 000C") == (
+        0,
+        bytes.fromhex("FFFF 00000000 800C 0D0E0F10 00000000 00000000"),
+    )
     assert call(plc, "0308", "FFFF 00") == (0, b"")
     assert call(plc, "0306", "FFFF 00000000 0004") == (
         0,

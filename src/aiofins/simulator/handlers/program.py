@@ -53,7 +53,9 @@ def program_area_write(plc: VirtualPLC, call: Call) -> bytes:
     _check_block(plc, begin, len(data))
     plc.program[begin : begin + len(data)] = data
     if req.last:
-        plc.program_length = begin + len(data)
+        end = begin + len(data)
+        plc.program_length = end
+        plc.program[end:] = bytes(len(plc.program) - end)  # nothing of a longer old program
     else:
         plc.program_length = max(plc.program_length, begin + len(data))
     return ProgramAreaWriteResult(begin, len(data), req.last).encode()
