@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import anyio
 import pytest
-from anyio.abc import SocketAttribute, SocketStream
+from anyio.abc import SocketAttribute, SocketStream, TaskStatus
 
 from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
 from aiofins.protocol.header import FinsAddress
@@ -40,12 +40,15 @@ class TcpPeer:
     connections: int = 0
     error_notification: int = 0  # answer the next frame with command 3 instead
     serving: anyio.CancelScope | None = None
+    served: anyio.Event | None = None  # set once the accept loop has ended
     listener: anyio.abc.Listener[anyio.abc.SocketStream] | None = None
 
     async def stop(self) -> None:
         """The PLC goes away: stop listening, drop every connection."""
         if self.serving is not None:
             self.serving.cancel()
+            if self.served is not None:  # before the listener closes under its accept()
+                await self.served.wait()
         for stream in self.streams:
             await stream.aclose()
         if self.listener is not None:
@@ -100,8 +103,19 @@ async def tcp_server(peer: TcpPeer) -> AsyncIterator[TcpPeer]:
     peer.port = listener.extra(SocketAttribute.local_port)
     peer.listener = listener
     async with anyio.create_task_group() as tg:
-        peer.serving = tg.cancel_scope
-        tg.start_soon(listener.serve, peer.handle, tg)
+        # Its own scope: peer.stop() must not cancel the test's body (it once did, silently
+        # skipping the rest of the test).
+        serving = peer.serving = anyio.CancelScope()
+        served = peer.served = anyio.Event()
+
+        async def serve() -> None:
+            try:
+                with serving:
+                    await listener.serve(peer.handle, tg)
+            finally:
+                served.set()
+
+        tg.start_soon(serve)
         yield peer
         tg.cancel_scope.cancel()
     await peer.stop()
@@ -201,6 +215,56 @@ async def test_server_restart_mid_flight_then_next_call_reconnects() -> None:
                 assert session.source.node == 0x33
                 assert session.stats.connects == 2
                 assert session.stats.disconnects == 1 and session.stats.connect_failures == 0
+
+
+async def test_calls_fail_fast_during_the_reconnect_backoff() -> None:
+    """A call used to sleep out the reconnect backoff (doubling to 5 s) before trying,
+    whatever its timeout: a poller's scans stalled through an outage. Now a call in the
+    backoff fails at once, and the first call after it tries again."""
+    from aiofins.simulator import VirtualPLC, run_simulator
+
+    async def plc(
+        port: int, stop: anyio.Event, *, task_status: TaskStatus[int] = anyio.TASK_STATUS_IGNORED
+    ) -> None:
+        async with run_simulator(VirtualPLC(), tcp=("127.0.0.1", port)) as sim:
+            task_status.started(sim.tcp_port)
+            await stop.wait()
+
+    async with anyio.create_task_group() as tg:
+        stop = anyio.Event()
+        port = await tg.start(plc, 0, stop)
+        session = Session(
+            TcpTransport("127.0.0.1", port, connect_timeout=2),
+            source=FinsAddress(0, 0, 0),
+            dest=FinsAddress(0, 1, 0),
+            timeout=0.3,
+            reconnect_backoff=(0.3, 1.0),
+        )
+        async with session:
+            await session.request(0x01, 0x01, read_params(0))
+            stop.set()  # the PLC goes away
+            with anyio.fail_after(5):
+                while session.stats.disconnects == 0:
+                    await anyio.sleep(0.01)
+            with pytest.raises(ConnectionLost, match="cannot connect"):
+                await session.request(0x01, 0x01, read_params(0))  # refused: backoff 0.3 s
+            start = anyio.current_time()
+            for _ in range(3):
+                with pytest.raises(ConnectionLost, match=r"the next one in 0\.[0-3]\d s"):
+                    await session.request(0x01, 0x01, read_params(0))
+            assert anyio.current_time() - start < 0.2  # no sleeping through the backoff
+            assert session.stats.connect_failures == 1  # and no attempts meanwhile
+            await tg.start(plc, port, anyio.Event())  # the PLC is back
+            with anyio.fail_after(5):
+                while True:
+                    try:
+                        r = await session.request(0x01, 0x01, read_params(3))
+                        break
+                    except ConnectionLost:
+                        await anyio.sleep(0.05)
+            assert r.data == b"\x00\x00"
+            assert session.stats.connect_failures == 1 and session.stats.connects == 2
+        tg.cancel_scope.cancel()
 
 
 async def test_connect_refused_raises_connection_lost() -> None:

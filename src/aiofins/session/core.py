@@ -144,6 +144,7 @@ class Session:
         self._closed = False
         self._open_lock: anyio.Lock | None = None
         self._backoff = 0.0
+        self._retry_at = 0.0  # no connection attempt before this (monotonic) time
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
         self.stats = SessionStats(self._pending)
@@ -212,14 +213,19 @@ class Session:
         async with self._open_lock:
             if self.transport.is_open:
                 return
-            if self._backoff:
-                await anyio.sleep(self._backoff)
+            wait = self._retry_at - monotonic()
+            if wait > 0:  # fail fast: no call waits out the backoff beyond its own timeout
+                raise ConnectionLost(
+                    f"cannot connect to {self.transport.description}: the last attempt failed; "
+                    f"the next one in {wait:.2f} s (reconnect backoff)"
+                )
             try:
                 await self.transport.open(self, self._background)
             except (OSError, FinsError) as exc:
                 self.stats.connect_failures += 1
                 low, high = self.reconnect_backoff
                 self._backoff = min(high, max(low, self._backoff * 2))
+                self._retry_at = monotonic() + self._backoff
                 if isinstance(exc, FinsError):
                     raise
                 raise ConnectionLost(
