@@ -217,7 +217,7 @@ class Poller:
         last = group._last
         for name in group.tags:
             previous = last.get(name)
-            failed = error if error is not None or not bad else bad.get(name)
+            failed = error if error is not None else bad.get(name)
             if failed is None:
                 value: Value | None = values[name]
                 reading = _reading(value, _GOOD, stamp, None)

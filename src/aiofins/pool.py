@@ -41,6 +41,7 @@ from .connection import check_options, connect, default_addresses
 from .endpoint import parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError
 from .protocol.header import FinsAddress
+from .session import SessionStats
 from .transport.base import is_asyncio
 
 
@@ -105,6 +106,11 @@ _SUMMED = (
     "connect_failures",
     "disconnects",
 )
+
+
+def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
+    for name in _SUMMED:
+        setattr(into, name, getattr(into, name) + getattr(stats, name))
 
 
 def _users(entry: _Entry) -> int:
@@ -223,8 +229,7 @@ class Pool:
                 agg.sessions += 1
                 agg.in_use += entry.users
                 agg.in_flight += s.in_flight
-                for name in _SUMMED:
-                    setattr(agg, name, getattr(agg, name) + getattr(s, name))
+                _add_counters(agg, s)
                 agg.latency_mean = max(agg.latency_mean, s.latency_mean)
                 agg.latency_p99 = max(agg.latency_p99, s.latency_p99)
             out[key] = agg
@@ -247,9 +252,9 @@ class Pool:
 
     async def _acquire(self, url: str) -> _Entry:
         """The slow path of lending (:meth:`_ready_entry` found no session to lend)."""
-        if self._tg is None or self._closed:
-            if self._closed:
-                raise ConnectionLost("the pool is closed")
+        if self._closed:
+            raise ConnectionLost("the pool is closed")
+        if self._tg is None:
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
         endpoint = parse_endpoint(url)
         key = endpoint.key
@@ -321,9 +326,7 @@ class Pool:
             if lst and entry in lst:
                 lst.remove(entry)
             if entry.client is not None:  # its counters stay with the endpoint
-                kept, s = self._stats[entry.key], entry.client.session.stats
-                for name in _SUMMED:
-                    setattr(kept, name, getattr(kept, name) + getattr(s, name))
+                _add_counters(self._stats[entry.key], entry.client.session.stats)
 
     # -- maintenance ----------------------------------------------------------------------
 

@@ -18,7 +18,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from .. import __version__
-from ..protocol.errors import FinsError
+from ..protocol.errors import FinsError, leaf_errors
 
 #: Subcommand modules (relative to this package), in the order ``--help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = ("plc", "poll", "bulk", "simulate", "demo")
@@ -43,15 +43,6 @@ def build_parser() -> argparse.ArgumentParser:
         else:  # pragma: no cover - a programming error
             raise RuntimeError(f"aiofins.cli.{name} has no register/add_parser(s)")
     return parser
-
-
-def leaf_errors(exc: BaseException) -> list[BaseException]:
-    """``exc`` itself, or every exception inside it if it is an exception group (a task
-    group's error), flattened."""
-    inner = getattr(exc, "exceptions", None)
-    if not isinstance(inner, tuple):
-        return [exc]
-    return [leaf for e in inner for leaf in leaf_errors(e)]
 
 
 def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException], ...]) -> bool:

@@ -13,6 +13,15 @@ if TYPE_CHECKING:
     from .endcodes import EndCode
 
 
+def leaf_errors(exc: BaseException) -> list[BaseException]:
+    """``exc`` itself, or every exception inside it if it is an exception group (a task
+    group's error), flattened."""
+    inner = getattr(exc, "exceptions", None)
+    if not isinstance(inner, tuple):
+        return [exc]
+    return [leaf for e in inner for leaf in leaf_errors(e)]
+
+
 class FinsError(Exception):
     """Root of every error aiofins raises."""
 

@@ -285,9 +285,7 @@ class VirtualPLC:
         5-3-17; "the highest priority error", 5-3-27): fatal before non-fatal, then the
         earliest raised."""
         errors = self.current_errors
-        if not errors:
-            return None
-        return min(errors, key=lambda code: (not error_bit(code)[0], errors.index(code)))
+        return next((code for code in errors if error_bit(code)[0]), errors[0] if errors else None)
 
     def refresh_error_state(self) -> None:
         """Recompute the 0601 error words and error code from the current errors."""

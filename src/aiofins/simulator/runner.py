@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import anyio
 
+from ..protocol.errors import leaf_errors
 from ..protocol.header import FinsAddress
 from .faults import Dispatcher, FaultCounters, FaultPlan, FrameHandler
 from .serial import SerialServer, SerialSettings
@@ -64,10 +65,9 @@ def _naming_the_endpoint(what: str, where: tuple[str, int]) -> Iterator[None]:
     try:
         yield
     except Exception as exc:
-        error: BaseException = exc
-        while isinstance(getattr(error, "exceptions", None), tuple) and len(error.exceptions) == 1:  # type: ignore[attr-defined]
-            error = error.exceptions[0]  # type: ignore[attr-defined]
-        if not isinstance(error, OSError):
+        leaves = leaf_errors(exc)
+        error = leaves[0]
+        if len(leaves) != 1 or not isinstance(error, OSError):
             raise
         host, port = where
         raise OSError(
