@@ -1,23 +1,30 @@
-"""Read-after-send under asyncio: a reply already queued when the send returns completes the
-request with no event-loop pass; the session still yields regularly and backs off where the
-attempt never finds anything.
+"""Read-after-send under asyncio (UDP and FINS/TCP): a reply already queued when the send
+returns completes the request with no event-loop pass; the session still yields regularly and
+backs off where the attempt never finds anything.
 
 The replies are placed in the client's socket *before* the request is sent (a loopback
-``sendto`` is delivered before it returns), which is what a peer on the same core does when
-it answers during the send. The SIDs are predictable: one destination allocates them in order.
+``sendto``/``send`` is delivered before it returns), which is what a peer on the same core
+does when it answers during the send. The SIDs are predictable: one destination allocates them
+in order.
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
+import socket
 from collections.abc import Awaitable, Callable
 from typing import Any
 
 import anyio
 import pytest
+from anyio.abc import SocketAttribute
 
+from aiofins.protocol.errors import ConnectionLost
+from aiofins.protocol.tcp import encode_message
 from aiofins.session import Session
 
+from .test_session_tcp import TcpPeer, tcp_server, tcp_session
 from .test_session_udp import (
     PLC,
     SOURCE,
@@ -187,3 +194,102 @@ def test_trio_has_no_read_after_send() -> None:
             assert response.data == (0x1007).to_bytes(2, "big")
 
     anyio.run(main, backend="trio")
+
+
+def tcp_placed(sid: int, data: bytes) -> bytes:
+    """:func:`placed_reply` in its FINS/TCP envelope."""
+    return encode_message(2, placed_reply(sid, data))
+
+
+async def first_tcp_sid(peer: TcpPeer, session: Session) -> tuple[int, socket.socket]:
+    """One request answered the ordinary way; its SID and a socket on the server's end of
+    the connection (a duplicate: the event loop's own socket object refuses ``send``)."""
+    await session.request(0x01, 0x01, read_params(0))
+    peer.answer = lambda cmd: None  # silent from now on: replies are placed
+    fd = peer.streams[-1].extra(SocketAttribute.raw_socket).fileno()
+    raw = socket.socket(fileno=os.dup(fd))
+    peer.duplicates.append(raw)
+    return peer.frames[-1][9], raw
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_tcp_placed_reply_completes_without_a_loop_pass(options: dict[str, Any]) -> None:
+    async def main() -> None:
+        async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
+            assert session.transport.poll_now is not None
+            sid, raw = await first_tcp_sid(peer, session)
+            ticks = 0
+
+            async def ticker() -> None:
+                nonlocal ticks
+                while True:
+                    await anyio.sleep(0)
+                    ticks += 1
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(ticker)
+                await anyio.sleep(0)
+                start = ticks
+                for i in range(1, 101):
+                    value = (0x5000 + i).to_bytes(2, "big")
+                    raw.send(tcp_placed((sid + i) & 0xFF, value))
+                    response = await session.request(0x01, 0x01, read_params(i))
+                    assert response.data == value
+                passes = ticks - start
+                tg.cancel_scope.cancel()
+            assert 3 <= passes <= 15, passes  # as over UDP: a turn per 33, not one per request
+            assert session.stats.completed == 101
+            assert session.stats.unsolicited == 0 and session.stats.malformed == 0
+
+    run(main, options)
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_tcp_message_split_between_the_read_after_send_and_the_transport(
+    options: dict[str, Any],
+) -> None:
+    """The read-after-send finds half a message; the transport's own read brings the rest:
+    one stream, one decoder, the reply is whole."""
+
+    async def main() -> None:
+        async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
+            sid, raw = await first_tcp_sid(peer, session)
+            for i in range(1, 21):
+                message = tcp_placed((sid + i) & 0xFF, (0x6000 + i).to_bytes(2, "big"))
+                cut = 4 + i  # inside the envelope, then inside the FINS header
+                raw.send(message[:cut])
+
+                def rest(cmd: bytes, tail: bytes = message[cut:]) -> None:
+                    raw.send(tail)  # once the request arrives: after the read-after-send
+                    return None
+
+                peer.answer = rest
+                response = await session.request(0x01, 0x01, read_params(i))
+                assert response.data == (0x6000 + i).to_bytes(2, "big")
+            assert session.stats.completed == 21 and session.stats.malformed == 0
+
+    run(main, options)
+
+
+@pytest.mark.parametrize("options", LOOPS)
+def test_tcp_read_after_send_leaves_the_end_of_stream_to_the_transport(
+    options: dict[str, Any],
+) -> None:
+    """A reply and then the server's FIN: the reply completes its request; the next request
+    fails with ConnectionLost (not a crash, not a hang); the call after it reconnects."""
+
+    async def main() -> None:
+        async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
+            sid, raw = await first_tcp_sid(peer, session)
+            raw.send(tcp_placed((sid + 1) & 0xFF, b"\x12\x34"))
+            raw.shutdown(socket.SHUT_WR)
+            response = await session.request(0x01, 0x01, read_params(1))
+            assert response.data == b"\x12\x34"
+            with pytest.raises(ConnectionLost):
+                await session.request(0x01, 0x01, read_params(2), timeout=5)
+            peer.answer = TcpPeer().answer
+            response = await session.request(0x01, 0x01, read_params(3))
+            assert response.data == (0x1003).to_bytes(2, "big")
+            assert peer.connections == 2 and session.stats.disconnects == 1
+
+    run(main, options)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
@@ -42,6 +43,8 @@ class TcpPeer:
     serving: anyio.CancelScope | None = None
     served: anyio.Event | None = None  # set once the accept loop has ended
     listener: anyio.abc.Listener[anyio.abc.SocketStream] | None = None
+    #: Sockets a test made on the server's connections (closed by stop()).
+    duplicates: list[socket.socket] = field(default_factory=list)
 
     async def stop(self) -> None:
         """The PLC goes away: stop listening, drop every connection."""
@@ -51,6 +54,8 @@ class TcpPeer:
                 await self.served.wait()
         for stream in self.streams:
             await stream.aclose()
+        for sock in self.duplicates:
+            sock.close()
         if self.listener is not None:
             await self.listener.aclose()
 

@@ -9,13 +9,16 @@ on every path out (a leaked connection holds one of the PLC's node slots).
 
 Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session from
 ``data_received`` and sends synchronously: a frame alone in flight at once, frames sent while
-others are in flight gathered into one write per event-loop step. Under trio a reader task on
-an anyio stream receives, and each frame is written on its own.
+others are in flight gathered into one write per event-loop step. We make and connect the
+socket ourselves, so the session can read what already arrived right after a send
+(``poll_now``, into the same decoder). Under trio a reader task on an anyio stream receives,
+and each frame is written on its own.
 """
 
 from __future__ import annotations
 
 import asyncio
+import socket
 from typing import cast
 
 import anyio
@@ -34,6 +37,9 @@ from ..protocol.tcp import (
 )
 from .base import FrameSink, TaskSpawner, Transport, is_asyncio, replies_awaited, wrap_os_error
 
+#: Bytes asked of one read-after-send recv(): a few replies of the largest FINS frame.
+_RECV_SIZE = 65536
+
 
 class _TcpProtocol(asyncio.Protocol):
     """The asyncio path: frames go from ``data_received`` straight to the session."""
@@ -48,6 +54,8 @@ class _TcpProtocol(asyncio.Protocol):
         self.gather = owner.gather_writes
         self.awaited = replies_awaited(sink)
         self.loop = asyncio.get_running_loop()
+        #: Our own handle on the connected socket (the transport's is not readable).
+        self.sock: socket.socket | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         # Not ``isinstance(transport, asyncio.Transport)``: uvloop's TCPTransport has the
@@ -92,6 +100,20 @@ class _TcpProtocol(asyncio.Protocol):
         transport = self.transport
         if outbox and transport is not None and not transport.is_closing():
             transport.write(b"".join(outbox))
+
+    def poll(self) -> None:
+        """Read what has already arrived on the socket, now (the transport would read it at
+        its next loop pass). The end of the stream or a socket error is left for the
+        transport's own reader to meet and report."""
+        sock = self.sock
+        if sock is None:
+            return
+        try:
+            data = sock.recv(_RECV_SIZE)
+        except OSError:  # nothing yet (BlockingIOError), or an error the transport will see
+            return
+        if data:
+            self.data_received(data)
 
     def data_received(self, data: bytes) -> None:
         if not self.handshake.done():
@@ -179,6 +201,27 @@ def _deliver_all(
     return None
 
 
+async def _connect(loop: asyncio.AbstractEventLoop, host: str, port: int) -> socket.socket:
+    """A connected, non-blocking TCP socket to the first address of ``host`` that accepts."""
+    infos = await loop.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    error: OSError = OSError(f"no address found for {host!r}")
+    for family, kind, proto, _, address in infos:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.setblocking(False)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            await loop.sock_connect(sock, address)
+        except OSError as exc:
+            sock.close()
+            error = exc
+            continue
+        except BaseException:
+            sock.close()
+            raise
+        return sock
+    raise error
+
+
 def _error_notification(owner: TcpTransport, code: int) -> FinsTcpError:
     return FinsTcpError(
         f"{owner.description} reported a FINS/TCP error: {tcp_error_meaning(code)}",
@@ -257,7 +300,13 @@ class TcpTransport(Transport):
         proto = _TcpProtocol(self, sink)
         try:
             with anyio.fail_after(self.connect_timeout):
-                await loop.create_connection(lambda: proto, self.host, self.port)
+                sock = await _connect(loop, self.host, self.port)
+                try:
+                    await loop.create_connection(lambda: proto, sock=sock)
+                except BaseException:
+                    sock.close()
+                    raise
+                proto.sock = sock
                 assert proto.transport is not None
                 proto.transport.write(encode_node_request(self.node))
                 self.local_node, self.remote_node = await proto.handshake
@@ -275,11 +324,13 @@ class TcpTransport(Transport):
         self._aio = proto
         self.fast_send = proto.send
         self.fast_send_many = proto.send_many
+        self.poll_now = proto.poll
 
     def _detach(self) -> None:
         self._aio = None
         self.fast_send = None
         self.fast_send_many = None
+        self.poll_now = None
 
     async def _handshake(self, stream: SocketStream, decoder: TcpDecoder) -> list[TcpMessage]:
         """Send our node, read the server's reply; returns messages that followed it."""
