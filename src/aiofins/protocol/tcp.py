@@ -89,7 +89,19 @@ def encode_message(command: int, payload: bytes = b"", error_code: int = 0) -> b
 _pack_frame_header = struct.Struct(">4sI8s").pack
 _FRAME_COMMAND = (TcpCommand.FRAME << 32).to_bytes(8, "big")
 _unpack_start = struct.Struct(">4sI").unpack_from
-_unpack_command = struct.Struct(">II").unpack_from
+_unpack_header = struct.Struct(">4sIII").unpack_from
+_FRAME = int(TcpCommand.FRAME)
+
+
+def _check_start(magic: bytes, length: int, max_length: int) -> None:
+    """Raise the error for a message start no stream can continue from, if it is one."""
+    if magic != MAGIC:
+        raise FinsTcpError("FINS/TCP header is not 'FINS'", tcp_error_code=TcpErrorCode.BAD_HEADER)
+    if length < 8 or length > max_length:
+        raise FinsTcpError(
+            f"FINS/TCP length {length} out of range 8..{max_length}",
+            tcp_error_code=TcpErrorCode.DATA_TOO_LONG,
+        )
 
 
 def encode_frame(fins_frame: bytes) -> bytes:
@@ -183,35 +195,34 @@ class TcpDecoder:
         before it were handed over.
         """
         buf = self._buffer
-        if data:
+        if buf:  # the rest of an earlier read first (rare: reads mostly end on a message)
             buf += data
-        n = len(buf)
+            data = bytes(buf)
+            buf.clear()
+        n = len(data)
         pos = 0
         found: TcpMessage | None = None
+        max_length = self.max_length
         try:
-            while n - pos >= 8:
-                magic, length = _unpack_start(buf, pos)
-                if magic != MAGIC:
-                    raise FinsTcpError(
-                        "FINS/TCP header is not 'FINS'", tcp_error_code=TcpErrorCode.BAD_HEADER
-                    )
-                if length < 8 or length > self.max_length:
-                    raise FinsTcpError(
-                        f"FINS/TCP length {length} out of range 8..{self.max_length}",
-                        tcp_error_code=TcpErrorCode.DATA_TOO_LONG,
-                    )
+            while n - pos >= 16:
+                magic, length, command, error_code = _unpack_header(data, pos)
+                if magic != MAGIC or length < 8 or length > max_length:
+                    _check_start(magic, length, max_length)
                 end = pos + 8 + length
                 if end > n:
                     break
-                command, error_code = _unpack_command(buf, pos + 8)
-                payload = bytes(buf[pos + 16 : end])
+                payload = data[pos + 16 : end]
                 pos = end
-                if command == TcpCommand.FRAME and not error_code:
+                if command == _FRAME and not error_code:
                     on_frame(payload)
                 else:
                     found = TcpMessage(command, error_code, payload)
                     break
+            else:
+                if n - pos >= 8:  # a header's start: refuse a bad one before the rest comes
+                    magic, length = _unpack_start(data, pos)
+                    _check_start(magic, length, max_length)
         finally:
-            if pos:
-                del buf[:pos]
+            if pos < n:
+                buf += data[pos:] if pos else data
         return found
