@@ -40,6 +40,8 @@ class TcpPeer:
     streams: list[SocketStream] = field(default_factory=list)
     connections: int = 0
     error_notification: int = 0  # answer the next frame with command 3 instead
+    #: While set to an event, a node address request is answered only once it is set.
+    handshake_gate: anyio.Event | None = None
     serving: anyio.CancelScope | None = None
     served: anyio.Event | None = None  # set once the accept loop has ended
     listener: anyio.abc.Listener[anyio.abc.SocketStream] | None = None
@@ -58,6 +60,12 @@ class TcpPeer:
             sock.close()
         if self.listener is not None:
             await self.listener.aclose()
+
+    async def drop(self) -> None:
+        """Drop every connection and keep listening (the PLC resets its connections)."""
+        streams, self.streams = self.streams, []
+        for stream in streams:
+            await stream.aclose()
 
     async def write(self, stream: SocketStream, data: bytes) -> None:
         if self.byte_by_byte:
@@ -84,6 +92,8 @@ class TcpPeer:
         if command == 0:
             requested = int.from_bytes(payload, "big")
             self.requested_nodes.append(requested)
+            if self.handshake_gate is not None:
+                await self.handshake_gate.wait()
             node = requested or self.assign_node
             await self.write(stream, encode_node_response(node, self.server_node, self.refuse))
             if self.refuse:

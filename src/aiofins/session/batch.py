@@ -389,7 +389,7 @@ async def request_many(
         return []
     transport = session.transport
     if transport.fast_send is None and not transport.is_open:
-        await session._ensure_open()
+        await session._ensure_open(timeout)
     state = session._dest_state(dest)
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))

@@ -59,17 +59,41 @@ _POLL_STREAK = 32
 _POLL_MAX_BACKOFF = 64
 
 
+class _Attempt:
+    """One connection attempt, run in the background and shared by every caller that needs
+    the link while it runs; each waits for it at most its own timeout."""
+
+    __slots__ = ("done", "error", "traceback")
+
+    def __init__(self) -> None:
+        self.done = anyio.Event()
+        self.error: BaseException | None = None
+        self.traceback: TracebackType | None = None
+
+    def finish(self, error: BaseException | None) -> None:
+        """The outcome (``None``: connected); the first one counts."""
+        if not self.done.is_set():
+            self.error = error
+            self.traceback = None if error is None else error.__traceback__
+            self.done.set()
+
+    def check(self) -> None:
+        """Raise the attempt's error, if any (to each waiter, as an asyncio future does)."""
+        if self.error is not None:
+            raise self.error.with_traceback(self.traceback)
+
+
 class Session:
     """Multiplexes FINS requests over one transport.
 
     Use as ``async with Session(transport, source=..., dest=...) as s: await s.request(...)``.
-    ``timeout`` is per attempt (waiting for a free slot, for a free SID and for the reply are
-    each bounded by it). A SID given up on stays quarantined until its late reply comes, or
-    for ``max(quarantine_factor x timeout, min_quarantine)`` seconds. Reads
-    (``idempotent=True``) are retried ``retries`` times after a timeout, each time with a
-    fresh SID; other requests only if the caller passes ``retries``. End codes 2604/2605
-    (busy) are retried ``busy_retries`` times with a growing pause, as the command was not
-    executed.
+    ``timeout`` is per attempt (waiting for a connection being made, for a free slot, for a
+    free SID and for the reply are each bounded by it). A SID given up on stays quarantined
+    until its late reply comes, or for ``max(quarantine_factor x timeout, min_quarantine)``
+    seconds. Reads (``idempotent=True``) are retried ``retries`` times after a timeout, each
+    time with a fresh SID; other requests only if the caller passes ``retries``. End codes
+    2604/2605 (busy) are retried ``busy_retries`` times with a growing pause, as the command
+    was not executed.
     """
 
     def __init__(
@@ -142,7 +166,8 @@ class Session:
         self._asyncio = False
         self._loop: Any = None  # the running asyncio loop, if any
         self._closed = False
-        self._open_lock: anyio.Lock | None = None
+        #: The connection attempt in progress, if any (one at a time, shared by callers).
+        self._connecting: _Attempt | None = None
         self._backoff = 0.0
         self._retry_at = 0.0  # no connection attempt before this (monotonic) time
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
@@ -157,7 +182,6 @@ class Session:
         self._asyncio = is_asyncio()
         if self._asyncio:
             self._loop = asyncio.get_running_loop()
-        self._open_lock = anyio.Lock()
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
@@ -195,6 +219,11 @@ class Session:
         if self._closed:
             return
         self._closed = True
+        attempt, self._connecting = self._connecting, None
+        if attempt is not None:  # its waiters fail now; cancel_all() ends the attempt itself
+            attempt.finish(
+                ConnectionLost(f"session to {self.transport.description} closed while connecting")
+            )
         self._fail_all(ConnectionLost(f"session to {self.transport.description} closed"))
         for q in self._slots.values():
             q.fail_waiters(ConnectionLost("session closed"))
@@ -203,41 +232,84 @@ class Session:
         with anyio.CancelScope(shield=True):
             await self.transport.aclose()
 
-    async def _ensure_open(self) -> None:
+    async def _ensure_open(self, timeout: float | None = None) -> None:
+        """Open the transport if it is closed, waiting for it at most ``timeout`` seconds.
+
+        One connection attempt at a time, run in the background (bounded by the transport's
+        own connect timeout) and shared by every caller that comes while it runs. A caller
+        whose ``timeout`` passes first gets :class:`FinsTimeout` and leaves the attempt
+        running: a later call (or a retry) finds the link open or keeps waiting for the same
+        attempt. ``timeout=None`` waits for the attempt's outcome (``async with session``).
+        """
         if self.transport.is_open:
             return
         if self._closed:
             raise ConnectionLost(f"session to {self.transport.description} is closed")
-        if self._background is None or self._open_lock is None:
+        background = self._background
+        if background is None:
             raise RuntimeError("Session is not running: use 'async with Session(...)'")
-        async with self._open_lock:
-            if self.transport.is_open:
-                return
+        attempt = self._connecting
+        if attempt is None:
             wait = self._retry_at - monotonic()
             if wait > 0:  # fail fast: no call waits out the backoff beyond its own timeout
                 raise ConnectionLost(
                     f"cannot connect to {self.transport.description}: the last attempt failed; "
                     f"the next one in {wait:.2f} s (reconnect backoff)"
                 )
-            try:
-                await self.transport.open(self, self._background)
-            except (OSError, FinsError) as exc:
-                self.stats.connect_failures += 1
-                low, high = self.reconnect_backoff
-                self._backoff = min(high, max(low, self._backoff * 2))
-                self._retry_at = monotonic() + self._backoff
-                if isinstance(exc, FinsError):
-                    raise
-                raise ConnectionLost(
-                    f"cannot connect to {self.transport.description}: {exc}"
-                ) from exc
-            self._backoff = 0.0
-            self.stats.connects += 1
-            node = self.transport.local_node
-            if node is not None and node != self.source.node:
-                self.source = FinsAddress(self.source.network, node, self.source.unit)
-                for state in self._dests.values():
-                    state.prefix = self._prefix(state.address)
+            attempt = self._connecting = _Attempt()
+            background.start_soon(self._connect, attempt, background)
+        if timeout is None:
+            await attempt.done.wait()
+        else:
+            with anyio.move_on_after(timeout):
+                await attempt.done.wait()
+            if not attempt.done.is_set():
+                raise FinsTimeout(
+                    f"no connection to {self.transport.description} within {timeout} s: "
+                    "a connection attempt is still in progress (a later call uses it once "
+                    "it succeeds)"
+                )
+        attempt.check()
+
+    async def _connect(self, attempt: _Attempt, background: Background) -> None:
+        """Run one connection attempt (a background task: callers wait for it, bounded)."""
+        error: BaseException | None = None
+        try:
+            await self.transport.open(self, background)
+        except (OSError, FinsError) as exc:
+            self.stats.connect_failures += 1
+            low, high = self.reconnect_backoff
+            self._backoff = min(high, max(low, self._backoff * 2))
+            self._retry_at = monotonic() + self._backoff
+            if isinstance(exc, FinsError):
+                error = exc
+            else:
+                error = ConnectionLost(f"cannot connect to {self.transport.description}: {exc}")
+                error.__cause__ = exc
+        except Exception as exc:  # not a connection failure (a bug): its callers see it
+            error = exc
+        except BaseException:  # cancelled: the session is closing
+            error = ConnectionLost(
+                f"session to {self.transport.description} closed while connecting"
+            )
+            raise
+        else:
+            if self._closed:  # closed as the open completed: leave no link behind
+                error = ConnectionLost(f"session to {self.transport.description} is closed")
+                with anyio.CancelScope(shield=True):
+                    await self.transport.aclose()
+            else:
+                self._backoff = 0.0
+                self.stats.connects += 1
+                node = self.transport.local_node
+                if node is not None and node != self.source.node:
+                    self.source = FinsAddress(self.source.network, node, self.source.unit)
+                    for state in self._dests.values():
+                        state.prefix = self._prefix(state.address)
+        finally:
+            if self._connecting is attempt:
+                self._connecting = None
+            attempt.finish(error)
 
     # ----------------------------------------------------------------- transport sink
 
@@ -415,8 +487,9 @@ class Session:
         """Send one command and return its normal-completion response.
 
         Raises the :class:`EndCodeError` subclass for the end code (:class:`RelayError` for
-        bit 15), :class:`FinsTimeout` when every attempt timed out, :class:`ConnectionLost`
-        when the link failed or the session closed.
+        bit 15), :class:`FinsTimeout` when every attempt timed out (waiting for a connection
+        still being made included), :class:`ConnectionLost` when the link failed or the
+        session closed.
         """
         if dest is None:
             dest = self.dest
@@ -436,7 +509,7 @@ class Session:
             try:
                 transport = self.transport
                 if transport.fast_send is None and not transport.is_open:
-                    await self._ensure_open()
+                    await self._ensure_open(timeout)
                 state = self._last_state if dest is self._last_dest else self._dest_state(dest)
                 slots = state.slots
                 if slots.in_flight < slots.limit and not slots.waiters:
