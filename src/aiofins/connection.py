@@ -32,6 +32,9 @@ from .transport.serial import SerialTransport
 from .transport.tcp import TcpTransport
 from .transport.udp import UdpTransport
 
+#: Seconds per attempt of a request when neither ``timeout=`` nor ``?timeout=`` says.
+DEFAULT_TIMEOUT = 2.0
+
 
 def _address(value: FinsAddress | str | None) -> FinsAddress | None:
     return None if value is None else FinsAddress.of(value)
@@ -136,7 +139,7 @@ async def connect(
     *,
     dest: FinsAddress | str | None = None,
     src: FinsAddress | str | None = None,
-    timeout: float = 2.0,
+    timeout: float = DEFAULT_TIMEOUT,
     retries: int = 2,
     max_in_flight: int | None = None,
     gct: int = 2,

@@ -203,7 +203,7 @@ class Poller:
         values: dict[str, Value] = {}
         bad: dict[str, str] = {}  # tags whose words are no value of their type
         try:
-            async with self.pool.client(group.url) as client:
+            async with self.pool.client(group.url, timeout=group.timeout) as client:
                 plan = group.plan
                 if plan is None:
                     plan = group.plan = client.compile_tags(group.tags)

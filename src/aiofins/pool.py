@@ -12,7 +12,9 @@ A maintenance task checks idle sessions every ``health_interval`` seconds with C
 READ (0601) and closes those that fail or stayed unused for ``idle_timeout`` seconds. An
 endpoint whose connection failed is not retried until its backoff (doubling from
 ``backoff_min`` to ``backoff_max``) has passed; calls in the meantime fail fast with
-:class:`~aiofins.ConnectionLost`.
+:class:`~aiofins.ConnectionLost`. A borrower waits for a connection being made at most its
+timeout (``pool.client(url, timeout=...)``, by default the endpoint's request timeout), then
+gets :class:`~aiofins.FinsTimeout`; the connection attempt goes on for the next borrower.
 
 Safe to open in a FastAPI lifespan::
 
@@ -37,9 +39,9 @@ import anyio
 from anyio.abc import TaskGroup
 
 from .client import Client
-from .connection import check_options, connect, default_addresses
-from .endpoint import parse_endpoint
-from .protocol.errors import CommandError, ConnectionLost, FinsError
+from .connection import DEFAULT_TIMEOUT, check_options, connect, default_addresses
+from .endpoint import Endpoint, option_value, parse_endpoint
+from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
 from .protocol.header import FinsAddress
 from .session import SessionStats
 from .transport.base import is_asyncio
@@ -120,18 +122,19 @@ def _users(entry: _Entry) -> int:
 class _Lease:
     """``async with pool.client(url) as client``: one use of an endpoint's client."""
 
-    __slots__ = ("entry", "pool", "url")
+    __slots__ = ("entry", "pool", "timeout", "url")
 
-    def __init__(self, pool: Pool, url: str) -> None:
+    def __init__(self, pool: Pool, url: str, timeout: float | None) -> None:
         self.pool = pool
         self.url = url
+        self.timeout = timeout
         self.entry: _Entry | None = None
 
     async def __aenter__(self) -> Client:
         pool = self.pool
         entry = pool._ready_entry(self.url)
         if entry is None:
-            entry = await pool._acquire(self.url)
+            entry = await pool._acquire(self.url, self.timeout)
         self.entry = entry
         assert entry.client is not None
         return entry.client
@@ -212,9 +215,19 @@ class Pool:
 
     # -- lending ------------------------------------------------------------------------
 
-    def client(self, url: str) -> AbstractAsyncContextManager[Client]:
-        """Lend the client of ``url``'s endpoint for the ``async with`` block."""
-        return _Lease(self, url)
+    def client(
+        self, url: str, *, timeout: float | None = None
+    ) -> AbstractAsyncContextManager[Client]:
+        """Lend the client of ``url``'s endpoint for the ``async with`` block.
+
+        Waiting for the endpoint's connection to be made takes at most ``timeout`` seconds
+        (default: the endpoint's request timeout, ``timeout=`` of the pool or ``?timeout=``
+        of the URL), then raises :class:`FinsTimeout`; the attempt itself goes on (bounded by
+        the transport's connect timeout) and serves later borrowers.
+        """
+        if timeout is not None and not 0 < timeout < float("inf"):
+            raise CommandError(f"timeout must be a positive number of seconds, got {timeout}")
+        return _Lease(self, url, timeout)
 
     def stats(self, url: str | None = None) -> dict[str, EndpointStats]:
         """Per-endpoint counters (all endpoints, or the one of ``url``)."""
@@ -250,7 +263,15 @@ class Pool:
             return best
         return None
 
-    async def _acquire(self, url: str) -> _Entry:
+    def _borrow_timeout(self, endpoint: Endpoint) -> float:
+        """How long a borrower waits for a connection by default: the request timeout the
+        endpoint's sessions get (the URL's ``?timeout=`` first, as :func:`connect` does)."""
+        text = endpoint.option("timeout")
+        if text:
+            return float(option_value("timeout", text))
+        return float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
+
+    async def _acquire(self, url: str, timeout: float | None = None) -> _Entry:
         """The slow path of lending (:meth:`_ready_entry` found no session to lend)."""
         if self._closed:
             raise ConnectionLost("the pool is closed")
@@ -289,7 +310,20 @@ class Pool:
             else:
                 entry = idle
             entry.users += 1
-        await entry.ready.wait()
+        if not entry.ready.is_set():
+            wait = self._borrow_timeout(endpoint) if timeout is None else timeout
+            try:
+                with anyio.move_on_after(wait):
+                    await entry.ready.wait()
+            except BaseException:  # the borrower was cancelled: it no longer uses the entry
+                entry.users -= 1
+                raise
+            if not entry.ready.is_set():  # the attempt goes on: a later borrower may use it
+                entry.users -= 1
+                raise FinsTimeout(
+                    f"{key}: no connection within {wait} s: a connection attempt is still "
+                    "in progress (a later borrower uses it once it succeeds)"
+                )
         if entry.error is not None:
             entry.users -= 1
             err = entry.error

@@ -10,10 +10,18 @@ import pytest
 from aiofins.connection import connect
 from aiofins.poller import Poller, Quality
 from aiofins.pool import Pool
-from aiofins.protocol.errors import AddressError, CommandError, ConnectionLost, DecodeError
+from aiofins.protocol.errors import (
+    AddressError,
+    CommandError,
+    ConnectionLost,
+    DecodeError,
+    FinsTimeout,
+)
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
+
+from ..session.test_session_tcp import TcpPeer, tcp_server
 
 pytestmark = pytest.mark.anyio
 
@@ -241,6 +249,43 @@ async def test_closing_the_pool_abandons_a_connect_in_progress(anyio_backend: ob
         tg.cancel_scope.cancel()
     assert len(outcome) == 1 and isinstance(outcome[0], ConnectionLost), outcome
     assert "the pool closed while connecting" in str(outcome[0])
+
+
+async def test_a_borrower_waits_for_a_connection_at_most_its_timeout(
+    anyio_backend: object,
+) -> None:
+    """A FINS/TCP peer that answers the handshake late: borrowers (and poller scans) gave up
+    only after the connect timeout (5 s) whatever their timeout. Now each waits at most its
+    own, and the attempt goes on for the next borrower."""
+    peer = TcpPeer(handshake_gate=anyio.Event())
+    async with tcp_server(peer):
+        url = f"tcp://127.0.0.1:{peer.port}"
+        still = "no connection within {} s: a connection attempt is still in progress"
+        async with Pool(timeout=0.3) as pool:
+            with anyio.fail_after(1.5), pytest.raises(FinsTimeout, match=still.format(0.3)):
+                async with pool.client(url):  # the pool's timeout by default
+                    pass
+            with anyio.fail_after(1.5), pytest.raises(FinsTimeout, match=still.format(0.2)):
+                async with pool.client(url, timeout=0.2):
+                    pass
+            with anyio.move_on_after(0.1):  # a borrower cancelled by its own deadline
+                async with pool.client(url, timeout=10):
+                    pass
+            poller = Poller(pool)
+            group = poller.add_group("g", url, {"a": "D0"}, timeout=0.25)
+            with anyio.fail_after(1.5):
+                scan = await poller.scan_once(group)
+            assert scan is not None and scan["a"].quality is Quality.ERROR
+            assert scan.error is not None and scan.error.startswith("FinsTimeout")
+            assert peer.handshake_gate is not None
+            peer.handshake_gate.set()  # the PLC answers at last
+            with anyio.fail_after(3):
+                async with pool.client(url) as plc:
+                    assert await plc.read("D0") == [0x1000]
+            assert peer.connections == 1  # the borrowers' giving up did not end the attempt
+            stats = pool.stats(url)[url]
+            assert stats.connect_failures == 0
+            assert stats.in_use == 0  # no borrower that gave up still counts as a user
 
 
 async def test_a_poller_outliving_its_pool_marks_scans_as_errors(sim: Simulator) -> None:
