@@ -167,6 +167,26 @@ def test_feed_frames_hands_over_the_same_messages_in_order(
     assert decoder.buffered == 0
 
 
+@given(st.lists(st.binary(min_size=10, max_size=2012), max_size=8))
+def test_encode_frames_is_the_messages_of_encode_frame_in_order(frames: list[bytes]) -> None:
+    data = tcp.encode_frames(frames)
+    assert data == b"".join(tcp.encode_frame(frame) for frame in frames)
+    out: list[bytes] = []
+    assert TcpDecoder().feed_frames(data, out.append) is None
+    assert out == frames
+
+
+def test_a_bad_header_start_is_refused_before_the_rest_of_it_arrives() -> None:
+    """8 bytes are enough to see a wrong magic or an impossible length."""
+    with pytest.raises(FinsTcpError, match="not 'FINS'"):
+        TcpDecoder().feed_frames(b"HTTP/1.1", lambda frame: None)
+    with pytest.raises(FinsTcpError, match="length 7"):
+        TcpDecoder().feed_frames(b"FINS\x00\x00\x00\x07", lambda frame: None)
+    decoder = TcpDecoder()  # a good start waits for the rest
+    assert decoder.feed_frames(tcp.encode_frame(b"x" * 10)[:15], lambda frame: None) is None
+    assert decoder.buffered == 15
+
+
 def test_feed_frames_hands_over_the_frames_before_a_bad_header() -> None:
     frames: list[bytes] = []
     decoder = TcpDecoder()

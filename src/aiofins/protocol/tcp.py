@@ -109,6 +109,12 @@ def encode_frame(fins_frame: bytes) -> bytes:
     return _pack_frame_header(MAGIC, 8 + len(fins_frame), _FRAME_COMMAND) + fins_frame
 
 
+def encode_frames(fins_frames: list[bytes]) -> bytes:
+    """Several FINS frames as consecutive command-2 messages, in one bytes object."""
+    head, magic, command = _pack_frame_header, MAGIC, _FRAME_COMMAND
+    return b"".join([head(magic, 8 + len(frame), command) + frame for frame in fins_frames])
+
+
 def encode_node_request(client_node: int = 0) -> bytes:
     """Client → server handshake; node 0 asks the server to allocate one."""
     if not 0 <= client_node <= 0xFE:

@@ -33,7 +33,7 @@ from ..protocol.errors import (
     error_for_end_code,
 )
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
-from .response import Response, new_response
+from .response import Response, _new, _set_data, _set_end_code, _set_frame
 from .slots import DestState, Pending, SlotTimeout, no_free_sid_message
 
 if TYPE_CHECKING:
@@ -94,7 +94,44 @@ class BatchPending(Pending):
         self.busy = busy
 
     def wake(self, frame: bytes) -> None:
-        self.batch.replied(self, frame)
+        """The receive callback matched a reply to this command (already out of the pending
+        table): store its result and send the batch's next command, or end the batch.
+        (Here rather than in a method of the batch: one call less per reply.)"""
+        batch = self.batch
+        if batch.fut.done():
+            return
+        session = batch.session
+        raw = (frame[12] << 8) | frame[13]
+        if not raw & _ERROR_BITS:
+            session.stats.completed += 1
+            response = _new(Response)  # new_response(), inlined
+            _set_end_code(response, _NORMAL if not raw else EndCode(raw))
+            _set_data(response, frame[14:])
+            _set_frame(response, frame)
+            batch.results[self.index] = response
+            remaining = batch.remaining = batch.remaining - 1
+            if not remaining:
+                batch.finish(None)
+                return
+            following = batch.next
+            if (
+                following < batch.count
+                and batch.held >= batch.window
+                and not batch.state.slots.waiters
+            ):
+                batch.next = following + 1  # the common case of slot_free, inlined
+                batch.send(following)
+            else:
+                batch.slot_free()
+            return
+        if (raw & END_CODE_MASK) in _BUSY_CODES and self.busy < session.busy_retries:
+            session.stats.busy_retries += 1
+            batch.later(
+                session.busy_backoff * (2**self.busy), self.index, self.attempt, self.busy + 1
+            )
+            return
+        session.stats.end_code_errors += 1
+        batch.finish(end_code_error(frame, self.mrc, self.src))
 
     def fail(self, exc: BaseException) -> None:
         self.batch.failed(self, exc)
@@ -210,8 +247,10 @@ class Batch:
         transport = self.session.transport
         send_many = transport.fast_send_many
         if send_many is not None:  # one write for all (FINS/TCP)
-            live = [(p, frame) for p, frame in outbox if not p.done]
-            if live and not self.fut.done():
+            if self.fut.done():
+                return
+            live = [item for item in outbox if not item[0].done]
+            if live:
                 try:
                     send_many([frame for _, frame in live])
                 except BaseException as exc:
@@ -271,35 +310,6 @@ class Batch:
             slots.release()  # to the first waiter of the destination, if any
 
     # -- receiving ----------------------------------------------------------------------
-
-    def replied(self, p: BatchPending, frame: bytes) -> None:
-        """The receive callback matched a reply to ``p`` (already out of the pending table)."""
-        if self.fut.done():
-            return
-        session = self.session
-        raw = (frame[12] << 8) | frame[13]
-        if not raw & _ERROR_BITS:
-            session.stats.completed += 1
-            self.results[p.index] = new_response(
-                _NORMAL if not raw else EndCode(raw), frame[14:], frame
-            )
-            self.remaining -= 1
-            if not self.remaining:
-                self.finish(None)
-                return
-            following = self.next
-            if following < self.count and self.held >= self.window and not self.state.slots.waiters:
-                self.next = following + 1  # the common case of slot_free, inlined
-                self.send(following)
-            else:
-                self.slot_free()
-            return
-        if (raw & END_CODE_MASK) in _BUSY_CODES and p.busy < session.busy_retries:
-            session.stats.busy_retries += 1
-            self.later(session.busy_backoff * (2**p.busy), p.index, p.attempt, p.busy + 1)
-            return
-        session.stats.end_code_errors += 1
-        self.finish(end_code_error(frame, p.mrc, p.src))
 
     def failed(self, p: BatchPending, exc: BaseException) -> None:
         """``p`` timed out (already quarantined) or the link failed."""

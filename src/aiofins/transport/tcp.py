@@ -31,6 +31,7 @@ from ..protocol.tcp import (
     TcpDecoder,
     TcpMessage,
     encode_frame,
+    encode_frames,
     encode_node_request,
     parse_node_response,
     tcp_error_meaning,
@@ -87,7 +88,7 @@ class _TcpProtocol(asyncio.Protocol):
             for frame in frames:
                 transport.write(encode_frame(frame))
             return
-        data = b"".join([encode_frame(frame) for frame in frames])
+        data = encode_frames(frames)
         if self.outbox:
             self.outbox.append(data)
         else:
