@@ -256,6 +256,7 @@ class TcpTransport(Transport):
         #: several FINS/TCP messages in one segment (TCP itself may still join them).
         self.gather_writes = gather_writes
         self._stream: SocketStream | None = None
+        self._raw: socket.socket | None = None  # the stream's socket (trio path)
         self._aio: _TcpProtocol | None = None
         self._send_lock = anyio.Lock()
         self.local_node: int | None = None
@@ -293,6 +294,7 @@ class TcpTransport(Transport):
                 await stream.aclose()
             raise
         self._stream = stream
+        self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once, not per send
         self._send_lock = anyio.Lock()
         task_group.start_soon(self._reader, stream, decoder, backlog, sink)
 
@@ -375,8 +377,18 @@ class TcpTransport(Transport):
                 error = _deliver(self, early, sink)
                 if error is not None:
                     raise error
+            # The socket itself, not stream.receive(): that tries a recv() before waiting,
+            # which fails once per reply for a request/reply peer (two system calls each).
+            raw = stream.extra(SocketAttribute.raw_socket)
             while True:
-                error = _deliver_all(self, decoder, await stream.receive(), sink)
+                await anyio.wait_readable(raw)
+                try:
+                    data = raw.recv(_RECV_SIZE)
+                except (BlockingIOError, InterruptedError):
+                    continue
+                if not data:
+                    raise anyio.EndOfStream
+                error = _deliver_all(self, decoder, data, sink)
                 if error is not None:
                     raise error
         except FrameError as err:  # FinsTcpError included: the stream is unusable now
@@ -390,7 +402,7 @@ class TcpTransport(Transport):
             with anyio.CancelScope(shield=True):
                 await stream.aclose()
             if self._stream is stream:
-                self._stream = None
+                self._stream = self._raw = None
                 if exc is not None:
                     sink.connection_lost(exc)
 
@@ -398,14 +410,13 @@ class TcpTransport(Transport):
         if self._aio is not None:
             self._aio.send(frame)
             return
-        stream = self._stream
-        if stream is None:
+        stream, raw = self._stream, self._raw
+        if stream is None or raw is None:
             raise ConnectionLost(f"{self.description} is not connected")
         data = encode_frame(frame)
         try:
             lock = self._send_lock
             if not lock.locked():  # nobody mid-write: try the socket directly, no await
-                raw = stream.extra(SocketAttribute.raw_socket)
                 try:
                     sent = raw.send(data)
                 except (BlockingIOError, InterruptedError):
@@ -423,7 +434,7 @@ class TcpTransport(Transport):
         self._detach()
         if proto is not None and proto.transport is not None:
             proto.transport.close()
-        stream, self._stream = self._stream, None
+        stream, self._stream, self._raw = self._stream, None, None
         if stream is not None:
             with anyio.CancelScope(shield=True):
                 await stream.aclose()
