@@ -563,9 +563,17 @@ class Session:
                                         await asyncio.sleep(0)
                                     else:
                                         poll()
-                                        self._polled(fut)
+                                        self._polled(fut.done())
                         else:
                             await transport.send(frame)
+                            if fut is None and len(pending) == 1:  # trio: the same, no fair
+                                poll = transport.poll_now  # turn (every wait checkpoints)
+                                if poll is not None:
+                                    if self._poll_skip:
+                                        self._poll_skip -= 1
+                                    else:
+                                        poll()
+                                        self._polled(p.done)
                         frame = await (p.wait() if fut is None else fut)
                     except FinsTimeout:
                         raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
@@ -600,7 +608,7 @@ class Session:
             self.stats.end_code_errors += 1
             raise end_code_error(frame, mrc, src)
 
-    def _polled(self, fut: asyncio.Future[bytes]) -> None:
+    def _polled(self, answered: bool) -> None:
         """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
 
         A peer on the same core often answers during the send itself: the request then
@@ -614,11 +622,13 @@ class Session:
         pass that runs anyio's cancellation retry, which then finds the task about to wake
         with a result and leaves it alone, turn after turn. (With many in flight the replies
         are read in one drain per loop pass instead, which is cheaper and keeps tasks fair.)
+        Under trio the wait for a reply already there is a checkpoint all the same, so the
+        request still yields; what the read saves is the reader task's wake-up.
         """
-        if fut.done():
+        if answered:
             self._poll_backoff = 0
             streak = self._poll_streak + 1
-            if streak >= _POLL_STREAK:
+            if streak >= _POLL_STREAK and self._asyncio:
                 streak = 0
                 self._turn_due = True
             self._poll_streak = streak

@@ -11,8 +11,9 @@ Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session 
 ``data_received`` and sends synchronously: a frame alone in flight at once, frames sent while
 others are in flight gathered into one write per event-loop step. We make and connect the
 socket ourselves, so the session can read what already arrived right after a send
-(``poll_now``, into the same decoder). Under trio a reader task on an anyio stream receives,
-and each frame is written on its own.
+(``poll_now``, into the same decoder). Under trio a reader task waits on the stream's socket
+and reads it (the session's ``poll_now`` reads it too, into the same decoder), and each frame
+is written on its own.
 """
 
 from __future__ import annotations
@@ -294,9 +295,34 @@ class TcpTransport(Transport):
                 await stream.aclose()
             raise
         self._stream = stream
-        self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once, not per send
+        raw = self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once
         self._send_lock = anyio.Lock()
         task_group.start_soon(self._reader, stream, decoder, backlog, sink)
+
+        def poll() -> None:
+            """Read what has already arrived, now, into the reader's decoder (the reader
+            task would wake for it; it waits on the socket, never inside the decoder). The
+            end of the stream or a socket error is left to the reader; a broken stream ends
+            the connection here, and the reader, woken, closes the socket."""
+            if self._stream is not stream:
+                return
+            try:
+                data = raw.recv(_RECV_SIZE)
+            except OSError:
+                return
+            if not data:
+                return
+            try:
+                error = _deliver_all(self, decoder, data, sink)
+            except FrameError as exc:
+                error = exc
+            if error is not None and self._stream is stream:
+                self._stream = self._raw = None
+                self.poll_now = None
+                anyio.notify_closing(raw)
+                sink.connection_lost(error)
+
+        self.poll_now = poll
 
     async def _open_asyncio(self, sink: FrameSink) -> None:
         loop = asyncio.get_running_loop()
@@ -399,12 +425,16 @@ class TcpTransport(Transport):
         except OSError as err:
             exc = wrap_os_error(err, f"connection to {self.description} failed")
         finally:
-            with anyio.CancelScope(shield=True):
-                await stream.aclose()
+            # Detach and report before closing: closing yields to other tasks, which must
+            # not send on the closed socket nor open a new connection while requests of
+            # this one are still waiting.
             if self._stream is stream:
                 self._stream = self._raw = None
+                self.poll_now = None
                 if exc is not None:
                     sink.connection_lost(exc)
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
 
     async def send(self, frame: bytes) -> None:
         if self._aio is not None:
@@ -436,5 +466,6 @@ class TcpTransport(Transport):
             proto.transport.close()
         stream, self._stream, self._raw = self._stream, None, None
         if stream is not None:
+            self.poll_now = None
             with anyio.CancelScope(shield=True):
                 await stream.aclose()

@@ -7,7 +7,8 @@ that many large replies in flight do not overflow it.
 Under stock asyncio a reader callback on the socket drains every queued datagram straight
 into the session (asyncio's datagram transport reads one per loop iteration); under uvloop its
 own datagram transport calls the session directly (it reads in C); under any other anyio
-backend (trio) a reader task drains the socket.
+backend (trio) a reader task drains the socket. Under every loop the session may also read the
+socket right after a send (``poll_now``) when that request is the only one in flight.
 """
 
 from __future__ import annotations
@@ -266,6 +267,15 @@ class UdpTransport(Transport):
         else:
             self._sock = sock
             task_group.start_soon(self._reader, sock, sink)
+            awaited = replies_awaited(sink)
+
+            def poll() -> None:
+                """Read what has already arrived, now (the reader task would wake for it).
+                A socket error is left to the reader, which meets it too and reports it."""
+                if self._sock is sock:
+                    _drain(sock.recv, sink, awaited)
+
+            self.poll_now = poll
 
     async def _reader(self, sock: socket.socket, sink: FrameSink) -> None:
         """The anyio driver: wait until readable, then drain every queued datagram."""
@@ -283,6 +293,7 @@ class UdpTransport(Transport):
             exc = err
         if self._sock is sock:
             self._sock = None
+            self.poll_now = None
             sock.close()
             sink.connection_lost(exc)
 
@@ -319,7 +330,7 @@ class UdpTransport(Transport):
 
     async def aclose(self) -> None:
         aio, sock = self._aio, self._sock
-        self._detach()
+        self._detach()  # poll_now too
         self._sock = None
         if aio is not None:
             aio.close()
