@@ -225,7 +225,7 @@ class Pool:
         of the URL), then raises :class:`FinsTimeout`; the attempt itself goes on (bounded by
         the transport's connect timeout) and serves later borrowers.
         """
-        if timeout is not None and not 0 < timeout < float("inf"):
+        if timeout is not None and not timeout > 0:  # math.inf: no bound but connect_timeout
             raise CommandError(f"timeout must be a positive number of seconds, got {timeout}")
         return _Lease(self, url, timeout)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import AsyncIterator, Callable
 
 import anyio
@@ -249,6 +250,24 @@ async def test_closing_the_pool_abandons_a_connect_in_progress(anyio_backend: ob
         tg.cancel_scope.cancel()
     assert len(outcome) == 1 and isinstance(outcome[0], ConnectionLost), outcome
     assert "the pool closed while connecting" in str(outcome[0])
+
+
+async def test_a_group_without_a_time_limit_still_scans(sim: Simulator) -> None:
+    """``timeout=math.inf`` is a valid group timeout (the poller and the session accept it);
+    the pool refused it when the poller started to pass it on, and every scan failed with
+    CommandError."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool() as pool:
+        poller = Poller(pool)
+        group = poller.add_group("g", url, {"a": "D0"}, timeout=math.inf)
+        scan = await poller.scan_once(group)
+        assert scan is not None and scan.error is None
+        assert scan["a"].quality is Quality.GOOD
+        async with pool.client(url, timeout=math.inf) as plc:
+            assert await plc.read("D0", timeout=math.inf) == [0]
+        for bad in (0.0, -1.0, math.nan):
+            with pytest.raises(CommandError):
+                pool.client(url, timeout=bad)
 
 
 async def test_a_borrower_waits_for_a_connection_at_most_its_timeout(
