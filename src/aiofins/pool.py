@@ -64,6 +64,8 @@ class _Entry:
     src: FinsAddress | None
     client: Client | None = None
     error: BaseException | None = None
+    #: ``error``'s traceback when it happened (each borrower is handed the error with it).
+    error_tb: TracebackType | None = None
     users: int = 0
     last_used: float = 0.0
     ready: anyio.Event = field(default_factory=anyio.Event)
@@ -328,7 +330,9 @@ class Pool:
             entry.users -= 1
             err = entry.error
             if isinstance(err, FinsError):
-                raise err
+                # The one error object of the entry: raised as is, its traceback would grow
+                # by every earlier borrower's frames.
+                raise err.with_traceback(entry.error_tb)
             raise ConnectionLost(f"{key}: {err}") from err
         return entry
 
@@ -348,6 +352,7 @@ class Pool:
                 entry.error = ConnectionLost(f"{entry.key}: the pool closed while connecting")
         except (OSError, FinsError) as exc:
             entry.error = exc
+            entry.error_tb = exc.__traceback__
             self._stats[entry.key].connect_failures += 1
             _, backoff = self._failures.get(entry.key, (0.0, 0.0))
             backoff = min(self.backoff_max, max(self.backoff_min, backoff * 2))

@@ -16,6 +16,7 @@ from aiofins.protocol.errors import (
     CommandError,
     ConnectionLost,
     DecodeError,
+    FinsTcpError,
     FinsTimeout,
 )
 from aiofins.simulator.faults import FaultPlan, FaultRule
@@ -268,6 +269,44 @@ async def test_a_group_without_a_time_limit_still_scans(sim: Simulator) -> None:
         for bad in (0.0, -1.0, math.nan):
             with pytest.raises(CommandError):
                 pool.client(url, timeout=bad)
+
+
+def _traceback_length(exc: BaseException) -> int:
+    n, tb = 0, exc.__traceback__
+    while tb is not None:
+        n, tb = n + 1, tb.tb_next
+    return n
+
+
+async def test_borrowers_sharing_a_failed_connect_get_its_traceback_once(
+    anyio_backend: object,
+) -> None:
+    """Every borrower waiting for a connect gets its one error object: re-raising it as is
+    made its traceback grow by each earlier borrower's frames (here 20 borrowers)."""
+    peer = TcpPeer(refuse=0x20, handshake_gate=anyio.Event())  # "all connections in use"
+    async with tcp_server(peer):
+        url = f"tcp://127.0.0.1:{peer.port}"
+        errors: list[BaseException] = []
+        lengths: set[int] = set()
+
+        async def borrow() -> None:
+            try:
+                async with pool.client(url):
+                    pass
+            except FinsTcpError as exc:
+                errors.append(exc)
+                lengths.add(_traceback_length(exc))  # as each borrower sees it
+
+        async with Pool(timeout=5) as pool:
+            with anyio.fail_after(5):
+                async with anyio.create_task_group() as tg:
+                    for _ in range(20):
+                        tg.start_soon(borrow)
+                    await anyio.wait_all_tasks_blocked()
+                    assert peer.handshake_gate is not None
+                    peer.handshake_gate.set()
+        assert len(errors) == 20
+        assert len(lengths) == 1, sorted(lengths)
 
 
 async def test_a_borrower_waits_for_a_connection_at_most_its_timeout(
