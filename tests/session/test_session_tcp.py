@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import gc
 import socket
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -15,6 +18,7 @@ from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.tcp import TcpDecoder, encode_message, encode_node_response
 from aiofins.session import Session
+from aiofins.session.background import Background
 from aiofins.transport import TcpTransport
 
 from .test_session_udp import read_params, reply, word_data
@@ -361,3 +365,50 @@ async def test_gathering_can_be_turned_off(anyio_backend: object) -> None:
                 (0x1000 | w).to_bytes(2, "big") for w in range(100)
             ]
             assert sid_order(peer.frames[:20]) == sorted(sid_order(peer.frames[:20]))
+
+
+class _Sink:
+    """A sink for a transport opened on its own (nothing is requested here)."""
+
+    def frame_received(self, frame: bytes, _addr: object = None, /) -> None:
+        pass
+
+    def frame_dropped(self, reason: str) -> None:
+        pass
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        pass
+
+
+async def test_a_connect_cancelled_at_any_step_logs_no_unretrieved_error(
+    anyio_backend: object,
+) -> None:
+    """A connect cancelled while asyncio makes its transport (after ``connection_made``)
+    closed the transport, whose ``connection_lost`` then failed the handshake future nobody
+    awaited any more: asyncio logged "Future exception was never retrieved" (the session
+    cancels its connection attempt whenever it closes during one). Cancelled after each
+    number of event-loop steps in turn, so one of them lands in that window."""
+    if anyio_backend == "trio":
+        pytest.skip("asyncio futures only")
+    loop = asyncio.get_running_loop()
+    logged: list[dict[str, object]] = []
+    handler = loop.get_exception_handler()
+    loop.set_exception_handler(lambda _, context: logged.append(context))
+    try:
+        async with tcp_server(TcpPeer()) as peer, anyio.create_task_group() as tg:
+            for steps in [*range(16)] * 4:
+                transport = TcpTransport("127.0.0.1", peer.port, connect_timeout=2)
+                task = asyncio.ensure_future(transport.open(_Sink(), Background(tg)))
+                for _ in range(steps):  # event-loop steps, not time
+                    await asyncio.sleep(0)
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+                await transport.aclose()
+                for _ in range(3):  # the transport's connection_lost runs in these steps
+                    await asyncio.sleep(0)
+            del task
+            gc.collect()
+    finally:
+        loop.set_exception_handler(handler)
+    assert [context.get("message") for context in logged] == []

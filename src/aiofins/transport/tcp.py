@@ -340,6 +340,11 @@ class TcpTransport(Transport):
                 proto.transport.write(encode_node_request(self.node))
                 self.local_node, self.remote_node = await proto.handshake
         except BaseException as exc:
+            handshake = proto.handshake
+            if not handshake.done():  # nobody awaits it now: no error for it to keep (and log)
+                handshake.cancel()
+            elif not handshake.cancelled():
+                handshake.exception()  # retrieved: not logged as never retrieved
             if proto.transport is not None:
                 proto.transport.close()
             if isinstance(exc, TimeoutError):
