@@ -252,3 +252,83 @@ def test_arbitrary_payload_after_valid_envelope(payload: bytes) -> None:
             parse(TcpMessage(1, 0, payload))
         except DecodeError:
             pass
+
+
+def _reference(stream: bytes, max_length: int) -> tuple[list[TcpMessage], int | None, int]:
+    """What a decoder owes for ``stream`` as a whole: its messages up to the first start no
+    stream can continue from (a wrong magic or length once 8 bytes of it are there), that
+    start's offset (``None``: none) and the bytes it then holds."""
+    out: list[TcpMessage] = []
+    pos = 0
+    while len(stream) - pos >= 8:
+        magic, length = stream[pos : pos + 4], int.from_bytes(stream[pos + 4 : pos + 8], "big")
+        if magic != tcp.MAGIC or not 8 <= length <= max_length:
+            return out, pos, len(stream) - pos
+        end = pos + 8 + length
+        if end > len(stream):
+            break
+        command = int.from_bytes(stream[pos + 8 : pos + 12], "big")
+        error_code = int.from_bytes(stream[pos + 12 : pos + 16], "big")
+        out.append(TcpMessage(command, error_code, stream[pos + 16 : end]))
+        pos = end
+    return out, None, len(stream) - pos
+
+
+def _damaged(message: bytes, how: int, value: int) -> bytes:
+    if how == 1:  # a wrong magic
+        return b"FINs" + message[4:]
+    if how == 2:  # a length out of range (0..7 or above the largest)
+        return message[:4] + value.to_bytes(4, "big") + message[8:]
+    return message
+
+
+damaged_stream_st = st.lists(
+    st.tuples(
+        st.builds(
+            TcpMessage,
+            st.sampled_from([2, 2, 2, 0, 1, 3, 6]),
+            st.one_of(st.just(0), st.integers(0, 0xFFFFFFFF)),
+            st.binary(max_size=40),
+        ),
+        st.sampled_from([0, 0, 0, 0, 0, 0, 1, 2]),
+        st.one_of(st.integers(0, 7), st.integers(49, 0xFFFFFFFF)),
+    ),
+    max_size=8,
+).map(lambda parts: b"".join(_damaged(m.encode(), how, v) for m, how, v in parts))
+
+
+@given(damaged_stream_st, st.data(), st.sampled_from([tcp.MAX_LENGTH, 48, 20]))
+def test_feed_frames_against_a_reference_with_damage_and_max_length(
+    stream: bytes, data: st.DataObject, max_length: int
+) -> None:
+    """Any split, any damage: the same messages as the whole stream gives, in order; the
+    error as soon as the 8 bytes of a bad start are there (not only once 16 are), with every
+    message before it handed over; the bad bytes kept and refused again on every later call."""
+    expected, bad_at, left = _reference(stream, max_length)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=12)))
+    decoder = TcpDecoder(max_length)
+    out: list[TcpMessage] = []
+
+    def frame(payload: bytes) -> None:
+        out.append(TcpMessage(TcpCommand.FRAME, 0, payload))
+
+    start = 0
+    for cut in [*cuts, len(stream)]:
+        try:
+            message = decoder.feed_frames(stream[start:cut], frame)
+            while message is not None:
+                out.append(message)
+                message = decoder.feed_frames(b"", frame)
+        except FinsTcpError as exc:
+            assert bad_at is not None and cut - bad_at >= 8  # not before the 8 bytes came
+            assert out == expected
+            assert exc.tcp_error_code in (TcpErrorCode.BAD_HEADER, TcpErrorCode.DATA_TOO_LONG)
+            assert decoder.buffered == cut - bad_at
+            with pytest.raises(FinsTcpError):
+                decoder.feed_frames(b"", frame)
+            return
+        assert bad_at is None or cut - bad_at < 8  # ... and not after either
+        start = cut
+    assert bad_at is None
+    assert out == expected
+    assert decoder.buffered == left
