@@ -412,3 +412,54 @@ async def test_a_connect_cancelled_at_any_step_logs_no_unretrieved_error(
     finally:
         loop.set_exception_handler(handler)
     assert [context.get("message") for context in logged] == []
+
+
+def _traceback_length(exc: BaseException) -> int:
+    n, tb = 0, exc.__traceback__
+    while tb is not None:
+        n, tb = n + 1, tb.tb_next
+    return n
+
+
+async def test_requests_failed_by_one_lost_connection_each_get_its_traceback_once() -> None:
+    """The requests in flight when the connection goes get its one error: under trio each
+    re-raised it as is, growing its traceback by every earlier request's frames."""
+    async with (
+        tcp_server(TcpPeer(answer=lambda c: None)) as peer,
+        tcp_session(peer, max_in_flight=20) as session,
+    ):
+        lengths: list[int] = []
+
+        async def call() -> None:
+            try:
+                await session.request(0x01, 0x01, read_params(0), timeout=5)
+            except ConnectionLost as exc:
+                lengths.append(_traceback_length(exc))  # as each caller sees it
+
+        with anyio.fail_after(5):
+            async with anyio.create_task_group() as tg:
+                for _ in range(20):
+                    tg.start_soon(call)
+                await anyio.wait_all_tasks_blocked()
+                await peer.drop()
+        assert len(lengths) == 20 and len(set(lengths)) == 1, lengths
+
+
+async def test_callers_queued_for_a_slot_when_the_session_closes_get_its_traceback_once() -> None:
+    async with tcp_server(TcpPeer(answer=lambda c: None)) as peer:
+        lengths: list[int] = []
+        async with tcp_session(peer, max_in_flight=1) as session:
+
+            async def call() -> None:
+                try:
+                    await session.request(0x01, 0x01, read_params(0), timeout=5)
+                except ConnectionLost as exc:
+                    lengths.append(_traceback_length(exc))
+
+            with anyio.fail_after(5):
+                async with anyio.create_task_group() as tg:
+                    for _ in range(20):
+                        tg.start_soon(call)
+                    await anyio.wait_all_tasks_blocked()
+                    await session.aclose()  # 1 request in flight, 19 queued for its slot
+        assert len(lengths) == 20 and len(set(lengths[1:])) == 1, lengths

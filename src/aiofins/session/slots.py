@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections import deque
+from types import TracebackType
 
 import anyio
 
@@ -79,12 +80,13 @@ class AsyncioPending(Pending):
 class EventPending(Pending):
     """Waits on an anyio event (trio and other backends)."""
 
-    __slots__ = ("event", "result")
+    __slots__ = ("event", "result", "traceback")
 
     def __init__(self, key: int, mrc: int, src: int) -> None:
         Pending.__init__(self, key, mrc, src)
         self.event = anyio.Event()
         self.result: bytes | BaseException | None = None
+        self.traceback: TracebackType | None = None
 
     def wake(self, frame: bytes) -> None:
         if self.result is None:
@@ -94,13 +96,17 @@ class EventPending(Pending):
     def fail(self, exc: BaseException) -> None:
         if self.result is None:
             self.result = exc
+            self.traceback = exc.__traceback__
             self.event.set()
 
     async def wait(self) -> bytes:
         await self.event.wait()
         result = self.result
         if isinstance(result, BaseException):
-            raise result
+            # One error fails every request in flight: raised as is, its traceback would
+            # grow by each earlier request's frames (so, as an asyncio future, with the
+            # traceback it came with).
+            raise result.with_traceback(self.traceback)
         assert result is not None
         return result
 
@@ -123,12 +129,13 @@ def no_free_sid_message(dest: object, timeout: float, quarantine: dict[int, floa
 
 
 class _Waiter:
-    __slots__ = ("error", "event", "granted")
+    __slots__ = ("error", "event", "granted", "traceback")
 
     def __init__(self) -> None:
         self.event = anyio.Event()
         self.granted = False
         self.error: BaseException | None = None
+        self.traceback: TracebackType | None = None
 
 
 class SlotQueue:
@@ -160,7 +167,7 @@ class SlotQueue:
             self._abandon(waiter)
             raise
         if waiter.error is not None:
-            raise waiter.error
+            raise waiter.error.with_traceback(waiter.traceback)  # shared: see EventPending
         if not waiter.granted:
             self._abandon(waiter)
             raise SlotTimeout(
@@ -187,6 +194,7 @@ class SlotQueue:
         while self.waiters:
             waiter = self.waiters.popleft()
             waiter.error = exc
+            waiter.traceback = exc.__traceback__
             waiter.event.set()
 
 
