@@ -286,6 +286,76 @@ async def test_calls_fail_fast_during_the_reconnect_backoff() -> None:
         tg.cancel_scope.cancel()
 
 
+async def test_a_loop_of_calls_failing_at_once_lets_other_tasks_run() -> None:
+    """Calls that fail without waiting (the reconnect backoff; a send on a socket that can no
+    longer send, before the transport has been told) yield once each: a caller retrying in
+    a loop with no sleep of its own does not starve the other tasks, and once the transport
+    has run, the next call connects again."""
+    async with tcp_server(TcpPeer()) as peer, tcp_session(peer, timeout=2) as session:
+        await session.request(0x01, 0x01, read_params(0))
+        ticks = 0
+
+        async def ticker() -> None:
+            nonlocal ticks
+            while True:
+                await anyio.sleep(0)
+                ticks += 1
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ticker)
+            await anyio.sleep(0)
+            # Our own end can no longer send: every send fails at once.
+            transport = session.transport
+            assert isinstance(transport, TcpTransport)
+            own = transport._raw or transport._aio.sock  # type: ignore[union-attr]
+            assert own is not None
+            own.shutdown(socket.SHUT_WR)
+            outcomes: list[str] = []
+            with anyio.fail_after(5):
+                for _ in range(50):
+                    try:
+                        await session.request(0x01, 0x01, read_params(1))
+                        outcomes.append("ok")
+                    except ConnectionLost:
+                        outcomes.append("lost")
+            tg.cancel_scope.cancel()
+        assert "lost" in outcomes and ticks >= outcomes.count("lost"), (ticks, outcomes)
+        assert outcomes[-1] == "ok" and peer.connections == 2, outcomes  # connected again
+
+
+async def test_a_loop_of_calls_in_the_reconnect_backoff_lets_other_tasks_run() -> None:
+    async with tcp_server(TcpPeer()) as peer:
+        session = tcp_session(peer, reconnect_backoff=(1.0, 1.0))
+        async with session:
+            await session.request(0x01, 0x01, read_params(0))
+            await peer.stop()  # gone: connections refused from now on
+            with anyio.fail_after(5):
+                while session.stats.disconnects == 0:
+                    await anyio.sleep(0.01)
+            with pytest.raises(ConnectionLost, match="cannot connect"):
+                await session.request(0x01, 0x01, read_params(0))  # refused: backoff 1 s
+            ticks = 0
+
+            async def ticker() -> None:
+                nonlocal ticks
+                while True:
+                    await anyio.sleep(0)
+                    ticks += 1
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(ticker)
+                await anyio.sleep(0)
+                start = ticks
+                for _ in range(20):  # a caller retrying with no pause of its own
+                    with pytest.raises(ConnectionLost, match="reconnect backoff"):
+                        await session.request(0x01, 0x01, read_params(0))
+                    with pytest.raises(ConnectionLost, match="reconnect backoff"):
+                        await session.request_many([(0x01, 0x01, read_params(0))] * 2)
+                passes = ticks - start
+                tg.cancel_scope.cancel()
+            assert passes >= 38, passes
+
+
 async def test_connect_refused_raises_connection_lost() -> None:
     async with tcp_server(TcpPeer()) as peer:
         port = peer.port

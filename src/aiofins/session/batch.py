@@ -22,6 +22,7 @@ from time import monotonic
 from typing import TYPE_CHECKING
 
 import anyio
+import anyio.lowlevel
 
 from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
@@ -399,7 +400,12 @@ async def request_many(
         return []
     transport = session.transport
     if transport.fast_send is None and not transport.is_open:
-        await session._ensure_open(timeout)
+        try:
+            await session._ensure_open(timeout)
+        except ConnectionLost as exc:  # often without a wait: see request()
+            traceback = exc.__traceback__
+            await anyio.lowlevel.cancel_shielded_checkpoint()
+            raise exc.with_traceback(traceback)  # noqa: B904 (the same error again)
     state = session._dest_state(dest)
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))
@@ -413,8 +419,13 @@ async def request_many(
         await batch.fut
     finally:
         batch.cleanup()
-    if batch.error is not None:
-        raise batch.error
+    error = batch.error
+    if error is not None:
+        if isinstance(error, ConnectionLost):  # often without a wait: see request()
+            traceback = error.__traceback__
+            await anyio.lowlevel.cancel_shielded_checkpoint()
+            raise error.with_traceback(traceback)
+        raise error
     results: list[Response] = batch.results  # type: ignore[assignment]  # all filled
     return results
 

@@ -358,7 +358,13 @@ class TcpTransport(Transport):
         self._aio = proto
         self.fast_send = proto.send
         self.fast_send_many = proto.send_many
-        self.poll_now = proto.poll
+        # A loop that waits for readiness and then reads (selector loops, uvloop) leaves the
+        # socket to whoever reads first; a proactor loop (Windows) has a read of its own
+        # outstanding at all times, which a read of ours would overtake.
+        if isinstance(loop, asyncio.SelectorEventLoop) or type(loop).__module__.startswith(
+            "uvloop"
+        ):
+            self.poll_now = proto.poll
 
     def _detach(self) -> None:
         self._aio = None
