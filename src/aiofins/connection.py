@@ -63,6 +63,9 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
             endpoint.host,
             endpoint.port,
             node=int(option_value("tcp_node", options.get("tcp_node", 0))),
+            connect_timeout=float(
+                option_value("tcp_connect_timeout", options.get("tcp_connect_timeout", 5.0))
+            ),
             gather_writes=bool(options.get("tcp_gather_writes", True)),
         )
     settings: dict[str, Any] = dict(endpoint.options)
@@ -119,8 +122,9 @@ async def default_addresses(
 
 
 #: Keyword options of :func:`connect` beyond its named parameters: serial settings, the
-#: client node asked for in the FINS/TCP handshake, and whether FINS/TCP gathers writes.
-TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node", "tcp_gather_writes"}
+#: client node asked for in the FINS/TCP handshake, the bound on a FINS/TCP connection
+#: attempt (connect and handshake), and whether FINS/TCP gathers writes.
+TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node", "tcp_connect_timeout", "tcp_gather_writes"}
 
 
 def check_options(options: Mapping[str, Any]) -> None:
@@ -155,8 +159,10 @@ async def connect(
     PLC (default 5; serial lines carry one at a time). Serial settings (``baudrate``,
     ``bytesize``, ``parity``, ``stopbits``, ``unit``, ``response_wait``) come from the URL
     query or keyword arguments. FINS/TCP: ``tcp_node`` asks the PLC for a client node (0: let
-    it allocate one); ``tcp_gather_writes=False`` writes each frame on its own instead of the
-    frames of one event-loop step together.
+    it allocate one); ``tcp_connect_timeout`` bounds a connection attempt, connect and
+    handshake (default 5 s; a call waits for it at most its own ``timeout``);
+    ``tcp_gather_writes=False`` writes each frame on its own instead of the frames of one
+    event-loop step together.
     """
     endpoint = parse_endpoint(url)
     check_options(transport_options)

@@ -43,13 +43,13 @@ def option_value(name: str, value: object) -> int | float | str:
 
     :class:`CommandError` says what is wrong (``?node=abc``, ``?baudrate=-1``, ...).
     """
-    if name == "timeout":
+    if name in ("timeout", "tcp_connect_timeout"):
         try:
             seconds = float(str(value))
         except ValueError:
             seconds = 0.0
         if not 0 < seconds < float("inf"):
-            raise CommandError(f"timeout must be a positive number of seconds; got {value!r}")
+            raise CommandError(f"{name} must be a positive number of seconds; got {value!r}")
         return seconds
     if name in ("node", "tcp_node"):
         return _integer(name, value, 0, 254)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import socket
+
+import anyio
 import pytest
 
 from aiofins.connection import connect
 from aiofins.endpoint import option_value, parse_endpoint
-from aiofins.protocol.errors import CommandError
+from aiofins.protocol.errors import CommandError, ConnectionLost
 
 
 @pytest.mark.parametrize(
@@ -47,6 +50,28 @@ async def test_connect_checks_serial_keywords_too(anyio_backend: object) -> None
     with pytest.raises(CommandError, match=r"tcp_node must be a whole number, 0\.\.254"):
         async with connect("tcp://127.0.0.1:1", tcp_node=300):
             pass
+    for bad in (0, -1, "soon", float("inf")):
+        with pytest.raises(CommandError, match="tcp_connect_timeout must be a positive number"):
+            async with connect("tcp://127.0.0.1:1", tcp_connect_timeout=bad):
+                pass
+
+
+@pytest.mark.anyio
+async def test_tcp_connect_timeout_bounds_a_handshake_that_never_comes(
+    anyio_backend: object,
+) -> None:
+    """A listener that never accepts: the kernel completes the TCP connect, nobody answers
+    the FINS/TCP node address request. The attempt ends after tcp_connect_timeout, not the
+    default 5 s."""
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(8)
+        url = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
+        start = anyio.current_time()
+        with pytest.raises(ConnectionLost, match=r"within 0\.3 s"):
+            async with connect(url, tcp_connect_timeout=0.3):
+                pass
+        assert anyio.current_time() - start < 2
 
 
 def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
