@@ -24,6 +24,7 @@ from aiofins.protocol.errors import ConnectionLost, FinsTcpError
 from aiofins.protocol.tcp import encode_message
 from aiofins.session import Session
 
+from .loop_passes import counting_loop_passes
 from .test_session_tcp import TcpPeer, tcp_server, tcp_session
 from .test_session_udp import (
     PLC,
@@ -92,29 +93,16 @@ def test_placed_reply_completes_without_a_loop_pass_yet_yields_every_33(
     async def main() -> None:
         async with udp_responder() as peer, session_for(peer) as session:
             sid, addr = await first_sid(peer, session)
-            ticks = 0
-
-            async def ticker() -> None:
-                nonlocal ticks
-                while True:
-                    await anyio.sleep(0)
-                    ticks += 1
-
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(ticker)
-                await anyio.sleep(0)
-                start = ticks
+            async with counting_loop_passes() as passes:
                 for i in range(1, 101):
                     value = (0x4000 + i).to_bytes(2, "big")
                     peer.sock.sendto(placed_reply((sid + i) & 0xFF, value), addr)
                     response = await session.request(0x01, 0x01, read_params(i))
                     assert response.data == value
-                passes = ticks - start
-                tg.cancel_scope.cancel()
-            # Waiting through the loop each time would give the ticker at least 100 turns;
-            # read-after-send gives it the forced turn after each streak of 32 (and one after
-            # the first request's miss).
-            assert 3 <= passes <= 15, passes
+            # Waiting through the loop each time would give other tasks at least 100 turns;
+            # read-after-send gives them the forced turn after each streak of 32 (and one
+            # after the first request's miss).
+            assert 3 <= passes.count <= 15, passes.count
             assert session.stats.completed == 101
             assert session.stats.unsolicited == 0 and session.stats.late_replies == 0
 
@@ -209,26 +197,16 @@ def test_trio_placed_replies_are_delivered_by_the_read_after_send() -> None:
         async with udp_responder() as peer, session_for(peer) as session:
             sid, addr = await first_sid(peer, session)
             counts = counting_deliveries(session)
-            ticks = 0
-
-            async def ticker() -> None:
-                nonlocal ticks
-                while True:
-                    await anyio.sleep(0)
-                    ticks += 1
-
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(ticker)
+            async with counting_loop_passes() as passes:
                 for i in range(1, 101):
                     value = (0x4000 + i).to_bytes(2, "big")
                     peer.sock.sendto(placed_reply((sid + i) & 0xFF, value), addr)
                     response = await session.request(0x01, 0x01, read_params(i))
                     assert response.data == value
-                tg.cancel_scope.cancel()
             # The first read may come too early (the one before was answered by the peer
             # after a pass); every other one finds its reply.
             assert counts[1] >= 98, counts
-            assert ticks >= 90  # a checkpoint per request: the ticker ran all along
+            assert passes.count >= 90  # a checkpoint per request: other tasks ran all along
             assert session.stats.completed == 101
 
     anyio.run(main, backend="trio")
@@ -256,26 +234,13 @@ def test_tcp_placed_reply_completes_without_a_loop_pass(options: dict[str, Any])
         async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
             assert session.transport.poll_now is not None
             sid, raw = await first_tcp_sid(peer, session)
-            ticks = 0
-
-            async def ticker() -> None:
-                nonlocal ticks
-                while True:
-                    await anyio.sleep(0)
-                    ticks += 1
-
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(ticker)
-                await anyio.sleep(0)
-                start = ticks
+            async with counting_loop_passes() as passes:
                 for i in range(1, 101):
                     value = (0x5000 + i).to_bytes(2, "big")
                     raw.send(tcp_placed((sid + i) & 0xFF, value))
                     response = await session.request(0x01, 0x01, read_params(i))
                     assert response.data == value
-                passes = ticks - start
-                tg.cancel_scope.cancel()
-            assert 3 <= passes <= 15, passes  # as over UDP: a turn per 33, not one per request
+            assert 3 <= passes.count <= 15, passes.count  # as over UDP: a turn per 33
             assert session.stats.completed == 101
             assert session.stats.unsolicited == 0 and session.stats.malformed == 0
 

@@ -21,6 +21,7 @@ from aiofins.session import Session
 from aiofins.session.background import Background
 from aiofins.transport import TcpTransport
 
+from .loop_passes import counting_loop_passes
 from .test_session_udp import read_params, reply, word_data
 
 pytestmark = pytest.mark.anyio
@@ -293,17 +294,7 @@ async def test_a_loop_of_calls_failing_at_once_lets_other_tasks_run() -> None:
     has run, the next call connects again."""
     async with tcp_server(TcpPeer()) as peer, tcp_session(peer, timeout=2) as session:
         await session.request(0x01, 0x01, read_params(0))
-        ticks = 0
-
-        async def ticker() -> None:
-            nonlocal ticks
-            while True:
-                await anyio.sleep(0)
-                ticks += 1
-
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(ticker)
-            await anyio.sleep(0)
+        async with counting_loop_passes() as passes:
             # Our own end can no longer send: every send fails at once.
             transport = session.transport
             assert isinstance(transport, TcpTransport)
@@ -318,8 +309,8 @@ async def test_a_loop_of_calls_failing_at_once_lets_other_tasks_run() -> None:
                         outcomes.append("ok")
                     except ConnectionLost:
                         outcomes.append("lost")
-            tg.cancel_scope.cancel()
-        assert "lost" in outcomes and ticks >= outcomes.count("lost"), (ticks, outcomes)
+        lost = outcomes.count("lost")
+        assert lost and passes.count >= lost, (passes.count, outcomes)
         assert outcomes[-1] == "ok" and peer.connections == 2, outcomes  # connected again
 
 
@@ -334,26 +325,13 @@ async def test_a_loop_of_calls_in_the_reconnect_backoff_lets_other_tasks_run() -
                     await anyio.sleep(0.01)
             with pytest.raises(ConnectionLost, match="cannot connect"):
                 await session.request(0x01, 0x01, read_params(0))  # refused: backoff 1 s
-            ticks = 0
-
-            async def ticker() -> None:
-                nonlocal ticks
-                while True:
-                    await anyio.sleep(0)
-                    ticks += 1
-
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(ticker)
-                await anyio.sleep(0)
-                start = ticks
+            async with counting_loop_passes() as passes:
                 for _ in range(20):  # a caller retrying with no pause of its own
                     with pytest.raises(ConnectionLost, match="reconnect backoff"):
                         await session.request(0x01, 0x01, read_params(0))
                     with pytest.raises(ConnectionLost, match="reconnect backoff"):
                         await session.request_many([(0x01, 0x01, read_params(0))] * 2)
-                passes = ticks - start
-                tg.cancel_scope.cancel()
-            assert passes >= 38, passes
+            assert passes.count >= 38, passes.count
 
 
 async def test_connect_refused_raises_connection_lost() -> None:
