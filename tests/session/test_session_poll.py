@@ -17,12 +17,14 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 import anyio
+import anyio.lowlevel
 import pytest
 from anyio.abc import SocketAttribute
 
-from aiofins.protocol.errors import ConnectionLost, FinsTcpError
+from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
 from aiofins.protocol.tcp import encode_message
 from aiofins.session import Session
+from aiofins.transport import TcpTransport
 
 from .loop_passes import counting_loop_passes
 from .test_session_tcp import TcpPeer, tcp_server, tcp_session
@@ -346,3 +348,39 @@ def test_tcp_broken_stream_found_by_the_read_after_send_ends_the_connection(
             assert peer.connections == 2 and session.stats.disconnects == 1
 
     run(main, options)
+
+
+def test_trio_tcp_broken_stream_read_after_send_while_the_reader_is_due_closes_it() -> None:
+    """Junk arrives and wakes the reader task; the request task runs first in that scheduler
+    batch (trio orders a batch at random) and its read after the send consumes the junk and
+    ends the connection. The reader, already woken (so not told by ``notify_closing``), found
+    nothing to read and waited on the socket again: the broken connection stayed open until
+    the session closed. Repeated until that order happened a few times."""
+
+    async def main() -> None:
+        found = 0
+        async with tcp_server(TcpPeer(answer=lambda c: None)) as peer:
+            for _ in range(40):
+                async with tcp_session(peer) as session:
+                    transport = session.transport
+                    assert isinstance(transport, TcpTransport)
+                    own = transport._raw
+                    assert own is not None
+                    fd = peer.streams[-1].extra(SocketAttribute.raw_socket).fileno()
+                    raw = socket.socket(fileno=os.dup(fd))
+                    peer.duplicates.append(raw)
+                    raw.send(b"HTTP/1.1 200 OK\r\n\r\n")
+                    await anyio.lowlevel.cancel_shielded_checkpoint()  # the reader is due
+                    try:
+                        await session.request(0x01, 0x01, read_params(1), timeout=0.2)
+                    except FinsTcpError:
+                        found += 1  # the read after the send met the junk first
+                    except FinsTimeout:
+                        pass  # the reader met it first; the request went on a new connection
+                    await anyio.wait_all_tasks_blocked()
+                    assert own.fileno() == -1  # the broken connection is closed
+                if found >= 4:
+                    break
+        assert found >= 4, found
+
+    anyio.run(main, backend="trio")

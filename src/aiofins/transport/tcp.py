@@ -419,6 +419,8 @@ class TcpTransport(Transport):
             raw = stream.extra(SocketAttribute.raw_socket)
             while True:
                 await anyio.wait_readable(raw)
+                if self._stream is not stream:  # ended by the read after a send, which
+                    break  # found the stream broken (and read what woke us): close it
                 try:
                     data = raw.recv(_RECV_SIZE)
                 except (BlockingIOError, InterruptedError):
