@@ -14,7 +14,7 @@ import anyio
 import pytest
 from anyio.abc import SocketAttribute, SocketStream, TaskStatus
 
-from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
+from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout, FrameError
 from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.tcp import TcpDecoder, encode_message, encode_node_response
 from aiofins.session import Session
@@ -512,3 +512,71 @@ async def test_callers_queued_for_a_slot_when_the_session_closes_get_its_traceba
                     await anyio.wait_all_tasks_blocked()
                     await session.aclose()  # 1 request in flight, 19 queued for its slot
         assert len(lengths) == 20 and len(set(lengths[1:])) == 1, lengths
+
+
+async def test_a_send_cancelled_part_way_through_a_frame_ends_the_connection(
+    anyio_backend: object,
+) -> None:
+    """The PLC stops reading; requests fill the socket's send buffer until one frame goes out
+    only in part and its sender waits for room. Cancelled there, the rest of that frame was
+    never written and the next frame followed the part on the same stream: the PLC read
+    garbage from then on. The connection must end instead; the next call reconnects."""
+    reading = anyio.Event()
+    received: list[bytes] = []  # the FINS frames the peer decoded, every connection
+    broken: list[FrameError] = []
+
+    async def handle(stream: SocketStream) -> None:
+        decoder = TcpDecoder()
+        async with stream:
+            try:
+                for msg in decoder.feed(await stream.receive()):
+                    if msg.command == 0:
+                        await stream.send(encode_node_response(0x21, 0x01))
+                await reading.wait()
+                while True:
+                    for msg in decoder.feed(await stream.receive()):
+                        received.append(msg.payload)
+                        await stream.send(
+                            encode_message(2, reply(msg.payload, 0, word_data(msg.payload)))
+                        )
+            except FrameError as exc:
+                broken.append(exc)
+            except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
+                pass
+
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1")
+    listener_sock = listener.extra(SocketAttribute.raw_socket)
+    listener_sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # accepted inherit it
+    port = listener.extra(SocketAttribute.local_port)
+    async with anyio.create_task_group() as server:
+        server.start_soon(listener.serve, handle)
+        session = Session(
+            TcpTransport("127.0.0.1", port, gather_writes=False),
+            source=FinsAddress(0, 0, 0),
+            dest=FinsAddress(0, 1, 0),
+            max_in_flight=200,
+            timeout=30,
+        )
+        async with session:
+            transport = session.transport
+            assert isinstance(transport, TcpTransport)
+            own = transport._raw or transport._aio.sock  # type: ignore[union-attr]
+            assert own is not None
+            own.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+            write = bytes.fromhex("8200000003E2") + bytes(1988)  # 994 words: ~2 KB a frame
+            with anyio.move_on_after(10) as scope:  # a bound: the writers block well before
+                async with anyio.create_task_group() as tg:
+                    for _ in range(200):
+                        tg.start_soon(session.request, 0x01, 0x02, write)
+                    await anyio.wait_all_tasks_blocked()  # the buffer full, writers waiting
+                    tg.cancel_scope.cancel()
+            assert not scope.cancelled_caught
+            reading.set()
+            with anyio.fail_after(5):
+                response = await session.request(0x01, 0x01, read_params(7))
+            assert response.data == (0x1007).to_bytes(2, "big")
+            assert received[-1][10:] == bytes.fromhex("0101") + read_params(7)
+            assert all(frame[10:12] == b"\x01\x02" for frame in received[:-1])
+            assert broken == []
+        server.cancel_scope.cancel()
+    await listener.aclose()

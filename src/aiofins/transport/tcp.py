@@ -19,6 +19,7 @@ is written on its own.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import socket
 from typing import cast
 
@@ -258,6 +259,7 @@ class TcpTransport(Transport):
         self.gather_writes = gather_writes
         self._stream: SocketStream | None = None
         self._raw: socket.socket | None = None  # the stream's socket (trio path)
+        self._sink: FrameSink | None = None  # whom the trio path reports to
         self._aio: _TcpProtocol | None = None
         self._send_lock = anyio.Lock()
         self.local_node: int | None = None
@@ -295,6 +297,7 @@ class TcpTransport(Transport):
                 await stream.aclose()
             raise
         self._stream = stream
+        self._sink = sink
         raw = self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once
         self._send_lock = anyio.Lock()
         task_group.start_soon(self._reader, stream, decoder, backlog, sink)
@@ -316,13 +319,20 @@ class TcpTransport(Transport):
                 error = _deliver_all(self, decoder, data, sink)
             except FrameError as exc:
                 error = exc
-            if error is not None and self._stream is stream:
-                self._stream = self._raw = None
-                self.poll_now = None
-                anyio.notify_closing(raw)
-                sink.connection_lost(error)
+            if error is not None:
+                self._end(stream, error)
 
         self.poll_now = poll
+
+    def _end(self, stream: SocketStream, error: BaseException) -> None:
+        """End ``stream``'s connection now, from a synchronous path (trio): detach, wake the
+        reader (which closes the socket) and report ``error``."""
+        if self._stream is stream and self._raw is not None and self._sink is not None:
+            raw = self._raw
+            self._stream = self._raw = None
+            self.poll_now = None
+            anyio.notify_closing(raw)
+            self._sink.connection_lost(error)
 
     async def _open_asyncio(self, sink: FrameSink) -> None:
         loop = asyncio.get_running_loop()
@@ -457,6 +467,7 @@ class TcpTransport(Transport):
         if stream is None or raw is None:
             raise ConnectionLost(f"{self.description} is not connected")
         data = encode_frame(frame)
+        sent = 0  # bytes of this message written: once some are, all must be, or none after
         try:
             lock = self._send_lock
             if not lock.locked():  # nobody mid-write: try the socket directly, no await
@@ -466,11 +477,26 @@ class TcpTransport(Transport):
                     sent = 0
                 if sent == len(data):
                     return
-                data = data[sent:]
             async with lock:  # the rest, in order, behind any other partial write
-                await stream.send(data)
+                if self._stream is not stream:  # ended while we waited for the lock
+                    raise anyio.ClosedResourceError
+                view = memoryview(data)
+                while sent < len(data):
+                    await anyio.wait_writable(raw)
+                    with contextlib.suppress(BlockingIOError, InterruptedError):
+                        sent += raw.send(view[sent:])
         except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError) as exc:
             raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
+        except BaseException:
+            if 0 < sent < len(data):  # cancelled part-way: what follows would be garbage
+                self._end(
+                    stream,
+                    ConnectionLost(
+                        f"connection to {self.description} ended: a send was cancelled "
+                        "part-way through a message"
+                    ),
+                )
+            raise
 
     async def aclose(self) -> None:
         proto = self._aio
