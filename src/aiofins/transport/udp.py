@@ -271,7 +271,9 @@ class UdpTransport(Transport):
 
             def poll() -> None:
                 """Read what has already arrived, now (the reader task would wake for it).
-                A socket error is left to the reader, which meets it too and reports it."""
+                ICMP errors are counted as in the reader; another socket error (none is
+                known to occur on a connected datagram socket) is dropped: the request
+                then times out."""
                 if self._sock is sock:
                     _drain(sock.recv, sink, awaited)
 
