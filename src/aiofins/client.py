@@ -327,12 +327,17 @@ class Client(CommandMethods):
         """
         if isinstance(tags, ReadPlan):
             plan = tags
-            self._check_plan_fits(plan)
+            if plan.cache.get("fits") is not self.limits:  # checked once per plan and limits
+                self._check_plan_fits(plan)
         else:
             plan = self.compile_tags(tags)
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
-            return plan.decode((await self._read_run(plan, 0, timeout),), (), errors)
+            mrc, src, params, request, _ = self._run_read(plan, 0)
+            response = await self.execute(
+                mrc, src, params, timeout=timeout, idempotent=request.IDEMPOTENT
+            )
+            return plan.decode((self._run_words(plan, 0, response),), (), errors)
         commands, multiple = self._scan_commands(plan)
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
         run_words = [self._run_words(plan, i, responses[i]) for i in range(n_runs)]
@@ -367,6 +372,7 @@ class Client(CommandMethods):
                 f"the tag plan has {' and '.join(too_big)}: compile it with this client "
                 "(compile_tags)"
             )
+        plan.cache["fits"] = limits
 
     def _scan_commands(
         self, plan: ReadPlan
@@ -406,14 +412,6 @@ class Client(CommandMethods):
             return values
         words: tuple[int, ...] = unpack(data)
         return words
-
-    async def _read_run(self, plan: ReadPlan, i: int, timeout: float | None) -> Sequence[int]:
-        """The words of the plan's run ``i``: one 0101 frame."""
-        mrc, src, params, request, _ = self._run_read(plan, i)
-        response = await self.execute(
-            mrc, src, params, timeout=timeout, idempotent=request.IDEMPOTENT
-        )
-        return self._run_words(plan, i, response)
 
 
 def _typed_start(address: AddressLike, vtype: ValueType, count: int) -> AddressLike:

@@ -140,19 +140,27 @@ class ReadPlan:
         encoding) raises :class:`DecodeError` naming it, or, given ``errors``, is left out and
         ``errors[name]`` says why (the other tags are decoded all the same).
         """
-        if len(run_words) != len(self.runs) or len(multiple_values) != len(self.multiple):
-            raise DecodeError("results do not match the plan's frames")
-        for run, values in zip(self.runs, run_words, strict=True):
-            if len(values) != run.count:
-                raise DecodeError(f"{run}: expected {run.count} words, got {len(values)}")
-        for frame, values in zip(self.multiple, multiple_values, strict=True):
-            if len(values) != len(frame):
-                raise DecodeError("0104 result has the wrong number of elements")
         cache = self.cache
-        if "steps" not in cache:
-            cache["steps"] = _compile_steps(self)
-        steps: list[_Step] = cache["steps"]
-        flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
+        steps: list[_Step] | None = cache.get("steps")
+        if steps is None:
+            steps = cache["steps"] = _compile_steps(self)
+            cache["lengths"] = (
+                tuple(run.count for run in self.runs),
+                tuple(len(frame) for frame in self.multiple),
+            )
+        # Every scan decodes here: compare the frames' lengths in one step and check each
+        # frame only to say which one is wrong.
+        run_lengths, multiple_lengths = cache["lengths"]
+        if (
+            tuple(map(len, run_words)) != run_lengths
+            or tuple(map(len, multiple_values)) != multiple_lengths
+        ):
+            raise self._length_error(run_words, multiple_values)
+        flat: Sequence[int]
+        if len(run_words) == 1 and not multiple_values:  # one frame: index its words as they are
+            flat = run_words[0]
+        else:
+            flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
         out: dict[str, Value] = {}
         for name, op, at, arg in steps:
             if op is _BIT:
@@ -179,6 +187,17 @@ class ReadPlan:
                         raise DecodeError(message) from None
                     errors[name] = message
         return out
+
+    def _length_error(
+        self, run_words: Sequence[Sequence[int]], multiple_values: Sequence[Sequence[int]]
+    ) -> DecodeError:
+        """Which frame's result has the wrong length (:meth:`decode` found one)."""
+        if len(run_words) != len(self.runs) or len(multiple_values) != len(self.multiple):
+            return DecodeError("results do not match the plan's frames")
+        for run, values in zip(self.runs, run_words, strict=True):
+            if len(values) != run.count:
+                return DecodeError(f"{run}: expected {run.count} words, got {len(values)}")
+        return DecodeError("0104 result has the wrong number of elements")
 
     def _text_of(self, name: str) -> str:
         return next((tag.text for tag in self.tags if tag.name == name), "?")

@@ -248,10 +248,12 @@ async def test_a_tag_plan_for_bigger_frames_is_refused_on_a_smaller_route(
         assert await ethernet.read_tags(plan) == {"first": 0, "last": 0}
     sent = sim.counters.requests
     async with connect(url, timeout=1, networks=(NetworkType.SYSMAC_LINK,)) as sysmac:
-        with pytest.raises(
-            CommandError, match=r"has 0101 frames of up to 501 words \(the route carries 269\): "
-        ):
-            await sysmac.read_tags(plan)
+        for _ in range(2):  # every time: the check's result is kept only for routes it fits
+            with pytest.raises(
+                CommandError,
+                match=r"has 0101 frames of up to 501 words \(the route carries 269\): ",
+            ):
+                await sysmac.read_tags(plan)
         assert sim.counters.requests == sent
         assert await sysmac.read_tags(tags) == {"first": 0, "last": 0}  # compiled for 269
 

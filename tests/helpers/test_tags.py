@@ -62,6 +62,20 @@ def test_decode_gives_typed_values() -> None:
     assert plan.decode([words], []) == {"temp": 1.5, "flag": True, "n": -1}
 
 
+def test_results_not_matching_the_plans_frames_are_refused() -> None:
+    tags = compile_tags({"temp": "D100:float32", "w": "D300"}).tags
+    plan = ReadPlan(tags, (WordRun(0x82, 100, 2),), ((MemoryAddress(0x82, 300, 0),),))
+    assert plan.decode([[0, 0x3FC0]], [[1]]) == {"temp": 1.5, "w": 1}
+    with pytest.raises(DecodeError, match="do not match the plan's frames"):
+        plan.decode([[0, 0x3FC0]], [])
+    with pytest.raises(DecodeError, match=r"words 100\.\.101: expected 2 words, got 1"):
+        plan.decode([[0]], [[1]])
+    with pytest.raises(DecodeError, match="0104 result has the wrong number of elements"):
+        plan.decode([[0, 0x3FC0]], [[1, 0]])
+    # A wrong result once does not spoil the plan for the next, right one.
+    assert plan.decode([[0, 0x3FC0]], [[7]]) == {"temp": 1.5, "w": 7}
+
+
 def test_a_hand_built_plan_missing_a_word_names_the_tag() -> None:
     plan = compile_tags({"temp": "D100:float32"})
     short = ReadPlan(plan.tags, (WordRun(0x82, 100, 1),), ())  # D101 in no frame
