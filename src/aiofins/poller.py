@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import TracebackType
@@ -36,7 +36,7 @@ from anyio.abc import TaskGroup
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from .endpoint import parse_endpoint
-from .pool import event_loop_clock
+from .pool import backend_sleep, event_loop_clock
 from .protocol.errors import CommandError, FinsError
 from .protocol.values import Value
 from .tags import ReadPlan, parse_tag
@@ -115,6 +115,7 @@ class Poller:
         self._receive: MemoryObjectReceiveStream[Snapshot] = receive
         self._tg: TaskGroup | None = None
         self._now = anyio.current_time
+        self._sleep: Callable[[float], Awaitable[None]] = anyio.sleep
 
     def add_group(
         self,
@@ -149,6 +150,7 @@ class Poller:
 
     async def __aenter__(self) -> Poller:
         self._now = event_loop_clock()
+        self._sleep = backend_sleep()
         self._tg = anyio.create_task_group()
         await self._tg.__aenter__()
         for group in self.groups.values():
@@ -174,12 +176,12 @@ class Poller:
         return self._receive.__aiter__()
 
     async def _run_group(self, group: ScanGroup) -> None:
-        clock = self._now
+        clock, sleep = self._now, self._sleep
         next_at = clock()
         while True:
             now = clock()
             if now < next_at:
-                await anyio.sleep(next_at - now)
+                await sleep(next_at - now)
             snapshot = await self.scan_once(group)
             if snapshot is not None:
                 try:  # room in the buffer: no extra trip through the event loop
@@ -203,11 +205,16 @@ class Poller:
         values: dict[str, Value] = {}
         bad: dict[str, str] = {}  # tags whose words are no value of their type
         try:
-            async with self.pool.client(group.url, timeout=group.timeout) as client:
+            # Borrowed without ``async with``: a ready session is lent with no coroutine.
+            lease = self.pool._lease(group.url, group.timeout)
+            client = lease.borrow_ready() or await lease.borrow()
+            try:
                 plan = group.plan
                 if plan is None:
                     plan = group.plan = client.compile_tags(group.tags)
                 values = await client.read_tags(plan, timeout=group.timeout, errors=bad)
+            finally:
+                lease.release()
         except FinsError as exc:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
@@ -215,6 +222,18 @@ class Poller:
         readings: dict[str, TagReading] = {}
         changed: set[str] = set()
         last = group._last
+        if error is None and not bad:  # the usual scan: every tag read, in the tag list's order
+            for name, read in values.items():
+                previous = last.get(name)
+                readings[name] = _reading(read, _GOOD, stamp, None)
+                if (
+                    previous is None
+                    or previous.quality is not _GOOD
+                    or not (previous.value is read or previous.value == read)
+                ):
+                    changed.add(name)
+            group._last = readings
+            return self._deliver(group, stamp, readings, changed, error)
         for name in group.tags:
             previous = last.get(name)
             failed = error if error is not None else bad.get(name)
@@ -236,6 +255,17 @@ class Poller:
                 changed.add(name)
             readings[name] = reading
         group._last = readings
+        return self._deliver(group, stamp, readings, changed, error)
+
+    def _deliver(
+        self,
+        group: ScanGroup,
+        stamp: float,
+        readings: dict[str, TagReading],
+        changed: set[str],
+        error: str | None,
+    ) -> Snapshot | None:
+        """The scan's snapshot (with ``changes_only``: its changed tags, None if none)."""
         if self.changes_only:
             if not changed:
                 return None

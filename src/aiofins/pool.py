@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-from collections.abc import Callable
+import math
+from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -55,6 +56,14 @@ def event_loop_clock() -> Callable[[], float]:
     if is_asyncio():
         return asyncio.get_running_loop().time
     return anyio.current_time
+
+
+def backend_sleep() -> Callable[[float], Awaitable[None]]:
+    """``anyio.sleep`` as a direct call: ``asyncio.sleep`` under asyncio (what anyio calls
+    after looking up the backend on every call). Other backends keep anyio's."""
+    if is_asyncio():
+        return asyncio.sleep
+    return anyio.sleep
 
 
 @dataclass(eq=False)
@@ -132,7 +141,18 @@ class _Lease:
         self.timeout = timeout
         self.entry: _Entry | None = None
 
-    async def __aenter__(self) -> Client:
+    def borrow_ready(self) -> Client | None:
+        """The client at once if a ready session can be lent without waiting, else None
+        (then :meth:`borrow` waits). A scan loop calls this and :meth:`release` directly:
+        no coroutine for the usual case."""
+        entry = self.pool._ready_entry(self.url)
+        if entry is None:
+            return None
+        self.entry = entry
+        return entry.client
+
+    async def borrow(self) -> Client:
+        """The client, once the endpoint's session is ready (:meth:`release` gives it back)."""
         pool = self.pool
         entry = pool._ready_entry(self.url)
         if entry is None:
@@ -141,12 +161,19 @@ class _Lease:
         assert entry.client is not None
         return entry.client
 
-    async def __aexit__(self, *exc_info: object) -> None:
+    def release(self) -> None:
+        """Give the client back (nothing if none was borrowed)."""
         entry = self.entry
         if entry is not None:
             self.entry = None
             entry.users -= 1
             entry.last_used = self.pool._now()
+
+    async def __aenter__(self) -> Client:
+        return await self.borrow()
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        self.release()
 
 
 class Pool:
@@ -227,6 +254,11 @@ class Pool:
         of the URL), then raises :class:`FinsTimeout`; the attempt itself goes on (bounded by
         the transport's connect timeout) and serves later borrowers.
         """
+        return self._lease(url, timeout)
+
+    def _lease(self, url: str, timeout: float | None = None) -> _Lease:
+        """:meth:`client`'s lease, also for the poller's scans (which borrow without
+        ``async with``: see :meth:`_Lease.borrow_ready`)."""
         if timeout is not None and not timeout > 0:  # math.inf: no bound but connect_timeout
             raise CommandError(f"timeout must be a positive number of seconds, got {timeout}")
         return _Lease(self, url, timeout)

@@ -138,6 +138,15 @@ async def test_poller_stale_quality_and_changes_only(sim: Simulator) -> None:
         assert fourth is not None
         assert fourth["a"].quality is Quality.STALE and fourth["a"].value == 0
         assert fourth.error is not None and "FinsTimeout" in fourth.error
+        sim.plan.rule = FaultRule()
+        fifth = await poller.scan_once(group)  # good again: same values, quality changed
+        assert fifth is not None and fifth.changed == {"a", "b"}
+        assert (fifth["a"].value, fifth["b"].value) == (0, 5)
+        assert {r.quality for r in fifth.readings.values()} == {Quality.GOOD}
+        assert await poller.scan_once(group) is None
+        (stats,) = pool.stats(url).values()
+        assert stats.in_use == 0  # every scan, good or failed, gave its client back
+        assert (group.scans, group.errors) == (6, 1)
 
 
 async def _until(condition: Callable[[], bool]) -> None:
