@@ -384,3 +384,45 @@ def test_trio_tcp_broken_stream_read_after_send_while_the_reader_is_due_closes_i
         assert found >= 4, found
 
     anyio.run(main, backend="trio")
+
+
+@pytest.mark.parametrize("options", ALL_LOOPS)
+def test_a_request_sent_among_others_turns_the_read_after_send_off_for_a_while(
+    options: dict[str, Any],
+) -> None:
+    """With concurrent callers, the one whose request is momentarily alone must not run its
+    round trips one after another through the read after the send while the others wait to
+    send theirs together (50 tasks over FINS/TCP on one core fell to a third). A request
+    sent while another is in flight turns the read off for the next 64 lone requests."""
+
+    async def main() -> None:
+        async with udp_responder() as peer, session_for(peer) as session:
+            sid, addr = await first_sid(peer, session)
+            counts = counting_deliveries(session)
+            sid = (sid + 1) & 0xFF
+            words = iter(range(1, 1000))
+
+            async def placed_request() -> None:
+                nonlocal sid
+                sid = (sid + 1) & 0xFF
+                peer.sock.sendto(placed_reply(sid, b"\x00\x07"), addr)
+                response = await session.request(0x01, 0x01, read_params(next(words)))
+                assert response.data == b"\x00\x07"
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(session.request, 0x01, 0x01, read_params(0))  # gets sid + 1
+                await anyio.wait_all_tasks_blocked()
+                for _ in range(5):  # sent while the other is in flight
+                    await placed_request()
+                peer.sock.sendto(placed_reply((sid - 5) & 0xFF, b"\x00\x00"), addr)
+            assert counts[0] <= 1 and counts[1] == 0, counts  # the first one, sent alone
+            before = list(counts)
+            for _ in range(64):  # alone again, but concurrency was seen: no read yet
+                await placed_request()
+            assert counts == before, counts
+            for _ in range(10):  # then reads again, and they find the placed replies
+                await placed_request()
+            assert counts[0] - before[0] >= 9 and counts[1] >= 8, counts
+            assert session.stats.completed == 81
+
+    run(main, options)
