@@ -580,3 +580,81 @@ async def test_a_send_cancelled_part_way_through_a_frame_ends_the_connection(
             assert broken == []
         server.cancel_scope.cancel()
     await listener.aclose()
+
+
+async def test_a_send_to_a_plc_that_stopped_reading_is_bounded_by_the_timeout(
+    anyio_backend: object,
+) -> None:
+    """The PLC stops reading: under trio a FINS/TCP send then waits for room in the socket,
+    and it waited with no bound but the caller's own cancellation. Every call ends within its
+    timeout instead (FinsTimeout), a frame left half-written ends the connection, and once
+    the PLC reads again the next call works."""
+    reading = anyio.Event()
+
+    async def handle(stream: SocketStream) -> None:
+        decoder = TcpDecoder()
+        async with stream:
+            try:
+                for msg in decoder.feed(await stream.receive()):
+                    if msg.command == 0:
+                        await stream.send(encode_node_response(0x21, 0x01))
+                await reading.wait()
+                while True:
+                    for msg in decoder.feed(await stream.receive()):
+                        if msg.command == 2:
+                            answer = reply(msg.payload, 0, word_data(msg.payload))
+                            await stream.send(encode_message(2, answer))
+            except (
+                FrameError,
+                anyio.EndOfStream,
+                anyio.BrokenResourceError,
+                anyio.ClosedResourceError,
+            ):
+                pass
+
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1")
+    listener.extra(SocketAttribute.raw_socket).setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    port = listener.extra(SocketAttribute.local_port)
+    async with anyio.create_task_group() as server:
+        server.start_soon(listener.serve, handle)
+        session = Session(
+            TcpTransport("127.0.0.1", port, gather_writes=False),
+            source=FinsAddress(0, 0, 0),
+            dest=FinsAddress(0, 1, 0),
+            max_in_flight=100,
+            timeout=0.5,
+        )
+        async with session:
+            transport = session.transport
+            assert isinstance(transport, TcpTransport)
+            own = transport._raw or transport._aio.sock  # type: ignore[union-attr]
+            assert own is not None
+            own.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+            write = bytes.fromhex("8200000003E2") + bytes(1988)  # 994 words: ~2 KB a frame
+            outcomes: list[str] = []
+
+            async def call() -> None:
+                try:
+                    await session.request(0x01, 0x02, write)
+                    outcomes.append("ok")
+                except FinsTimeout:
+                    outcomes.append("timeout")
+                except ConnectionLost:
+                    outcomes.append("lost")  # its connection ended under it
+
+            with anyio.fail_after(3):  # each call: 0.5 s; none may wait for the PLC
+                async with anyio.create_task_group() as tg:
+                    for _ in range(100):
+                        tg.start_soon(call)
+            assert len(outcomes) == 100 and "ok" not in outcomes, outcomes
+            assert outcomes.count("timeout") >= 50, outcomes
+            reading.set()
+            with anyio.fail_after(5):
+                while True:  # the connection may have ended: the next call reconnects
+                    try:
+                        response = await session.request(0x01, 0x01, read_params(7))
+                        break
+                    except ConnectionLost:
+                        await anyio.sleep(0.05)
+            assert response.data == (0x1007).to_bytes(2, "big")
+        server.cancel_scope.cancel()

@@ -570,7 +570,7 @@ class Session:
                             else:  # concurrent callers: see _polled
                                 self._poll_skip = _POLL_MAX_BACKOFF
                         else:
-                            await transport.send(frame)
+                            await transport.send(frame, timeout)
                             if fut is not None:
                                 pass
                             elif len(pending) == 1:  # trio: the same, no fair turn (every
@@ -585,6 +585,12 @@ class Session:
                                 self._poll_skip = _POLL_MAX_BACKOFF
                         frame = await (p.wait() if fut is None else fut)
                     except FinsTimeout:
+                        if not p.done:  # the send itself timed out: the PLC is not reading
+                            p.done = True
+                            pending.pop(key, None)
+                            self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
+                            self.stats.timeouts += 1
+                            raise
                         raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
                     except BaseException:
                         if not p.done:  # cancelled or failed to send: the reply may still come

@@ -82,8 +82,10 @@ class Transport(ABC):
         """Open (or re-open) the link; raise :class:`ConnectionLost`/``OSError`` on failure."""
 
     @abstractmethod
-    async def send(self, frame: bytes) -> None:
-        """Send one whole FINS frame; raise :class:`ConnectionLost` if the link is gone."""
+    async def send(self, frame: bytes, timeout: float | None = None) -> None:
+        """Send one whole FINS frame; raise :class:`ConnectionLost` if the link is gone, and
+        :class:`FinsTimeout` if the frame cannot be written within ``timeout`` seconds (a
+        stream whose peer stopped reading; the link is then ended if part of it went out)."""
 
     @abstractmethod
     async def aclose(self) -> None:

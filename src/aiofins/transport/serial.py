@@ -164,7 +164,7 @@ class SerialTransport(Transport):
             command, unit=self.unit, wait_time=self.response_wait, full_header=self._full_header
         )
 
-    async def send(self, frame: bytes) -> None:
+    async def send(self, frame: bytes, timeout: float | None = None) -> None:
         line = self._encode(frame)
         if self._aio is not None:
             self._aio.write(line)

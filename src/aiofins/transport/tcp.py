@@ -26,7 +26,7 @@ from typing import cast
 import anyio
 from anyio.abc import SocketAttribute, SocketStream
 
-from ..protocol.errors import ConnectionLost, FinsTcpError, FrameError
+from ..protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout, FrameError
 from ..protocol.tcp import (
     DEFAULT_PORT,
     TcpCommand,
@@ -459,9 +459,9 @@ class TcpTransport(Transport):
             with anyio.CancelScope(shield=True):
                 await stream.aclose()
 
-    async def send(self, frame: bytes) -> None:
+    async def send(self, frame: bytes, timeout: float | None = None) -> None:
         if self._aio is not None:
-            self._aio.send(frame)
+            self._aio.send(frame)  # buffered by the event loop: never waits
             return
         stream, raw = self._stream, self._raw
         if stream is None or raw is None:
@@ -477,14 +477,28 @@ class TcpTransport(Transport):
                     sent = 0
                 if sent == len(data):
                     return
-            async with lock:  # the rest, in order, behind any other partial write
-                if self._stream is not stream:  # ended while we waited for the lock
-                    raise anyio.ClosedResourceError
-                view = memoryview(data)
-                while sent < len(data):
-                    await anyio.wait_writable(raw)
-                    with contextlib.suppress(BlockingIOError, InterruptedError):
-                        sent += raw.send(view[sent:])
+            with anyio.move_on_after(timeout) as waited:
+                async with lock:  # the rest, in order, behind any other partial write
+                    if self._stream is not stream:  # ended while we waited for the lock
+                        raise anyio.ClosedResourceError
+                    view = memoryview(data)
+                    while sent < len(data):
+                        await anyio.wait_writable(raw)
+                        with contextlib.suppress(BlockingIOError, InterruptedError):
+                            sent += raw.send(view[sent:])
+            if waited.cancelled_caught:  # the PLC stopped reading: its window stays full
+                if sent:  # part of the frame is out: what follows would be garbage
+                    self._end(
+                        stream,
+                        ConnectionLost(
+                            f"connection to {self.description} ended: a frame could not be "
+                            f"written in whole within {timeout} s"
+                        ),
+                    )
+                raise FinsTimeout(
+                    f"cannot send to {self.description} within {timeout} s: the PLC does not "
+                    "read what was sent (its TCP receive window stays full)"
+                )
         except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError) as exc:
             raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
         except BaseException:

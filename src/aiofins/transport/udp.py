@@ -299,7 +299,8 @@ class UdpTransport(Transport):
             sock.close()
             sink.connection_lost(exc)
 
-    async def send(self, frame: bytes) -> None:
+    async def send(self, frame: bytes, timeout: float | None = None) -> None:
+        # A datagram socket's send buffer drains without the peer: no wait worth a bound.
         aio = self._aio
         if aio is not None:
             aio.send(frame)
