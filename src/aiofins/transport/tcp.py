@@ -300,7 +300,7 @@ class TcpTransport(Transport):
         self._sink = sink
         raw = self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once
         self._send_lock = anyio.Lock()
-        task_group.start_soon(self._reader, stream, decoder, backlog, sink)
+        task_group.start_soon(self._reader, stream, raw, decoder, backlog, sink)
 
         def poll() -> None:
             """Read what has already arrived, now, into the reader's decoder (the reader
@@ -414,6 +414,7 @@ class TcpTransport(Transport):
     async def _reader(
         self,
         stream: SocketStream,
+        raw: socket.socket,
         decoder: TcpDecoder,
         backlog: list[TcpMessage],
         sink: FrameSink,
@@ -426,7 +427,6 @@ class TcpTransport(Transport):
                     raise error
             # The socket itself, not stream.receive(): that tries a recv() before waiting,
             # which fails once per reply for a request/reply peer (two system calls each).
-            raw = stream.extra(SocketAttribute.raw_socket)
             while True:
                 await anyio.wait_readable(raw)
                 if self._stream is not stream:  # ended by the read after a send, which
@@ -486,31 +486,29 @@ class TcpTransport(Transport):
                         await anyio.wait_writable(raw)
                         with contextlib.suppress(BlockingIOError, InterruptedError):
                             sent += raw.send(view[sent:])
-            if waited.cancelled_caught:  # the PLC stopped reading: its window stays full
-                if sent:  # part of the frame is out: what follows would be garbage
-                    self._end(
-                        stream,
-                        ConnectionLost(
-                            f"connection to {self.description} ended: a frame could not be "
-                            f"written in whole within {timeout} s"
-                        ),
-                    )
-                raise FinsTimeout(
-                    f"cannot send to {self.description} within {timeout} s: the PLC does not "
-                    "read what was sent (its TCP receive window stays full)"
-                )
         except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError) as exc:
             raise wrap_os_error(exc, f"cannot send to {self.description}") from exc
         except BaseException:
-            if 0 < sent < len(data):  # cancelled part-way: what follows would be garbage
-                self._end(
-                    stream,
-                    ConnectionLost(
-                        f"connection to {self.description} ended: a send was cancelled "
-                        "part-way through a message"
-                    ),
-                )
+            if 0 < sent < len(data):
+                self._end_mid_frame(stream, "its send was cancelled")
             raise
+        if waited.cancelled_caught:  # the PLC stopped reading: its window stays full
+            if sent:
+                self._end_mid_frame(stream, f"not written in whole within {timeout} s")
+            raise FinsTimeout(
+                f"cannot send to {self.description} within {timeout} s: the PLC does not "
+                "read what was sent (its TCP receive window stays full)"
+            )
+
+    def _end_mid_frame(self, stream: SocketStream, why: str) -> None:
+        """End the connection of a frame left part-written: what followed it on the stream
+        would be garbage to the PLC."""
+        self._end(
+            stream,
+            ConnectionLost(
+                f"connection to {self.description} ended: a frame was left part-written ({why})"
+            ),
+        )
 
     async def aclose(self) -> None:
         proto = self._aio
