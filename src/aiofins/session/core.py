@@ -553,51 +553,37 @@ class Session:
                         fast_send = transport.fast_send
                         if fast_send is not None:
                             fast_send(frame)
-                            if fut is None:
-                                pass
-                            elif len(pending) == 1:
-                                poll = transport.poll_now
-                                if poll is not None:
-                                    if self._poll_skip:
-                                        self._poll_skip -= 1
-                                        self._poll_streak = 0
-                                    elif self._turn_due:  # fair turn: a bare yield
-                                        self._turn_due = False
-                                        await asyncio.sleep(0)
-                                    else:
-                                        poll()
-                                        self._polled(fut.done())
-                            else:  # concurrent callers: see _polled
-                                self._poll_skip = _POLL_MAX_BACKOFF
                         else:
                             await transport.send(frame, timeout)
-                            if fut is not None:
-                                pass
-                            elif len(pending) == 1:  # trio: the same, no fair turn (every
-                                poll = transport.poll_now  # wait is a checkpoint)
-                                if poll is not None:
-                                    if self._poll_skip:
-                                        self._poll_skip -= 1
-                                    else:
-                                        poll()
-                                        self._polled(p.done)
-                            else:
-                                self._poll_skip = _POLL_MAX_BACKOFF
+                        # Read-after-send (see _polled): for a request alone in flight.
+                        if len(pending) == 1:
+                            poll = transport.poll_now
+                            if poll is not None:
+                                if self._poll_skip:
+                                    self._poll_skip -= 1
+                                    self._poll_streak = 0
+                                elif self._turn_due:  # fair turn (asyncio only): a bare yield
+                                    self._turn_due = False
+                                    await asyncio.sleep(0)
+                                else:
+                                    poll()
+                                    self._polled(p.done)
+                        else:  # concurrent callers: see _polled
+                            self._poll_skip = _POLL_MAX_BACKOFF
                         frame = await (p.wait() if fut is None else fut)
-                    except FinsTimeout:
-                        if not p.done:  # the send itself timed out: the PLC is not reading
-                            p.done = True
-                            pending.pop(key, None)
-                            self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
-                            self.stats.timeouts += 1
-                            raise
-                        raise FinsTimeout(self._timeout_message(dest, mrc, src, timeout)) from None
-                    except BaseException:
+                    except BaseException as exc:
                         if not p.done:  # cancelled or failed to send: the reply may still come
                             p.done = True
                             pending.pop(key, None)
                             self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
-                            self.stats.cancelled += 1
+                            if isinstance(exc, FinsTimeout):  # the send timed out (trio TCP)
+                                self.stats.timeouts += 1
+                            else:
+                                self.stats.cancelled += 1
+                        elif isinstance(exc, FinsTimeout):  # the deadline passed: say why
+                            raise FinsTimeout(
+                                self._timeout_message(dest, mrc, src, timeout)
+                            ) from None
                         raise
                 finally:
                     if slots.waiters:
