@@ -19,7 +19,7 @@ import asyncio
 import struct
 from collections.abc import Sequence
 from time import monotonic
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import anyio
 import anyio.lowlevel
@@ -62,6 +62,20 @@ def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:
             end_code, network=frame[14], node=frame[15], command_code=command_code, data=frame[16:]
         )
     return error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+
+
+async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
+    """Raise ``exc`` after yielding to the event loop once.
+
+    A :class:`ConnectionLost` is often raised without any wait (the reconnect backoff, a send
+    on a link whose end the transport has not yet been told of): the yield lets a caller that
+    retries in a loop with no pause of its own leave the loop running, the transport's news
+    among it. The error may be shared by other callers, who re-raise it meanwhile: it is
+    raised with the traceback it has now.
+    """
+    traceback = exc.__traceback__
+    await anyio.lowlevel.cancel_shielded_checkpoint()
+    raise exc.with_traceback(traceback)
 
 
 def check_command(mrc: int, src: int, params: bytes) -> None:
@@ -402,10 +416,8 @@ async def request_many(
     if transport.fast_send is None and not transport.is_open:
         try:
             await session._ensure_open(timeout)
-        except ConnectionLost as exc:  # often without a wait: see request()
-            traceback = exc.__traceback__
-            await anyio.lowlevel.cancel_shielded_checkpoint()
-            raise exc.with_traceback(traceback)  # noqa: B904 (the same error again)
+        except ConnectionLost as exc:
+            await raise_after_a_turn(exc)
     state = session._dest_state(dest)
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))
@@ -421,10 +433,8 @@ async def request_many(
         batch.cleanup()
     error = batch.error
     if error is not None:
-        if isinstance(error, ConnectionLost):  # often without a wait: see request()
-            traceback = error.__traceback__
-            await anyio.lowlevel.cancel_shielded_checkpoint()
-            raise error.with_traceback(traceback)
+        if isinstance(error, ConnectionLost):
+            await raise_after_a_turn(error)
         raise error
     results: list[Response] = batch.results  # type: ignore[assignment]  # all filled
     return results

@@ -18,7 +18,6 @@ from types import TracebackType
 from typing import Any
 
 import anyio
-import anyio.lowlevel
 from anyio.abc import TaskGroup
 
 from ..protocol.endcodes import EndCode
@@ -39,6 +38,7 @@ from .batch import (
     _pack_head,
     check_command,
     end_code_error,
+    raise_after_a_turn,
     request_many,
 )
 from .deadlines import Deadlines
@@ -597,13 +597,7 @@ class Session:
                 self.stats.retries += 1
                 continue
             except ConnectionLost as exc:
-                # Often raised without waiting (reconnect backoff, a send on a link whose
-                # end the transport has not yet been told of): yield once, so a caller that
-                # retries in a loop lets the loop run, the transport's news among it. (The
-                # error may be shared by other callers, who re-raise it meanwhile: keep ours.)
-                traceback = exc.__traceback__
-                await anyio.lowlevel.cancel_shielded_checkpoint()
-                raise exc.with_traceback(traceback)  # noqa: B904 (the same error again)
+                await raise_after_a_turn(exc)
             raw = (frame[12] << 8) | frame[13]
             if not raw & _ERROR_BITS:
                 self.stats.completed += 1
