@@ -36,6 +36,13 @@ from .transport.udp import UdpTransport
 DEFAULT_TIMEOUT = 2.0
 
 
+def request_timeout(endpoint: Endpoint, timeout: float = DEFAULT_TIMEOUT) -> float:
+    """Seconds per attempt of a request to ``endpoint``: its URL's ``?timeout=``, else
+    ``timeout``."""
+    text = endpoint.option("timeout")
+    return float(option_value("timeout", text)) if text else timeout
+
+
 def _address(value: FinsAddress | str | None) -> FinsAddress | None:
     return None if value is None else FinsAddress.of(value)
 
@@ -170,7 +177,6 @@ async def connect(
     route = limits or limits_for(
         *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
     )
-    timeout_text = endpoint.option("timeout")
     transport = make_transport(endpoint, **transport_options)
     session = Session(
         transport,
@@ -178,7 +184,7 @@ async def connect(
         dest=d,
         gct=gct,
         max_in_flight=5 if max_in_flight is None else max_in_flight,
-        timeout=float(option_value("timeout", timeout_text)) if timeout_text else timeout,
+        timeout=request_timeout(endpoint, timeout),
         retries=retries,
     )
     async with session:

@@ -39,8 +39,14 @@ import anyio
 from anyio.abc import TaskGroup
 
 from .client import Client
-from .connection import DEFAULT_TIMEOUT, check_options, connect, default_addresses
-from .endpoint import Endpoint, option_value, parse_endpoint
+from .connection import (
+    DEFAULT_TIMEOUT,
+    check_options,
+    connect,
+    default_addresses,
+    request_timeout,
+)
+from .endpoint import parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
 from .protocol.header import FinsAddress
 from .session import SessionStats
@@ -151,11 +157,9 @@ class _Lease:
         return entry.client
 
     async def borrow(self) -> Client:
-        """The client, once the endpoint's session is ready (:meth:`release` gives it back)."""
-        pool = self.pool
-        entry = pool._ready_entry(self.url)
-        if entry is None:
-            entry = await pool._acquire(self.url, self.timeout)
+        """The client, once the endpoint's session is ready, where :meth:`borrow_ready` had
+        none at once (:meth:`release` gives it back)."""
+        entry = await self.pool._acquire(self.url, self.timeout)
         self.entry = entry
         assert entry.client is not None
         return entry.client
@@ -169,7 +173,7 @@ class _Lease:
             entry.last_used = self.pool._now()
 
     async def __aenter__(self) -> Client:
-        return await self.borrow()
+        return self.borrow_ready() or await self.borrow()
 
     async def __aexit__(self, *exc_info: object) -> None:
         self.release()
@@ -296,14 +300,6 @@ class Pool:
             return best
         return None
 
-    def _borrow_timeout(self, endpoint: Endpoint) -> float:
-        """How long a borrower waits for a connection by default: the request timeout the
-        endpoint's sessions get (the URL's ``?timeout=`` first, as :func:`connect` does)."""
-        text = endpoint.option("timeout")
-        if text:
-            return float(option_value("timeout", text))
-        return float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
-
     async def _acquire(self, url: str, timeout: float | None = None) -> _Entry:
         """The slow path of lending (:meth:`_ready_entry` found no session to lend)."""
         if self._closed:
@@ -344,9 +340,11 @@ class Pool:
                 entry = idle
             entry.users += 1
         if not entry.ready.is_set():
-            wait = self._borrow_timeout(endpoint) if timeout is None else timeout
+            if timeout is None:  # the request timeout the endpoint's sessions get
+                default = float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
+                timeout = request_timeout(endpoint, default)
             try:
-                with anyio.move_on_after(wait):
+                with anyio.move_on_after(timeout):
                     await entry.ready.wait()
             except BaseException:  # the borrower was cancelled: it no longer uses the entry
                 entry.users -= 1
@@ -354,7 +352,7 @@ class Pool:
             if not entry.ready.is_set():  # the attempt goes on: a later borrower may use it
                 entry.users -= 1
                 raise FinsTimeout(
-                    f"{key}: no connection within {wait} s: a connection attempt is still "
+                    f"{key}: no connection within {timeout} s: a connection attempt is still "
                     "in progress (a later borrower uses it once it succeeds)"
                 )
         if entry.error is not None:
