@@ -16,6 +16,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
+from .transport.base import url_host
 
 DEFAULT_PORT = 9600
 
@@ -91,8 +92,7 @@ class Endpoint:
     def key(self) -> str:
         if self.scheme == "serial":
             return f"serial://{self.device}"
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{self.scheme}://{host}:{self.port}"
+        return f"{self.scheme}://{url_host(self.host)}:{self.port}"
 
     def option(self, name: str, default: str | None = None) -> str | None:
         for key, value in self.options:

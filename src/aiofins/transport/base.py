@@ -102,6 +102,16 @@ def replies_awaited(sink: FrameSink) -> Sized:
     return awaited
 
 
+def url_host(host: str) -> str:
+    """``host`` as a URL writes it: an IPv6 address in brackets (``[::1]``)."""
+    return f"[{host}]" if ":" in host else host
+
+
+def is_uvloop(loop: object) -> bool:
+    """Whether ``loop`` is uvloop's (its transports are not asyncio's subclasses)."""
+    return type(loop).__module__.startswith("uvloop")
+
+
 def is_asyncio() -> bool:
     """True when running under asyncio (stock or uvloop): the callback fast path applies.
 

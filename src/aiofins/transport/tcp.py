@@ -38,7 +38,16 @@ from ..protocol.tcp import (
     parse_node_response,
     tcp_error_meaning,
 )
-from .base import FrameSink, TaskSpawner, Transport, is_asyncio, replies_awaited, wrap_os_error
+from .base import (
+    FrameSink,
+    TaskSpawner,
+    Transport,
+    is_asyncio,
+    is_uvloop,
+    replies_awaited,
+    url_host,
+    wrap_os_error,
+)
 
 #: Bytes asked of one read-after-send recv(): a few replies of the largest FINS frame.
 _RECV_SIZE = 65536
@@ -271,8 +280,7 @@ class TcpTransport(Transport):
 
     @property
     def description(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"tcp://{host}:{self.port}"
+        return f"tcp://{url_host(self.host)}:{self.port}"
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:
@@ -371,9 +379,7 @@ class TcpTransport(Transport):
         # A loop that waits for readiness and then reads (selector loops, uvloop) leaves the
         # socket to whoever reads first; a proactor loop (Windows) has a read of its own
         # outstanding at all times, which a read of ours would overtake.
-        if isinstance(loop, asyncio.SelectorEventLoop) or type(loop).__module__.startswith(
-            "uvloop"
-        ):
+        if isinstance(loop, asyncio.SelectorEventLoop) or is_uvloop(loop):
             self.poll_now = proto.poll
 
     def _detach(self) -> None:

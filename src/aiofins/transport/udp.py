@@ -28,7 +28,9 @@ from .base import (
     TaskSpawner,
     Transport,
     is_asyncio,
+    is_uvloop,
     replies_awaited,
+    url_host,
     wrap_os_error,
 )
 
@@ -211,8 +213,7 @@ class UdpTransport(Transport):
 
     @property
     def description(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"udp://{host}:{self.port}"
+        return f"udp://{url_host(self.host)}:{self.port}"
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -250,7 +251,7 @@ class UdpTransport(Transport):
             raise wrap_os_error(exc, f"cannot open {self.description}") from exc
         if is_asyncio():
             loop = asyncio.get_running_loop()
-            if type(loop).__module__.startswith("uvloop"):
+            if is_uvloop(loop):
                 proto = _UvloopProtocol(self, sink)
                 proto._raw_send = sock.send  # our own socket object: connected, non-blocking
                 proto._raw_recv = sock.recv
