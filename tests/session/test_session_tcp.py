@@ -514,48 +514,54 @@ async def test_callers_queued_for_a_slot_when_the_session_closes_get_its_traceba
         assert len(lengths) == 20 and len(set(lengths[1:])) == 1, lengths
 
 
-async def test_a_send_cancelled_part_way_through_a_frame_ends_the_connection(
-    anyio_backend: object,
-) -> None:
-    """The PLC stops reading; requests fill the socket's send buffer until one frame goes out
-    only in part and its sender waits for room. Cancelled there, the rest of that frame was
-    never written and the next frame followed the part on the same stream: the PLC read
-    garbage from then on. The connection must end instead; the next call reconnects."""
-    reading = anyio.Event()
-    received: list[bytes] = []  # the FINS frames the peer decoded, every connection
-    broken: list[FrameError] = []
+@dataclass
+class StalledPlc:
+    """A FINS/TCP peer that answers the node-address handshake, then reads nothing until
+    ``reading`` is set (its 4 KB receive buffer fills), then answers every read or write."""
 
-    async def handle(stream: SocketStream) -> None:
+    reading: anyio.Event = field(default_factory=anyio.Event)
+    received: list[bytes] = field(default_factory=list)  # the frames decoded, all connections
+    broken: list[FrameError] = field(default_factory=list)  # the stream turned to garbage
+
+    async def handle(self, stream: SocketStream) -> None:
         decoder = TcpDecoder()
         async with stream:
             try:
                 for msg in decoder.feed(await stream.receive()):
                     if msg.command == 0:
                         await stream.send(encode_node_response(0x21, 0x01))
-                await reading.wait()
+                await self.reading.wait()
                 while True:
                     for msg in decoder.feed(await stream.receive()):
-                        received.append(msg.payload)
-                        await stream.send(
-                            encode_message(2, reply(msg.payload, 0, word_data(msg.payload)))
-                        )
+                        if msg.command == 2:
+                            self.received.append(msg.payload)
+                            answer = reply(msg.payload, 0, word_data(msg.payload))
+                            await stream.send(encode_message(2, answer))
             except FrameError as exc:
-                broken.append(exc)
+                self.broken.append(exc)
             except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
                 pass
 
+
+#: A 994-word write (0102): about 2 KB a frame, to fill socket buffers with few requests.
+BIG_WRITE = bytes.fromhex("8200000003E2") + bytes(1988)
+
+
+@asynccontextmanager
+async def stalled_plc_session(**options: object) -> AsyncIterator[tuple[StalledPlc, Session]]:
+    """A :class:`StalledPlc` and a session to it whose socket sends through a 4 KB buffer."""
+    plc = StalledPlc()
     listener = await anyio.create_tcp_listener(local_host="127.0.0.1")
     listener_sock = listener.extra(SocketAttribute.raw_socket)
     listener_sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # accepted inherit it
     port = listener.extra(SocketAttribute.local_port)
     async with anyio.create_task_group() as server:
-        server.start_soon(listener.serve, handle)
+        server.start_soon(listener.serve, plc.handle)
         session = Session(
             TcpTransport("127.0.0.1", port, gather_writes=False),
             source=FinsAddress(0, 0, 0),
             dest=FinsAddress(0, 1, 0),
-            max_in_flight=200,
-            timeout=30,
+            **options,  # type: ignore[arg-type]
         )
         async with session:
             transport = session.transport
@@ -563,23 +569,33 @@ async def test_a_send_cancelled_part_way_through_a_frame_ends_the_connection(
             own = transport._raw or transport._aio.sock  # type: ignore[union-attr]
             assert own is not None
             own.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
-            write = bytes.fromhex("8200000003E2") + bytes(1988)  # 994 words: ~2 KB a frame
-            with anyio.move_on_after(10) as scope:  # a bound: the writers block well before
-                async with anyio.create_task_group() as tg:
-                    for _ in range(200):
-                        tg.start_soon(session.request, 0x01, 0x02, write)
-                    await anyio.wait_all_tasks_blocked()  # the buffer full, writers waiting
-                    tg.cancel_scope.cancel()
-            assert not scope.cancelled_caught
-            reading.set()
-            with anyio.fail_after(5):
-                response = await session.request(0x01, 0x01, read_params(7))
-            assert response.data == (0x1007).to_bytes(2, "big")
-            assert received[-1][10:] == bytes.fromhex("0101") + read_params(7)
-            assert all(frame[10:12] == b"\x01\x02" for frame in received[:-1])
-            assert broken == []
+            yield plc, session
         server.cancel_scope.cancel()
     await listener.aclose()
+
+
+async def test_a_send_cancelled_part_way_through_a_frame_ends_the_connection(
+    anyio_backend: object,
+) -> None:
+    """The PLC stops reading; requests fill the socket's send buffer until one frame goes out
+    only in part and its sender waits for room. Cancelled there, the rest of that frame was
+    never written and the next frame followed the part on the same stream: the PLC read
+    garbage from then on. The connection must end instead; the next call reconnects."""
+    async with stalled_plc_session(max_in_flight=200, timeout=30) as (plc, session):
+        with anyio.move_on_after(10) as scope:  # a bound: the writers block well before
+            async with anyio.create_task_group() as tg:
+                for _ in range(200):
+                    tg.start_soon(session.request, 0x01, 0x02, BIG_WRITE)
+                await anyio.wait_all_tasks_blocked()  # the buffer full, writers waiting
+                tg.cancel_scope.cancel()
+        assert not scope.cancelled_caught
+        plc.reading.set()
+        with anyio.fail_after(5):
+            response = await session.request(0x01, 0x01, read_params(7))
+        assert response.data == (0x1007).to_bytes(2, "big")
+        assert plc.received[-1][10:] == bytes.fromhex("0101") + read_params(7)
+        assert all(frame[10:12] == b"\x01\x02" for frame in plc.received[:-1])
+        assert plc.broken == []
 
 
 async def test_a_send_to_a_plc_that_stopped_reading_is_bounded_by_the_timeout(
@@ -589,72 +605,30 @@ async def test_a_send_to_a_plc_that_stopped_reading_is_bounded_by_the_timeout(
     and it waited with no bound but the caller's own cancellation. Every call ends within its
     timeout instead (FinsTimeout), a frame left half-written ends the connection, and once
     the PLC reads again the next call works."""
-    reading = anyio.Event()
+    async with stalled_plc_session(max_in_flight=100, timeout=0.5) as (plc, session):
+        outcomes: list[str] = []
 
-    async def handle(stream: SocketStream) -> None:
-        decoder = TcpDecoder()
-        async with stream:
+        async def call() -> None:
             try:
-                for msg in decoder.feed(await stream.receive()):
-                    if msg.command == 0:
-                        await stream.send(encode_node_response(0x21, 0x01))
-                await reading.wait()
-                while True:
-                    for msg in decoder.feed(await stream.receive()):
-                        if msg.command == 2:
-                            answer = reply(msg.payload, 0, word_data(msg.payload))
-                            await stream.send(encode_message(2, answer))
-            except (
-                FrameError,
-                anyio.EndOfStream,
-                anyio.BrokenResourceError,
-                anyio.ClosedResourceError,
-            ):
-                pass
+                await session.request(0x01, 0x02, BIG_WRITE)
+                outcomes.append("ok")
+            except FinsTimeout:
+                outcomes.append("timeout")
+            except ConnectionLost:
+                outcomes.append("lost")  # its connection ended under it
 
-    listener = await anyio.create_tcp_listener(local_host="127.0.0.1")
-    listener.extra(SocketAttribute.raw_socket).setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    port = listener.extra(SocketAttribute.local_port)
-    async with anyio.create_task_group() as server:
-        server.start_soon(listener.serve, handle)
-        session = Session(
-            TcpTransport("127.0.0.1", port, gather_writes=False),
-            source=FinsAddress(0, 0, 0),
-            dest=FinsAddress(0, 1, 0),
-            max_in_flight=100,
-            timeout=0.5,
-        )
-        async with session:
-            transport = session.transport
-            assert isinstance(transport, TcpTransport)
-            own = transport._raw or transport._aio.sock  # type: ignore[union-attr]
-            assert own is not None
-            own.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
-            write = bytes.fromhex("8200000003E2") + bytes(1988)  # 994 words: ~2 KB a frame
-            outcomes: list[str] = []
-
-            async def call() -> None:
+        with anyio.fail_after(3):  # each call: 0.5 s; none may wait for the PLC
+            async with anyio.create_task_group() as tg:
+                for _ in range(100):
+                    tg.start_soon(call)
+        assert len(outcomes) == 100 and "ok" not in outcomes, outcomes
+        assert outcomes.count("timeout") >= 50, outcomes
+        plc.reading.set()
+        with anyio.fail_after(5):
+            while True:  # the connection may have ended: the next call reconnects
                 try:
-                    await session.request(0x01, 0x02, write)
-                    outcomes.append("ok")
-                except FinsTimeout:
-                    outcomes.append("timeout")
+                    response = await session.request(0x01, 0x01, read_params(7))
+                    break
                 except ConnectionLost:
-                    outcomes.append("lost")  # its connection ended under it
-
-            with anyio.fail_after(3):  # each call: 0.5 s; none may wait for the PLC
-                async with anyio.create_task_group() as tg:
-                    for _ in range(100):
-                        tg.start_soon(call)
-            assert len(outcomes) == 100 and "ok" not in outcomes, outcomes
-            assert outcomes.count("timeout") >= 50, outcomes
-            reading.set()
-            with anyio.fail_after(5):
-                while True:  # the connection may have ended: the next call reconnects
-                    try:
-                        response = await session.request(0x01, 0x01, read_params(7))
-                        break
-                    except ConnectionLost:
-                        await anyio.sleep(0.05)
-            assert response.data == (0x1007).to_bytes(2, "big")
-        server.cancel_scope.cancel()
+                    await anyio.sleep(0.05)
+        assert response.data == (0x1007).to_bytes(2, "big")
