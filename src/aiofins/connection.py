@@ -29,7 +29,7 @@ from .protocol.values import WordOrder
 from .session import Session
 from .transport.base import Transport
 from .transport.serial import SerialTransport
-from .transport.tcp import TcpTransport
+from .transport.tcp import DEFAULT_CONNECT_TIMEOUT, TcpTransport
 from .transport.udp import UdpTransport
 
 #: Seconds per attempt of a request when neither ``timeout=`` nor ``?timeout=`` says.
@@ -71,7 +71,10 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
             endpoint.port,
             node=int(option_value("tcp_node", options.get("tcp_node", 0))),
             connect_timeout=float(
-                option_value("tcp_connect_timeout", options.get("tcp_connect_timeout", 5.0))
+                option_value(
+                    "tcp_connect_timeout",
+                    options.get("tcp_connect_timeout", DEFAULT_CONNECT_TIMEOUT),
+                )
             ),
             gather_writes=bool(options.get("tcp_gather_writes", True)),
         )

@@ -49,6 +49,8 @@ from .base import (
     wrap_os_error,
 )
 
+#: Seconds a connection attempt (TCP connect and node-address handshake) may take.
+DEFAULT_CONNECT_TIMEOUT = 5.0
 #: Bytes asked of one read-after-send recv(): a few replies of the largest FINS frame.
 _RECV_SIZE = 65536
 
@@ -252,7 +254,7 @@ class TcpTransport(Transport):
         port: int = DEFAULT_PORT,
         *,
         node: int = 0,
-        connect_timeout: float = 5.0,
+        connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
         gather_writes: bool = True,
     ) -> None:
         if not 0 <= node <= 0xFE:
