@@ -89,10 +89,30 @@ class Endpoint:
     options: tuple[tuple[str, str], ...] = field(default=())
 
     @property
-    def key(self) -> str:
+    def link(self) -> str:
+        """Where frames go: ``scheme://host:port`` (``serial://device``), options left out.
+
+        Every session to one link shares what the link has only once: a UDP peer's reply
+        port per source node, a serial line.
+        """
         if self.scheme == "serial":
             return f"serial://{self.device}"
         return f"{self.scheme}://{url_host(self.host)}:{self.port}"
+
+    @property
+    def key(self) -> str:
+        """The link and every option that changes what is addressed or how, in one
+        spelling: ``udp://h:9600?dest=3.5.0&timeout=0.3``. A pool shares a session only
+        among URLs with the same key. An option given twice counts by its first value (the
+        one :meth:`option` and ``connect`` use)."""
+        seen: dict[str, str] = {}
+        for name, value in self.options:
+            if name not in seen:
+                seen[name] = _canonical(name, value)
+        if not seen:
+            return self.link
+        query = "&".join(f"{name}={seen[name]}" for name in sorted(seen))
+        return f"{self.link}?{query}"
 
     def option(self, name: str, default: str | None = None) -> str | None:
         for key, value in self.options:
@@ -147,6 +167,13 @@ def parse_endpoint(url: str) -> Endpoint:
             FinsAddress.parse(value)
         _check(url, key, value)
     return Endpoint(scheme, host=host, port=port, options=options)
+
+
+def _canonical(name: str, value: str) -> str:
+    """One spelling of an option's value (``?node=07`` is ``node=7``, ``?dest=3.5`` ...)."""
+    if name in ("dest", "src"):
+        return str(FinsAddress.parse(value))
+    return str(option_value(name, value))
 
 
 def _check(url: str, key: str, value: str) -> None:

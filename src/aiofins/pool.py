@@ -1,6 +1,9 @@
 """A connection pool keyed by endpoint: share sessions among tasks, keep them healthy.
 
-``pool.client(url)`` lends a :class:`~aiofins.client.Client` for the endpoint. One session
+``pool.client(url)`` lends a :class:`~aiofins.client.Client` for the endpoint. Sessions are
+shared by :attr:`Endpoint.key <aiofins.endpoint.Endpoint.key>`: host, port and every option
+that changes what is addressed or how (``?node=7``, ``?dest=3.5.0``, ``?timeout=0.3`` each get
+their own session, what ``connect()`` with that URL gives). One session
 multiplexes any number of concurrent tasks, so the default is one session per endpoint
 (``max_per_endpoint=1``); with more, each extra session is opened when all existing ones are
 busy and gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port it
@@ -46,7 +49,7 @@ from .connection import (
     default_addresses,
     request_timeout,
 )
-from .endpoint import parse_endpoint
+from .endpoint import Endpoint, parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
 from .protocol.header import FinsAddress
 from .session import SessionStats
@@ -73,9 +76,13 @@ def backend_sleep() -> Callable[[float], Awaitable[None]]:
 
 @dataclass(eq=False)
 class _Entry:
+    #: The endpoint's key (link and options: what it addresses and how).
     key: str
+    #: Where its frames go (``udp://host:port``): sessions of several keys may share it.
+    link: str
     url: str
     src: FinsAddress | None
+    dest: FinsAddress | None = None
     client: Client | None = None
     error: BaseException | None = None
     #: ``error``'s traceback when it happened (each borrower is handed the error with it).
@@ -312,25 +319,16 @@ class Pool:
             entries = [e for e in self._entries.get(key, []) if not e.closing.is_set()]
             ready = [e for e in entries if e.error is None]
             idle = min(ready, key=_users, default=None)
-            if idle is None or (idle.users and len(entries) < self.max_per_endpoint):
+            most = 1 if endpoint.scheme == "serial" else self.max_per_endpoint
+            if idle is None or (idle.users and len(entries) < most):
                 now = anyio.current_time()
                 retry_at, _ = self._failures.get(key, (0.0, 0.0))
                 if now < retry_at and idle is None:
                     raise ConnectionLost(
                         f"{key}: last connection attempt failed; retrying in {retry_at - now:.1f} s"
                     )
-                src = None
-                if endpoint.scheme == "udp" and entries:
-                    dest, first_src = await default_addresses(
-                        endpoint, self.connect_options.get("dest"), self.connect_options.get("src")
-                    )
-                    used = {e.src.node for e in entries if e.src is not None} | {
-                        first_src.node,
-                        dest.node,
-                    }
-                    node = next(n for n in range(254, 0, -1) if n not in used)
-                    src = FinsAddress(first_src.network, node, first_src.unit)
-                entry = _Entry(key, url, src)
+                dest, src = await self._addresses_for(endpoint, extra=bool(entries))
+                entry = _Entry(key, endpoint.link, url, src, dest)
                 self._entries.setdefault(key, []).append(entry)
                 self._by_url[url] = self._entries[key]
                 self._stats.setdefault(key, EndpointStats())
@@ -364,6 +362,60 @@ class Pool:
                 raise err.with_traceback(entry.error_tb)
             raise ConnectionLost(f"{key}: {err}") from err
         return entry
+
+    def _on_link(self, link: str) -> list[_Entry]:
+        """The sessions (of any key) open or being opened to ``link``."""
+        return [
+            e
+            for lst in self._entries.values()
+            for e in lst
+            if e.link == link and not e.closing.is_set()
+        ]
+
+    async def _addresses_for(
+        self, endpoint: Endpoint, *, extra: bool
+    ) -> tuple[FinsAddress | None, FinsAddress | None]:
+        """(dest, source) of a new session to ``endpoint``; ``None``: left to connect().
+
+        An Ethernet unit replies to the last UDP port it saw for a source node, so every UDP
+        session to one host:port (whatever its key) gets a source node of its own: the one
+        connect() would use if no other session there uses it as source or destination,
+        else a free one (254 down). A source the URL or the pool names is kept for a new
+        key: if another session to the same host:port uses its node, the URL is refused
+        (:class:`CommandError`). A serial line carries one session: another key for the
+        same device is refused while it is open.
+        """
+        others = self._on_link(endpoint.link)
+        if endpoint.scheme == "serial":
+            if any(e.key != endpoint.key for e in others):
+                raise CommandError(
+                    f"{endpoint.key}: {endpoint.link} is open in this pool with other settings "
+                    f"({others[0].key}); a serial line carries one session"
+                )
+            return None, None
+        if endpoint.scheme != "udp":
+            return None, None
+        dest, src = await default_addresses(
+            endpoint, self.connect_options.get("dest"), self.connect_options.get("src")
+        )
+        used = {e.src.node for e in others if e.src is not None}
+        taken = used | {e.dest.node for e in others if e.dest is not None}
+        named = self.connect_options.get("src") or endpoint.option("src")
+        if named is not None and not extra:
+            if src.node in used:
+                raise CommandError(
+                    f"{endpoint.key}: source node {src.node} is used by another session to "
+                    f"{endpoint.link} in this pool; the PLC would send each one's replies to "
+                    "the other. Name another src, or leave it out"
+                )
+            return dest, src
+        if src.node not in taken:
+            return dest, src
+        avoid = taken | {dest.node}
+        node = next((n for n in range(254, 0, -1) if n not in avoid), None)
+        if node is None:
+            raise CommandError(f"{endpoint.link}: no free FINS source node for another session")
+        return dest, FinsAddress(src.network, node, src.unit)
 
     async def _serve(self, entry: _Entry) -> None:
         options = dict(self.connect_options)

@@ -82,3 +82,26 @@ def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
     assert UdpTransport("::1", 9601).description == "udp://[::1]:9601"
     assert TcpTransport("::1").description == "tcp://[::1]:9600"
     assert TcpTransport("10.0.0.5").description == "tcp://10.0.0.5:9600"
+
+
+@pytest.mark.parametrize(
+    ("url", "key"),
+    [
+        ("udp://127.0.0.1", "udp://127.0.0.1:9600"),
+        ("udp://127.0.0.1:9600?node=07&timeout=0.30", "udp://127.0.0.1:9600?node=7&timeout=0.3"),
+        ("udp://127.0.0.1?timeout=.3&node=7", "udp://127.0.0.1:9600?node=7&timeout=0.3"),
+        ("udp://127.0.0.1?dest=3.5&node=1&node=7", "udp://127.0.0.1:9600?dest=3.5.0&node=1"),
+        ("tcp://h?src=0.10", "tcp://h:9600?src=0.10.0"),
+        (
+            "serial:///dev/ttyS0?parity=e&baudrate=19200",
+            "serial:///dev/ttyS0?baudrate=19200&parity=E",
+        ),
+    ],
+)
+def test_a_key_names_the_link_and_every_option_in_one_spelling(url: str, key: str) -> None:
+    """A pool shares a session by key: node, dest, src and timeout change what is addressed
+    or how, so they are part of it (they were left out: every URL of a host:port shared the
+    first one's session)."""
+    endpoint = parse_endpoint(url)
+    assert endpoint.key == key
+    assert endpoint.link == key.split("?")[0]

@@ -1,0 +1,158 @@
+"""Which borrowers of a Pool share a session: those that address the same PLC the same way.
+
+The peer is a small FINS network behind one Ethernet unit, served by the simulator's UDP and
+FINS/TCP servers: the gateway PLC (0.1.0), a PLC on the same network (0.7.0) and one on a
+network behind it (3.5.0), each with its own memory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+
+import anyio
+import pytest
+
+from aiofins.client import Client
+from aiofins.connection import connect
+from aiofins.poller import Poller, Quality
+from aiofins.pool import Pool
+from aiofins.protocol.errors import CommandError, DecodeError
+from aiofins.protocol.header import CommandFrame, FinsAddress
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator, run_simulator
+
+pytestmark = pytest.mark.anyio
+
+
+class Site:
+    """PLCs behind one Ethernet unit: a frame goes to the PLC its DNA/DA1 names (DNA 0 and
+    DA1 0 mean the gateway's network and the gateway); an unknown address goes to the
+    gateway, which answers a relay error or drops it as a PLC does."""
+
+    def __init__(self, gateway: VirtualPLC, *others: VirtualPLC) -> None:
+        self.gateway = gateway
+        self.plcs = {(p.address.network, p.address.node): p for p in (gateway, *others)}
+        self.address = gateway.address
+
+    def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
+        try:
+            dest = CommandFrame.decode(frame).header.destination
+        except DecodeError:
+            return None
+        network = dest.network or self.gateway.address.network
+        node = dest.node or self.gateway.address.node
+        plc = self.plcs.get((network, node), self.gateway)
+        return plc.handle_frame(frame, from_network=from_network)
+
+
+def _plc(network: int, node: int, d0: int) -> VirtualPLC:
+    plc = VirtualPLC(network=network, node=node)
+    plc.write("D0", [d0])
+    return plc
+
+
+@pytest.fixture
+async def site(anyio_backend: object) -> AsyncIterator[Simulator]:
+    plcs = Site(_plc(0, 1, 100), _plc(0, 7, 700), _plc(3, 5, 350))
+    async with run_simulator(plcs, udp=("127.0.0.1", 0), tcp=("127.0.0.1", 0)) as sim:
+        yield sim
+
+
+def _base(sim: Simulator, scheme: str) -> str:
+    return f"{scheme}://127.0.0.1:{sim.udp_port if scheme == 'udp' else sim.tcp_port}"
+
+
+#: (query, D0 of the PLC it addresses, request timeout)
+BORROWERS = [
+    ("?node=1", 100, 2.0),
+    ("?node=7&timeout=0.3", 700, 0.3),
+    ("?dest=3.5.0", 350, 2.0),
+    ("?node=7", 700, 2.0),
+    ("", 100, 2.0),  # 127.0.0.1: node 1, the gateway
+]
+
+
+async def _what_it_gives(plc: Client) -> tuple[FinsAddress, float, list[int]]:
+    return plc.session.dest, plc.session.timeout, await plc.read("D0")
+
+
+@pytest.mark.parametrize("scheme", ["udp", "tcp"])
+async def test_each_borrower_gets_what_connect_with_its_url_gives(
+    site: Simulator, scheme: str
+) -> None:
+    """Node 1's session was lent to every URL of the host:port: node 7's and 3.5.0's
+    borrowers read the gateway's D0, with its timeout."""
+    base = _base(site, scheme)
+    alone = {}
+    for query, d0, timeout in BORROWERS:
+        async with connect(base + query) as plc:
+            alone[query] = await _what_it_gives(plc)
+            assert alone[query][1:] == (timeout, [d0])
+    async with Pool() as pool:
+        for _ in range(2):  # lent again: the same session per key
+            async with anyio.create_task_group() as tg:
+                for query, _, _ in BORROWERS:
+
+                    async def borrow(query: str = query) -> None:
+                        async with pool.client(base + query) as plc:
+                            assert await _what_it_gives(plc) == alone[query], query
+
+                    tg.start_soon(borrow)
+        keys = {key for query, _, _ in BORROWERS for key in pool.stats(base + query)}
+        assert keys == {
+            f"{base}?node=1",
+            f"{base}?node=7&timeout=0.3",
+            f"{base}?dest=3.5.0",
+            f"{base}?node=7",
+            base,
+        }
+        for query, _, _ in BORROWERS:
+            (stats,) = pool.stats(base + query).values()
+            assert (stats.sessions, stats.completed) == (1, 2)
+        # One spelling per key: the same options in another order or form share the session.
+        async with pool.client(f"{base}?timeout=0.30&node=07") as plc:
+            assert await _what_it_gives(plc) == alone["?node=7&timeout=0.3"]
+        assert pool.stats(f"{base}?node=7&timeout=0.3")[f"{base}?node=7&timeout=0.3"].sessions == 1
+
+
+async def test_udp_sessions_to_one_host_port_have_their_own_source_nodes(site: Simulator) -> None:
+    """An Ethernet unit replies to the last port it saw for a source node: each UDP session
+    to the gateway, whatever PLC it addresses, needs a source node of its own, and none may
+    be the node of a PLC addressed there."""
+    base = _base(site, "udp")
+    async with Pool() as pool:
+        sources = []
+        dests = []
+        for query, d0, _ in BORROWERS:
+            async with pool.client(base + query) as plc:
+                assert await plc.read("D0") == [d0]
+                sources.append(plc.session.source)
+                dests.append(plc.session.dest.node)
+        assert len({s.node for s in sources}) == len(BORROWERS)
+        assert not {s.node for s in sources} & set(dests)
+        # A source node named in the URL is kept; one in use on the link is refused.
+        async with pool.client(f"{base}?node=7&src=0.200.0") as plc:
+            assert plc.session.source == FinsAddress(0, 200, 0)
+            assert await plc.read("D0") == [700]
+        with pytest.raises(CommandError, match="source node 200 is used by another session"):
+            async with pool.client(f"{base}?dest=3.5.0&src=0.200.0"):
+                pass
+
+
+@pytest.mark.parametrize("scheme", ["udp", "tcp"])
+async def test_poller_groups_for_a_gateway_and_the_plcs_behind_it(
+    site: Simulator, scheme: str
+) -> None:
+    """Two groups for the gateway PLC and a PLC behind it both reported the gateway's D0."""
+    base = _base(site, scheme)
+    async with Pool() as pool:
+        poller = Poller(pool)
+        groups = {
+            query: poller.add_group(query or "plain", base + query, {"d0": "D0"}, interval=1)
+            for query, _, _ in BORROWERS
+        }
+        for _ in range(2):
+            for query, d0, _ in BORROWERS:
+                scan = await poller.scan_once(groups[query])
+                assert scan is not None and scan.error is None
+                assert (scan["d0"].quality, scan["d0"].value) == (Quality.GOOD, d0), query
