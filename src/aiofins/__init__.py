@@ -3,7 +3,7 @@
 from .client import Client
 from .connection import connect
 from .poller import Poller, Quality, Snapshot
-from .pool import Pool
+from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
 from .protocol.endcodes import EndCode
 from .protocol.errors import (
@@ -36,6 +36,7 @@ __all__ = [
     "MemoryAddress",
     "Poller",
     "Pool",
+    "PoolFull",
     "Quality",
     "RelayError",
     "Snapshot",

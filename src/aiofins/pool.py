@@ -3,21 +3,32 @@
 ``pool.client(url)`` lends a :class:`~aiofins.client.Client` for the endpoint. Sessions are
 shared by :attr:`Endpoint.key <aiofins.endpoint.Endpoint.key>`: host, port and every option
 that changes what is addressed or how (``?node=7``, ``?dest=3.5.0``, ``?timeout=0.3`` each get
-their own session, what ``connect()`` with that URL gives). One session
-multiplexes any number of concurrent tasks, so the default is one session per endpoint
-(``max_per_endpoint=1``); with more, each extra session is opened when all existing ones are
-busy and gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port it
-saw for a node, so two sockets sharing SA1 would steal each other's replies. FINS/TCP PLCs
+their own session, what ``connect()`` with that URL gives). One session multiplexes any number
+of concurrent tasks, so the default is one session per endpoint (``max_per_endpoint=1``); with
+more, each extra session is opened when all existing ones are busy. Every UDP session to one
+host:port gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port
+it saw for a node, so two sockets sharing SA1 would steal each other's replies. FINS/TCP PLCs
 accept few connections (each holds one of the unit's node slots): keep ``max_per_endpoint``
 within that.
 
-A maintenance task checks idle sessions every ``health_interval`` seconds with CPU UNIT STATUS
-READ (0601) and closes those that fail or stayed unused for ``idle_timeout`` seconds. An
-endpoint whose connection failed is not retried until its backoff (doubling from
-``backoff_min`` to ``backoff_max``) has passed; calls in the meantime fail fast with
-:class:`~aiofins.ConnectionLost`. A borrower waits for a connection being made at most its
+The pool holds at most ``max_sessions`` sessions: a new endpoint evicts the least recently
+used idle one, and :class:`PoolFull` says when every one is in use or being opened. A session
+whose first use got no reply is closed when given back (its endpoint backs off like a failed
+connect), so hosts that never answer do not keep sockets open.
+
+A maintenance task closes sessions unused for ``idle_timeout`` seconds and checks the others
+every ``health_interval`` seconds with CPU UNIT STATUS READ (0601), each check in a task of its
+own bounded by the session's timeout; a session failing it is closed. An endpoint whose
+connection failed is not retried until its backoff has passed (a ceiling doubling from
+``backoff_min`` to ``backoff_max``, the delay drawn between half the ceiling and the ceiling,
+so PLCs back after a power cut are not retried in lockstep); calls in the meantime fail fast
+with :class:`~aiofins.ConnectionLost`. A borrower waits for a connection being made at most its
 timeout (``pool.client(url, timeout=...)``, by default the endpoint's request timeout), then
 gets :class:`~aiofins.FinsTimeout`; the connection attempt goes on for the next borrower.
+
+No error of a session's task, a health check or the maintenance reaches the pool's task group
+or the application: each becomes a failure of its own endpoint (counted, logged under
+``aiofins.pool``, a typed error for the borrowers waiting on it).
 
 Safe to open in a FastAPI lifespan::
 
@@ -32,6 +43,10 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import enum
+import logging
+import math
+import random
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
@@ -49,8 +64,8 @@ from .connection import (
     default_addresses,
     request_timeout,
 )
-from .endpoint import Endpoint, parse_endpoint
-from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
+from .endpoint import Endpoint, option_value, parse_endpoint
+from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout, leaf_errors
 from .protocol.header import FinsAddress
 from .session import SessionStats
 from .transport.base import is_asyncio
@@ -74,8 +89,55 @@ def backend_sleep() -> Callable[[float], Awaitable[None]]:
     return anyio.sleep
 
 
+logger = logging.getLogger("aiofins.pool")
+
+#: The shortest pause of the maintenance task between two passes, whatever the intervals.
+MIN_MAINTENANCE_PERIOD = 0.01
+
+
+class PoolFull(ConnectionLost):
+    """Every session the pool may hold (``max_sessions``) is in use or being opened: none
+    can be evicted for a new endpoint. Raised at once; try again later."""
+
+
+class EntryState(enum.Enum):
+    """Where a pooled session is in its life. :meth:`_Entry.move` makes every transition."""
+
+    #: Its connection is being made; borrowers wait for it (each at most its own timeout).
+    CONNECTING = "connecting"
+    #: Open; lent to any number of borrowers at once.
+    READY = "ready"
+    #: Open and being checked with CPU UNIT STATUS READ while idle; still lent meanwhile.
+    CHECKING = "checking"
+    #: Lent no more (idle too long, failed its health check or its first use, evicted, or
+    #: the pool is closing); its task is closing the session.
+    CLOSING = "closing"
+    #: The connection could not be made; ``error`` says why (its borrowers get it).
+    FAILED = "failed"
+    #: The session is closed and its task has ended.
+    CLOSED = "closed"
+
+
+_TRANSITIONS: dict[EntryState, frozenset[EntryState]] = {
+    EntryState.CONNECTING: frozenset({EntryState.READY, EntryState.FAILED}),
+    EntryState.READY: frozenset({EntryState.CHECKING, EntryState.CLOSING}),
+    EntryState.CHECKING: frozenset({EntryState.READY, EntryState.CLOSING}),
+    EntryState.CLOSING: frozenset({EntryState.CLOSED}),
+    EntryState.FAILED: frozenset(),
+    EntryState.CLOSED: frozenset(),
+}
+#: States in which an entry's client is lent.
+_LENDABLE = frozenset({EntryState.READY, EntryState.CHECKING})
+#: States in which an entry holds (or is getting) a socket or a serial port.
+_LIVE = frozenset(
+    {EntryState.CONNECTING, EntryState.READY, EntryState.CHECKING, EntryState.CLOSING}
+)
+
+
 @dataclass(eq=False)
 class _Entry:
+    """One pooled session (or the attempt to open it)."""
+
     #: The endpoint's key (link and options: what it addresses and how).
     key: str
     #: Where its frames go (``udp://host:port``): sessions of several keys may share it.
@@ -83,27 +145,49 @@ class _Entry:
     url: str
     src: FinsAddress | None
     dest: FinsAddress | None = None
+    state: EntryState = EntryState.CONNECTING
     client: Client | None = None
     error: BaseException | None = None
     #: ``error``'s traceback when it happened (each borrower is handed the error with it).
     error_tb: TracebackType | None = None
     users: int = 0
+    #: When a borrower last gave it back (idle closing and eviction go by it).
     last_used: float = 0.0
-    ready: anyio.Event = field(default_factory=anyio.Event)
-    closing: anyio.Event = field(default_factory=anyio.Event)
-    done: anyio.Event = field(default_factory=anyio.Event)
+    #: When its health was last known good (a use or a health check).
+    checked_at: float = 0.0
+    #: A reply came (normal or not): the link works. Until then, a failed use closes it.
+    proven: bool = False
     #: Cancels the connect while it is being made (the pool closes meanwhile).
     connecting: anyio.CancelScope = field(default_factory=anyio.CancelScope)
+    #: Set (and replaced) on every transition.
+    changed: anyio.Event = field(default_factory=anyio.Event)
+
+    def move(self, to: EntryState) -> None:
+        """The one place an entry changes state (``RuntimeError`` for a transition that
+        the table does not allow: a bug in the pool)."""
+        if to not in _TRANSITIONS[self.state]:
+            raise RuntimeError(f"pool entry {self.key}: {self.state.name} -> {to.name}")
+        self.state = to
+        changed, self.changed = self.changed, anyio.Event()
+        changed.set()
+
+    async def wait_while(self, *states: EntryState) -> None:
+        """Return once the entry is in none of ``states``."""
+        while self.state in states:
+            await self.changed.wait()
 
 
 @dataclass
 class EndpointStats:
     """An endpoint's counters, summed over its sessions (see ``SessionStats`` for each).
 
-    The counters (``completed`` to ``health_failures``) only grow: those of a session the
-    pool closed (idle, failed health check) stay counted. ``sessions``, ``in_use``,
+    The counters (``completed`` to ``evictions``) only grow: those of a session the pool
+    closed (idle, failed health check, evicted) stay counted. ``sessions``, ``in_use``,
     ``in_flight`` and the latencies describe the sessions open now. ``connect_failures``
-    counts the pool's failed first connects and its sessions' failed reconnects alike.
+    counts the pool's failed first connects (a session whose first use got no reply
+    included) and its sessions' failed reconnects alike; ``errors`` the unexpected errors
+    caught at the pool's boundary (logged under ``aiofins.pool``). ``backoff`` is the delay
+    drawn after the endpoint's last failure (0 once a connection succeeds).
     """
 
     sessions: int = 0
@@ -117,6 +201,9 @@ class EndpointStats:
     connect_failures: int = 0
     disconnects: int = 0
     health_failures: int = 0
+    errors: int = 0
+    evictions: int = 0
+    backoff: float = 0.0
     latency_mean: float = 0.0
     latency_p99: float = 0.0
 
@@ -140,6 +227,26 @@ def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
 
 def _users(entry: _Entry) -> int:
     return entry.users
+
+
+def _last_used(entry: _Entry) -> float:
+    return entry.last_used
+
+
+def _seconds(name: str, value: object, *, low: float = 0.0, allow_low: bool = False) -> float:
+    """``value`` as a finite number of seconds above ``low`` (or equal, ``allow_low``)."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    seconds = float(value) if number else math.nan  # type: ignore[arg-type]
+    if not (math.isfinite(seconds) and (seconds > low or (allow_low and seconds == low))):
+        bound = f"at least {low}" if allow_low else f"above {low}"
+        raise CommandError(f"{name} must be a finite number of seconds, {bound}; got {value!r}")
+    return seconds
+
+
+def _count(name: str, value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise CommandError(f"{name} must be a whole number, at least 1; got {value!r}")
+    return value
 
 
 class _Lease:
@@ -178,6 +285,8 @@ class _Lease:
             self.entry = None
             entry.users -= 1
             entry.last_used = self.pool._now()
+            if not entry.proven:
+                self.pool._first_use_ended(entry)
 
     async def __aenter__(self) -> Client:
         return self.borrow_ready() or await self.borrow()
@@ -187,39 +296,60 @@ class _Lease:
 
 
 class Pool:
-    """Clients keyed by endpoint URL; see the module docstring."""
+    """Clients keyed by endpoint URL; see the module docstring.
+
+    Every argument is checked when the pool is made (:class:`CommandError`): counts are
+    whole numbers from 1, times finite seconds above 0 (``backoff_min`` may be 0: no
+    backoff), ``backoff_min <= backoff_max``; other keywords are options of
+    :func:`aiofins.connect` for every endpoint.
+    """
 
     def __init__(
         self,
         *,
         max_per_endpoint: int = 1,
+        max_sessions: int = 256,
         idle_timeout: float = 300.0,
         health_interval: float = 30.0,
         backoff_min: float = 0.5,
         backoff_max: float = 30.0,
         **connect_options: Any,
     ) -> None:
-        if max_per_endpoint < 1:
-            raise CommandError("max_per_endpoint must be at least 1")
+        self.max_per_endpoint = _count("max_per_endpoint", max_per_endpoint)
+        self.max_sessions = _count("max_sessions", max_sessions)
+        self.idle_timeout = _seconds("idle_timeout", idle_timeout)
+        self.health_interval = _seconds("health_interval", health_interval)
+        self.backoff_min = _seconds("backoff_min", backoff_min, allow_low=True)
+        self.backoff_max = _seconds("backoff_max", backoff_max, allow_low=True)
+        if self.backoff_min > self.backoff_max:
+            raise CommandError(
+                f"backoff_min ({backoff_min}) must not be above backoff_max ({backoff_max})"
+            )
         check_options(connect_options)
-        self.max_per_endpoint = max_per_endpoint
-        self.idle_timeout = idle_timeout
-        self.health_interval = health_interval
-        self.backoff_min = backoff_min
-        self.backoff_max = backoff_max
+        for name in ("timeout", "tcp_connect_timeout"):
+            if name in connect_options:
+                option_value(name, connect_options[name])
         self.connect_options = connect_options
         self._entries: dict[str, list[_Entry]] = {}
         #: The same lists as ``_entries``, by the URL text callers use (no parsing per call).
         self._by_url: dict[str, list[_Entry]] = {}
-        self._failures: dict[str, tuple[float, float]] = {}  # key -> (retry_at, backoff)
+        #: The URL texts of each key in ``_by_url`` (forgotten with the key's last session).
+        self._urls: dict[str, list[str]] = {}
+        #: key -> (retry_at, ceiling, delay) after a failure.
+        self._failures: dict[str, tuple[float, float, float]] = {}
         self._stats: dict[str, EndpointStats] = {}
+        #: Keys without a session whose counters are kept, oldest first.
+        self._retired: dict[str, None] = {}
+        self._random = random.Random()
         self._tg: TaskGroup | None = None
         self._closed = False
         self._lock = anyio.Lock()
         self._now = anyio.current_time
+        self._wake: anyio.Event | None = None
 
     async def __aenter__(self) -> Pool:
         self._now = event_loop_clock()
+        self._wake = anyio.Event()
         self._tg = anyio.create_task_group()
         await self._tg.__aenter__()
         self._tg.start_soon(self._maintain)
@@ -231,26 +361,31 @@ class Pool:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
+        """Close every session; an exception of the ``async with`` body leaves as it is (the
+        pool's own tasks end at their boundaries: nothing of theirs is added to it)."""
         await self.aclose()
         assert self._tg is not None
         tg, self._tg = self._tg, None
         tg.cancel_scope.cancel()
-        return await tg.__aexit__(exc_type, exc, tb)
+        await tg.__aexit__(None, None, None)
+        return None
 
     async def aclose(self) -> None:
         """Close every session (in-flight calls fail with ``ConnectionLost``; so do borrowers
         waiting for a connection still being made, which is abandoned)."""
         self._closed = True
         entries = [e for lst in self._entries.values() for e in lst]
-        self._entries.clear()
-        self._by_url.clear()
         for entry in entries:
-            entry.closing.set()
-            if entry.client is None:
+            if entry.state is EntryState.CONNECTING:
                 entry.connecting.cancel()
+            elif entry.state in _LENDABLE:
+                entry.move(EntryState.CLOSING)
         with anyio.CancelScope(shield=True):
             for entry in entries:
-                await entry.done.wait()
+                await entry.wait_while(*_LIVE)
+        self._entries.clear()
+        self._by_url.clear()
+        self._urls.clear()
 
     # -- lending ------------------------------------------------------------------------
 
@@ -274,13 +409,15 @@ class Pool:
         return _Lease(self, url, timeout)
 
     def stats(self, url: str | None = None) -> dict[str, EndpointStats]:
-        """Per-endpoint counters (all endpoints, or the one of ``url``)."""
+        """Per-endpoint counters (all endpoints, or the one of ``url``), by key."""
         keys = [parse_endpoint(url).key] if url else list(self._stats)
         out: dict[str, EndpointStats] = {}
         for key in keys:
             agg = dataclasses.replace(self._stats.get(key, EndpointStats()))
+            failure = self._failures.get(key)
+            agg.backoff = failure[2] if failure else 0.0
             for entry in self._entries.get(key, []):
-                if entry.client is None:
+                if entry.client is None or entry.state not in _LIVE:
                     continue
                 s = entry.client.session.stats
                 agg.sessions += 1
@@ -298,11 +435,7 @@ class Pool:
         if not entries or self._tg is None:
             return None
         best = entries[0] if len(entries) == 1 else min(entries, key=_users)
-        if (
-            best.client is not None
-            and not best.closing.is_set()
-            and (best.users == 0 or len(entries) >= self.max_per_endpoint)
-        ):
+        if best.state in _LENDABLE and (best.users == 0 or len(entries) >= self.max_per_endpoint):
             best.users += 1
             return best
         return None
@@ -315,61 +448,112 @@ class Pool:
             raise RuntimeError("use 'async with Pool() as pool' before borrowing clients")
         endpoint = parse_endpoint(url)
         key = endpoint.key
+        if timeout is None:  # the request timeout the endpoint's sessions get
+            default = float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
+            timeout = request_timeout(endpoint, default)
         async with self._lock:
-            entries = [e for e in self._entries.get(key, []) if not e.closing.is_set()]
-            ready = [e for e in entries if e.error is None]
-            idle = min(ready, key=_users, default=None)
+            entries = [e for e in self._entries.get(key, []) if e.state in _LIVE]
+            usable = [e for e in entries if e.state is not EntryState.CLOSING]
+            idle = min(usable, key=_users, default=None)
             most = 1 if endpoint.scheme == "serial" else self.max_per_endpoint
-            if idle is None or (idle.users and len(entries) < most):
-                now = anyio.current_time()
-                retry_at, _ = self._failures.get(key, (0.0, 0.0))
+            if idle is None or (idle.users and len(usable) < most):
+                retry_at = self._failures.get(key, (0.0, 0.0, 0.0))[0]
+                now = self._now()
                 if now < retry_at and idle is None:
                     raise ConnectionLost(
                         f"{key}: last connection attempt failed; retrying in {retry_at - now:.1f} s"
                     )
-                dest, src = await self._addresses_for(endpoint, extra=bool(entries))
-                entry = _Entry(key, endpoint.link, url, src, dest)
-                self._entries.setdefault(key, []).append(entry)
-                self._by_url[url] = self._entries[key]
-                self._stats.setdefault(key, EndpointStats())
-                assert self._tg is not None
-                self._tg.start_soon(self._serve, entry)
+                if idle is None or self._count(_LIVE) < self.max_sessions:
+                    entry = await self._open(endpoint, url, timeout, extra=bool(usable))
+                else:
+                    entry = idle  # the pool is full: share the busy session
             else:
                 entry = idle
             entry.users += 1
-        if not entry.ready.is_set():
-            if timeout is None:  # the request timeout the endpoint's sessions get
-                default = float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
-                timeout = request_timeout(endpoint, default)
+        if entry.state is EntryState.CONNECTING:
             try:
                 with anyio.move_on_after(timeout):
-                    await entry.ready.wait()
+                    await entry.wait_while(EntryState.CONNECTING)
             except BaseException:  # the borrower was cancelled: it no longer uses the entry
                 entry.users -= 1
                 raise
-            if not entry.ready.is_set():  # the attempt goes on: a later borrower may use it
+            if entry.state is EntryState.CONNECTING:  # a later borrower may use the attempt
                 entry.users -= 1
                 raise FinsTimeout(
                     f"{key}: no connection within {timeout} s: a connection attempt is still "
                     "in progress (a later borrower uses it once it succeeds)"
                 )
-        if entry.error is not None:
+        if entry.state not in _LENDABLE:
             entry.users -= 1
             err = entry.error
             if isinstance(err, FinsError):
                 # The one error object of the entry: raised as is, its traceback would grow
                 # by every earlier borrower's frames.
                 raise err.with_traceback(entry.error_tb)
+            if err is None:
+                raise ConnectionLost(f"{key}: the session closed")
             raise ConnectionLost(f"{key}: {err}") from err
         return entry
+
+    async def _open(self, endpoint: Endpoint, url: str, timeout: float, *, extra: bool) -> _Entry:
+        """A new entry for ``endpoint`` (its session is opened by a task of its own), once
+        the pool has room for it (called with the lock held)."""
+        await self._make_room(endpoint.key, timeout)
+        dest, src = await self._addresses_for(endpoint, extra=extra)
+        key = endpoint.key
+        entry = _Entry(key, endpoint.link, url, src, dest)
+        entries = self._entries.setdefault(key, [])
+        entries.append(entry)
+        urls = self._urls.setdefault(key, [])
+        if url not in self._by_url and len(urls) < 8:  # a few spellings of one key
+            urls.append(url)
+            self._by_url[url] = entries
+        self._stats.setdefault(key, EndpointStats())
+        self._retired.pop(key, None)
+        assert self._tg is not None and self._wake is not None
+        self._tg.start_soon(self._serve, entry)
+        self._wake.set()
+        return entry
+
+    def _count(self, states: frozenset[EntryState]) -> int:
+        return sum(e.state in states for lst in self._entries.values() for e in lst)
+
+    async def _make_room(self, key: str, timeout: float) -> None:
+        """Evict idle sessions (least recently used first) until a new one fits within
+        ``max_sessions``; :class:`PoolFull` if every session is in use or being opened."""
+        with anyio.move_on_after(timeout):
+            while self._count(_LIVE) >= self.max_sessions:
+                idle = [
+                    e
+                    for lst in self._entries.values()
+                    for e in lst
+                    if e.state in _LENDABLE and not e.users
+                ]
+                if idle:
+                    victim = min(idle, key=_last_used)
+                    logger.debug("%s: evicted (idle) to make room for %s", victim.key, key)
+                    self._stats[victim.key].evictions += 1
+                    victim.move(EntryState.CLOSING)
+                closing = [
+                    e
+                    for lst in self._entries.values()
+                    for e in lst
+                    if e.state is EntryState.CLOSING
+                ]
+                if not closing:
+                    logger.warning("%s: refused, all %d sessions are busy", key, self.max_sessions)
+                    raise PoolFull(
+                        f"{key}: all {self.max_sessions} sessions of the pool are in use or "
+                        "being opened (max_sessions); try again later"
+                    )
+                await closing[0].wait_while(EntryState.CLOSING)
+            return
+        raise FinsTimeout(f"{key}: no room in the pool within {timeout} s (sessions closing)")
 
     def _on_link(self, link: str) -> list[_Entry]:
         """The sessions (of any key) open or being opened to ``link``."""
         return [
-            e
-            for lst in self._entries.values()
-            for e in lst
-            if e.link == link and not e.closing.is_set()
+            e for lst in self._entries.values() for e in lst if e.link == link and e.state in _LIVE
         ]
 
     async def _addresses_for(
@@ -387,10 +571,11 @@ class Pool:
         """
         others = self._on_link(endpoint.link)
         if endpoint.scheme == "serial":
-            if any(e.key != endpoint.key for e in others):
+            open_ = [e for e in others if e.state is not EntryState.CLOSING]
+            if any(e.key != endpoint.key for e in open_):
                 raise CommandError(
                     f"{endpoint.key}: {endpoint.link} is open in this pool with other settings "
-                    f"({others[0].key}); a serial line carries one session"
+                    f"({open_[0].key}); a serial line carries one session"
                 )
             return None, None
         if endpoint.scheme != "udp":
@@ -417,7 +602,11 @@ class Pool:
             raise CommandError(f"{endpoint.link}: no free FINS source node for another session")
         return dest, FinsAddress(src.network, node, src.unit)
 
+    # -- each session's task: its boundary --------------------------------------------------
+
     async def _serve(self, entry: _Entry) -> None:
+        """Open the entry's session, hold it while it is lent, close it. Ends at a boundary:
+        whatever goes wrong becomes a failure of this entry alone."""
         options = dict(self.connect_options)
         if entry.src is not None:
             options["src"] = entry.src
@@ -425,51 +614,145 @@ class Pool:
             with entry.connecting:  # cancelled only while the connection is being made
                 async with connect(entry.url, **options) as client:
                     entry.client = client
-                    entry.last_used = anyio.current_time()
+                    entry.last_used = entry.checked_at = self._now()
                     self._failures.pop(entry.key, None)
-                    entry.ready.set()
-                    await entry.closing.wait()
+                    entry.move(EntryState.READY)
+                    await entry.wait_while(*_LENDABLE)
             if entry.client is None:  # the pool closed while connecting
                 entry.error = ConnectionLost(f"{entry.key}: the pool closed while connecting")
         except (OSError, FinsError) as exc:
-            entry.error = exc
-            entry.error_tb = exc.__traceback__
-            self._stats[entry.key].connect_failures += 1
-            _, backoff = self._failures.get(entry.key, (0.0, 0.0))
-            backoff = min(self.backoff_max, max(self.backoff_min, backoff * 2))
-            self._failures[entry.key] = (anyio.current_time() + backoff, backoff)
+            self._fail(entry, exc)
+        except Exception as exc:  # the boundary: nothing of one endpoint escapes the pool
+            self._stats[entry.key].errors += 1
+            logger.error("%s: unexpected error in its session", entry.key, exc_info=True)
+            leaves = leaf_errors(exc)
+            error = ConnectionLost(f"{entry.key}: {', '.join(repr(e) for e in leaves)}")
+            error.__cause__ = exc
+            self._fail(entry, error)
         finally:
-            entry.closing.set()
-            entry.ready.set()
-            entry.done.set()
-            lst = self._entries.get(entry.key)
-            if lst and entry in lst:
-                lst.remove(entry)
-            if entry.client is not None:  # its counters stay with the endpoint
-                _add_counters(self._stats[entry.key], entry.client.session.stats)
+            self._settle(entry)
+
+    def _fail(self, entry: _Entry, exc: BaseException) -> None:
+        """The entry's session could not be made, or broke: borrowers get ``exc``."""
+        entry.error = exc
+        entry.error_tb = exc.__traceback__
+        if not entry.proven:  # no reply yet: the connection failed, even if it had opened
+            self._stats[entry.key].connect_failures += 1
+        self._back_off(entry.key)
+        logger.info("%s: connection failed: %s", entry.key, exc)
+
+    def _back_off(self, key: str) -> None:
+        """Next attempt for ``key`` after a jittered delay: a ceiling doubling from
+        ``backoff_min`` to ``backoff_max``, the delay uniform between half of it (at least
+        ``backoff_min``) and it."""
+        ceiling = self._failures.get(key, (0.0, 0.0, 0.0))[1]
+        ceiling = min(self.backoff_max, 2 * max(ceiling, self.backoff_min))
+        delay = self._random.uniform(max(self.backoff_min, ceiling / 2), ceiling)
+        self._failures[key] = (self._now() + delay, ceiling, delay)
+
+    def _settle(self, entry: _Entry) -> None:
+        """The entry's task ends: its last transition, its counters kept, its key forgotten
+        with its last session (within bounds)."""
+        if entry.state is EntryState.CONNECTING:
+            if entry.error is None:
+                entry.error = ConnectionLost(f"{entry.key}: the connection attempt ended")
+            entry.move(EntryState.FAILED)
+        else:
+            if entry.state in _LENDABLE:
+                entry.move(EntryState.CLOSING)
+            entry.move(EntryState.CLOSED)
+        key = entry.key
+        lst = self._entries.get(key)
+        if lst is not None and entry in lst:
+            lst.remove(entry)
+        if entry.client is not None:  # its counters stay with the endpoint
+            _add_counters(self._stats[key], entry.client.session.stats)
+        if lst is not None and not lst:
+            del self._entries[key]
+            for url in self._urls.pop(key, ()):
+                self._by_url.pop(url, None)
+            self._retired[key] = None
+            while len(self._retired) > self.max_sessions:  # counters of many keys: bounded
+                old = next(iter(self._retired))
+                del self._retired[old]
+                self._stats.pop(old, None)
+                self._failures.pop(old, None)
+
+    def _first_use_ended(self, entry: _Entry) -> None:
+        """A borrower gave back a session that has seen no reply yet: once a use failed
+        (no reply), it is closed and its endpoint backs off, as after a failed connect."""
+        client = entry.client
+        if client is None:
+            return
+        stats = client.session.stats
+        if stats.completed or stats.end_code_errors:
+            entry.proven = True
+            return
+        failed = stats.timeouts or stats.disconnects or stats.connect_failures
+        if failed and not entry.users and entry.state in _LENDABLE:
+            logger.info("%s: no reply to its first use; closing it", entry.key)
+            self._stats[entry.key].connect_failures += 1
+            self._back_off(entry.key)
+            entry.move(EntryState.CLOSING)
 
     # -- maintenance ----------------------------------------------------------------------
 
     async def _maintain(self) -> None:
+        """Idle closing and health checks, at a boundary: an error is logged and counted,
+        and the loop goes on."""
+        period = max(MIN_MAINTENANCE_PERIOD, min(self.health_interval, self.idle_timeout))
         while True:
-            await anyio.sleep(min(self.health_interval, self.idle_timeout))
-            now = anyio.current_time()
-            for entries in list(self._entries.values()):
-                for entry in list(entries):
-                    if entry.client is None or entry.users or entry.closing.is_set():
-                        continue
-                    if now - entry.last_used >= self.idle_timeout:
-                        entry.closing.set()
-                        continue
-                    if now - entry.last_used >= self.health_interval:
-                        await self._health_check(entry)
+            if not self._entries:  # nothing to look after: sleep until a session opens
+                assert self._wake is not None
+                await self._wake.wait()
+                self._wake = anyio.Event()
+            await anyio.sleep(period)
+            try:
+                self._maintain_once()
+            except Exception:
+                logger.error("pool maintenance failed", exc_info=True)
+
+    def _maintain_once(self) -> None:
+        """One pass: close idle sessions, start the due health checks (each a task of its
+        own: idle closing never waits for them)."""
+        now = self._now()
+        assert self._tg is not None
+        for entries in list(self._entries.values()):
+            for entry in list(entries):
+                if entry.users or entry.state not in _LENDABLE:
+                    continue
+                if now - entry.last_used >= self.idle_timeout:
+                    logger.debug("%s: closed after %.1f s unused", entry.key, now - entry.last_used)
+                    entry.move(EntryState.CLOSING)
+                elif (
+                    entry.state is EntryState.READY
+                    and now - max(entry.last_used, entry.checked_at) >= self.health_interval
+                ):
+                    entry.move(EntryState.CHECKING)
+                    self._tg.start_soon(self._health_check, entry)
 
     async def _health_check(self, entry: _Entry) -> None:
-        assert entry.client is not None
+        """CPU UNIT STATUS READ, bounded by the session's timeout; a failure closes the
+        session if nobody uses it. Ends at a boundary."""
+        client = entry.client
+        assert client is not None
+        ok = False
+        timeout = client.session.timeout
         try:
-            await entry.client.cpu_unit_status_read(timeout=entry.client.session.timeout)
-        except FinsError:
-            self._stats[entry.key].health_failures += 1
-            entry.closing.set()
-        else:
-            entry.last_used = anyio.current_time()
+            with anyio.move_on_after(timeout):
+                await client.cpu_unit_status_read(timeout=timeout)
+                ok = True
+        except FinsError as exc:
+            logger.info("%s: health check failed: %s", entry.key, exc)
+        except Exception:
+            self._stats[entry.key].errors += 1
+            logger.error("%s: unexpected error in its health check", entry.key, exc_info=True)
+        if entry.state is not EntryState.CHECKING:
+            return  # closed meanwhile
+        if ok:
+            entry.checked_at = self._now()
+            entry.proven = True
+            entry.move(EntryState.READY)
+            return
+        self._stats[entry.key].health_failures += 1
+        entry.move(EntryState.READY if entry.users else EntryState.CLOSING)

@@ -1,0 +1,293 @@
+"""A Pool's bounds and boundaries: arguments, sessions held, health checks, backoff, errors.
+
+Peers are loopback: the simulator, FINS/TCP peers that misbehave on purpose, UDP sockets that
+never answer, and loopback addresses (127.x.y.z) where nothing listens.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import socket
+import time
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import anyio
+import pytest
+
+import aiofins
+from aiofins.pool import EntryState, Pool, PoolFull, _Entry
+from aiofins.protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
+from aiofins.simulator.faults import FaultPlan, FaultRule
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator, run_simulator
+
+from ..session.test_session_tcp import TcpPeer, tcp_server
+
+pytestmark = pytest.mark.anyio
+
+
+async def _until(condition: Callable[[], bool], within: float = 5) -> None:
+    with anyio.fail_after(within):
+        while not condition():
+            await anyio.sleep(0.01)
+
+
+@contextmanager
+def _silent_udp() -> Iterator[str]:
+    """A UDP socket that takes every datagram and never answers: a dead PLC's URL."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        yield f"udp://127.0.0.1:{silent.getsockname()[1]}"
+
+
+def _open_descriptors() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+# -- arguments ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"idle_timeout": -1}, "idle_timeout must be a finite number of seconds, above 0"),
+        ({"idle_timeout": math.inf}, "idle_timeout must be a finite number"),
+        ({"health_interval": math.nan}, "health_interval must be a finite number"),
+        ({"health_interval": 0}, "health_interval must be a finite number of seconds, above"),
+        ({"backoff_min": 5, "backoff_max": 1}, r"backoff_min \(5\) must not be above backoff_max"),
+        ({"backoff_min": -0.5}, "backoff_min must be a finite number of seconds, at least 0"),
+        ({"backoff_max": math.inf}, "backoff_max must be a finite number"),
+        ({"max_sessions": 0}, "max_sessions must be a whole number, at least 1"),
+        ({"max_per_endpoint": 1.5}, "max_per_endpoint must be a whole number"),
+        ({"idle_timeout": "300"}, "idle_timeout must be a finite number"),
+        ({"timeout": math.nan}, "timeout must be a positive number of seconds"),
+        ({"tcp_connect_timeout": -1}, "tcp_connect_timeout must be a positive number"),
+    ],
+)
+def test_pool_arguments_are_checked_when_the_pool_is_made(
+    kwargs: dict[str, Any], message: str
+) -> None:
+    """They crashed the maintenance task later (idle_timeout=-1, health_interval=nan) or were
+    taken as they were (backoff_min above backoff_max)."""
+    with pytest.raises(CommandError, match=message):
+        Pool(**kwargs)
+
+
+async def test_a_short_health_interval_does_not_spin(anyio_backend: object) -> None:
+    """health_interval=0 spun a core, with no endpoint at all; the shortest accepted one
+    is paced (the maintenance sleeps until a session opens, then at least 10 ms a pass)."""
+    async with Pool(health_interval=1e-9, idle_timeout=1e-9):
+        cpu = time.process_time()
+        await anyio.sleep(0.3)
+        assert time.process_time() - cpu < 0.1
+
+
+# -- the body's own exception ------------------------------------------------------------
+
+
+async def test_an_error_of_the_pool_body_comes_out_as_it_is(sim: Simulator) -> None:
+    """It came out wrapped in an ExceptionGroup: ``except aiofins.FinsError`` missed it."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    error = aiofins.FinsTimeout("the application's own")
+    with pytest.raises(aiofins.FinsError) as caught:
+        async with Pool() as pool:
+            async with pool.client(url) as plc:
+                assert await plc.read("D0") == [0]
+            raise error
+    assert caught.value is error
+    with pytest.raises(KeyError):
+        async with Pool():
+            raise KeyError("not a FINS error either")
+
+
+# -- boundaries ----------------------------------------------------------------------------
+
+
+async def test_a_peer_assigning_node_300_fails_its_endpoint_alone(
+    sim: Simulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A FINS/TCP handshake assigning node 300 raised out of the connect into the pool's
+    task group: it cancelled the pool, every other session and the application's task."""
+    good = f"udp://127.0.0.1:{sim.udp_port}"
+    peer = TcpPeer(assign_node=300)
+    reads = 0
+    async with tcp_server(peer), Pool(timeout=1) as pool:
+        bad = f"tcp://127.0.0.1:{peer.port}"
+
+        async def sibling() -> None:  # the application's other task, on another PLC
+            nonlocal reads
+            while True:
+                async with pool.client(good) as plc:
+                    assert await plc.read("D0") == [0]
+                reads += 1
+                await anyio.sleep(0.01)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(sibling)
+            with (
+                caplog.at_level(logging.ERROR, logger="aiofins.pool"),
+                anyio.fail_after(3),
+                pytest.raises(FinsError),  # not an ExceptionGroup
+            ):
+                async with pool.client(bad) as plc:  # at the borrow or the first call
+                    await plc.read("D0")
+            await _until(lambda: pool.stats(bad)[bad].sessions == 0)
+            with pytest.raises(ConnectionLost, match="retrying in"):
+                async with pool.client(bad):  # backing off: at once
+                    pass
+            before = reads
+            await _until(lambda: reads > before + 2)  # the other PLC is still read
+            tg.cancel_scope.cancel()
+        stats = pool.stats(bad)[bad]
+        assert (stats.connect_failures, stats.errors) == (1, 1)
+        assert any(r.name == "aiofins.pool" and bad in r.getMessage() for r in caplog.records)
+        async with pool.client(good) as plc:  # the pool goes on
+            assert await plc.read("D0") == [0]
+
+
+# -- backoff -------------------------------------------------------------------------------
+
+
+async def test_endpoints_failing_together_are_retried_at_different_times(
+    anyio_backend: object,
+) -> None:
+    """200 PLCs back after a power cut: their reconnects were in lockstep (every backoff the
+    same doubling sequence). Each delay is drawn between half its ceiling and the ceiling,
+    within backoff_min..backoff_max."""
+    low, high = 0.02, 0.07
+    urls = [f"tcp://127.0.{1 + i // 200}.{1 + i % 200}:1" for i in range(200)]  # refused
+    async with Pool(backoff_min=low, backoff_max=high, max_sessions=200) as pool:
+        ceilings = [2 * low, high, high]  # 2 x 0.04 is above backoff_max
+        for ceiling in ceilings:
+
+            async def fail(url: str) -> None:
+                with pytest.raises(FinsError):
+                    async with pool.client(url):
+                        pass
+
+            async with anyio.create_task_group() as tg:
+                for url in urls:
+                    tg.start_soon(fail, url)
+            delays = [pool.stats(url)[url].backoff for url in urls]
+            assert all(max(low, ceiling / 2) <= d <= ceiling for d in delays), ceiling
+            assert len(set(delays)) > 190
+            await anyio.sleep(high)  # every backoff has passed
+
+
+# -- bounds --------------------------------------------------------------------------------
+
+
+async def test_many_caller_chosen_hosts_do_not_open_a_socket_each(anyio_backend: object) -> None:
+    """1,500 hosts named by callers (a FastAPI route): 1,015 sockets were open, then every
+    new socket of the process failed. Idle sessions are evicted, least recently used first."""
+    async with Pool(max_sessions=16, timeout=0.5) as pool:
+        before = _open_descriptors()
+        most = 0
+        for i in range(1500):
+            url = f"udp://127.3.{i // 250}.{1 + i % 250}:9600"  # nothing listens there
+            async with pool.client(url) as plc:
+                assert plc.session.dest.node == 1 + i % 250
+            most = max(most, _open_descriptors() - before)
+        assert most <= 16
+        sessions = sum(s.sessions for s in pool.stats().values())
+        assert sessions == 16
+        evicted = f"udp://127.3.5.{1 + (1500 - 17) % 250}:9600"  # the last one evicted
+        assert (pool.stats(evicted)[evicted].evictions, pool.stats(evicted)[evicted].sessions) == (
+            1,
+            0,
+        )
+        assert len(pool.stats()) <= 2 * 16  # counters of gone endpoints: bounded too
+
+
+async def test_a_full_pool_of_busy_sessions_refuses_a_new_endpoint(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(max_sessions=2) as pool:
+        async with pool.client(url + "?node=1") as a, pool.client(url + "?node=0") as b:
+            with pytest.raises(PoolFull, match="all 2 sessions of the pool are in use"):
+                async with pool.client(url + "?dest=0.1.0"):
+                    pass
+            assert await a.read("D0") == await b.read("D0") == [0]
+        async with pool.client(url + "?dest=0.1.0") as c:  # room once one is idle
+            assert await c.read("D0") == [0]
+        assert sum(s.sessions for s in pool.stats().values()) == 2
+    assert issubclass(PoolFull, aiofins.ConnectionLost)
+
+
+async def test_a_session_whose_first_use_failed_is_released(anyio_backend: object) -> None:
+    """A UDP session to a host that never answered stayed open for idle_timeout (300 s)."""
+    with _silent_udp() as url:
+        async with Pool(timeout=0.1, retries=0, backoff_min=5) as pool:
+            with pytest.raises(FinsTimeout):
+                async with pool.client(url) as plc:
+                    await plc.read("D0")
+            await _until(lambda: pool.stats(url)[url + ""].sessions == 0)
+            stats = pool.stats(url)[url]
+            assert stats.connect_failures == 1 and 5 <= stats.backoff <= 10
+            with pytest.raises(ConnectionLost, match="retrying in"):
+                async with pool.client(url):
+                    pass
+
+
+async def test_health_checks_run_side_by_side_each_within_its_timeout(
+    anyio_backend: object,
+) -> None:
+    """They ran one after another, each up to timeout x attempts: with the defaults every
+    dead endpoint held the maintenance loop ~6 s."""
+    plcs: list[Simulator] = []
+    async with (
+        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s1,
+        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s2,
+        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s3,
+    ):
+        plcs = [s1, s2, s3]
+        urls = [f"udp://127.0.0.1:{s.udp_port}" for s in plcs]
+        async with Pool(timeout=0.4, retries=2, health_interval=0.05, idle_timeout=60) as pool:
+            for url in urls:
+                async with pool.client(url) as plc:
+                    assert await plc.read("D0") == [0]
+            for s in plcs:
+                s.plan.rule = FaultRule(drop_request=1.0)  # all three go silent
+            started = anyio.current_time()
+            await _until(lambda: all(pool.stats(u)[u].sessions == 0 for u in urls))
+            assert anyio.current_time() - started < 1.0  # one by one: 3 x 3 x 0.4 s
+            assert [pool.stats(u)[u].health_failures for u in urls] == [1, 1, 1]
+
+
+async def test_idle_sessions_close_while_a_health_check_waits(sim: Simulator) -> None:
+    with _silent_udp() as dead:
+        good = f"udp://127.0.0.1:{sim.udp_port}"
+        async with Pool(timeout=3, health_interval=0.05, idle_timeout=0.3) as pool:
+            async with pool.client(dead):  # lent, unused: its health check waits 3 s
+                pass
+            async with pool.client(good) as plc:
+                assert await plc.read("D0") == [0]
+            started = anyio.current_time()
+            await _until(lambda: pool.stats(good)[good].sessions == 0)
+            assert anyio.current_time() - started < 1.5  # the dead one's check takes 3 s
+
+
+# -- the entry state machine ---------------------------------------------------------------
+
+
+async def test_an_entry_moves_only_along_its_transitions(anyio_backend: object) -> None:
+    entry = _Entry("udp://h:9600", "udp://h:9600", "udp://h", None)
+    assert entry.state is EntryState.CONNECTING
+    changed = entry.changed
+    entry.move(EntryState.READY)
+    assert changed.is_set() and not entry.changed.is_set()
+    with pytest.raises(RuntimeError, match="READY -> FAILED"):
+        entry.move(EntryState.FAILED)
+    for state in (EntryState.CHECKING, EntryState.READY, EntryState.CLOSING, EntryState.CLOSED):
+        entry.move(state)
+    with pytest.raises(RuntimeError, match="CLOSED -> READY"):
+        entry.move(EntryState.READY)
+
+
+@pytest.fixture
+async def sim(anyio_backend: object) -> AsyncIterator[Simulator]:
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as running:
+        yield running
