@@ -3,9 +3,15 @@
     pip install fastapi uvicorn
     AIOFINS_PLC=udp://192.168.250.1 uvicorn examples.fastapi_app:app
 
-Without ``AIOFINS_PLC`` the app starts an embedded virtual PLC in its lifespan.
+Without ``AIOFINS_PLC`` the app starts an embedded virtual PLC in its lifespan. The PLCs a
+request may name (``?plc=HOST``) are configured, never taken from the request:
+``AIOFINS_PLCS=udp://192.168.250.2,udp://192.168.250.3`` adds them to ``AIOFINS_PLC``, the
+default. Any other host is refused (404) before the pool opens anything: a route that built
+URLs from request input would let any caller make the server open sockets to hosts of their
+choosing.
 
     GET  /plc/D100?count=10            -> {"address": "D100", "values": [...]}
+    GET  /plc/D100?plc=192.168.250.2   -> the same, from another configured PLC
     GET  /plc/D200/value?type=float32  -> {"address": "D200", "value": 21.5}
     PUT  /plc/D100  [1, 2, 3]          -> {"written": 3}
     GET  /status                       -> mode, error code, message
@@ -23,6 +29,7 @@ from typing import Any
 from fastapi import FastAPI, HTTPException
 
 import aiofins
+from aiofins.endpoint import parse_endpoint
 from aiofins.simulator import VirtualPLC, run_simulator
 
 STATE: dict[str, Any] = {}
@@ -36,6 +43,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
             sim = await stack.enter_async_context(run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)))
             url = f"udp://127.0.0.1:{sim.udp_port}"
         STATE["url"] = url
+        extra = [u.strip() for u in os.environ.get("AIOFINS_PLCS", "").split(",") if u.strip()]
+        # The allowlist: host (or serial device) -> URL, from the configuration only.
+        endpoints = {u: parse_endpoint(u) for u in [url, *extra]}
+        STATE["plcs"] = {e.host or e.device: u for u, e in endpoints.items()}
         STATE["pool"] = await stack.enter_async_context(aiofins.Pool(timeout=1.0))
         yield
 
@@ -51,39 +62,51 @@ def _http_error(exc: aiofins.FinsError) -> HTTPException:
     return HTTPException(504, str(exc))
 
 
+def _url(host: str | None) -> str:
+    """The configured URL of ``host`` (the default PLC without one); 404 for any other."""
+    if host is None:
+        return str(STATE["url"])
+    url = STATE["plcs"].get(host)
+    if url is None:
+        raise HTTPException(404, f"PLC {host!r} is not configured")
+    return str(url)
+
+
 @asynccontextmanager
-async def _plc() -> AsyncIterator[aiofins.Client]:
-    """The PLC's client, lent by the pool; FINS errors leave the block as HTTP errors."""
+async def _plc(host: str | None = None) -> AsyncIterator[aiofins.Client]:
+    """The client of a configured PLC, lent by the pool; FINS errors leave the block as
+    HTTP errors."""
+    url = _url(host)
     try:
-        async with STATE["pool"].client(STATE["url"]) as plc:
+        async with STATE["pool"].client(url) as plc:
             yield plc
     except aiofins.FinsError as exc:
         raise _http_error(exc) from exc
 
 
 @app.get("/plc/{address}")
-async def read(address: str, count: int = 1) -> dict[str, Any]:
-    async with _plc() as plc:
-        return {"address": address, "values": await plc.read(address, count)}
+async def read(address: str, count: int = 1, plc: str | None = None) -> dict[str, Any]:
+    async with _plc(plc) as client:
+        return {"address": address, "values": await client.read(address, count)}
 
 
 @app.get("/plc/{address}/value")
-async def read_value(address: str, type: str = "uint16") -> dict[str, Any]:
-    async with _plc() as plc:
-        return {"address": address, "value": await plc.read_value(address, type)}
+async def read_value(address: str, type: str = "uint16", plc: str | None = None) -> dict[str, Any]:
+    async with _plc(plc) as client:
+        return {"address": address, "value": await client.read_value(address, type)}
 
 
 @app.put("/plc/{address}")
-async def write(address: str, values: list[int]) -> dict[str, Any]:
-    async with _plc() as plc:
-        await plc.write(address, values)
+async def write(address: str, values: list[int], plc: str | None = None) -> dict[str, Any]:
+    async with _plc(plc) as client:
+        await client.write(address, values)
         return {"written": len(values)}
 
 
 @app.get("/status")
-async def status() -> dict[str, Any]:
-    async with _plc() as plc:
-        s = await plc.cpu_unit_status_read()
+async def status(plc: str | None = None) -> dict[str, Any]:
+    async with _plc(plc) as client:
+        s = await client.cpu_unit_status_read()
         return {"mode": s.mode.name, "error_code": s.error_code, "message": s.error_message}
 
 

@@ -64,6 +64,24 @@ def test_fastapi_app_answers_504_when_the_plc_is_silent(monkeypatch: pytest.Monk
             assert reply.status_code == 504 and "no response to command 0601" in reply.text
 
 
+def test_fastapi_app_serves_configured_plcs_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A host named by the request must be in the configuration: the documented pattern
+    built URLs from request paths, and any caller could make the server open sockets."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.2", 0))
+        other = f"udp://127.0.0.2:{silent.getsockname()[1]}?timeout=0.1"
+        monkeypatch.setenv("AIOFINS_PLCS", other)
+        with fastapi_client() as http:
+            assert http.get("/plc/D0", params={"plc": "127.0.0.1"}).json()["values"] == [0]
+            refused = http.get("/plc/D0", params={"plc": "10.1.2.3"})
+            assert refused.status_code == 404
+            assert refused.json() == {"detail": "PLC '10.1.2.3' is not configured"}
+            assert http.put("/plc/D0", params={"plc": "127.0.0.9"}, json=[1]).status_code == 404
+            assert http.get("/status", params={"plc": "127.0.0.2"}).status_code == 504
+            stats = http.get("/stats").json()
+            assert len(stats) == 2 and not any("10.1.2.3" in key for key in stats)
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_polling_daemon_stops_cleanly_on_a_signal(signum: signal.Signals) -> None:
