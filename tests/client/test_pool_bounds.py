@@ -291,3 +291,43 @@ async def test_an_entry_moves_only_along_its_transitions(anyio_backend: object) 
 async def sim(anyio_backend: object) -> AsyncIterator[Simulator]:
     async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as running:
         yield running
+
+
+async def test_a_reconnect_assigned_node_300_fails_its_endpoint_alone(
+    sim: Simulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The issue's case: the session had worked; its reconnect's handshake assigns node 300.
+    That raised out of the session's background task through the pool's task group."""
+    good = f"udp://127.0.0.1:{sim.udp_port}"
+    peer = TcpPeer()
+    async with tcp_server(peer), Pool(timeout=1, retries=0) as pool:
+        bad = f"tcp://127.0.0.1:{peer.port}"
+        async with pool.client(bad) as plc:
+            assert await plc.read("D0") == [0x1000]
+        peer.assign_node = 300
+        await peer.drop()  # the PLC resets its connections
+        with caplog.at_level(logging.ERROR, logger="aiofins.pool"), anyio.fail_after(3):
+            while not pool.stats(bad)[bad].errors:  # the drop, then the reconnect's failure
+                with pytest.raises(FinsError):  # not an ExceptionGroup
+                    async with pool.client(bad) as plc:
+                        await plc.read("D0")
+            await _until(lambda: pool.stats(bad)[bad].sessions == 0)
+        async with pool.client(good) as plc:  # the rest of the pool goes on
+            assert await plc.read("D0") == [0]
+        stats = pool.stats(bad)[bad]
+        assert stats.errors == 1 and stats.backoff > 0
+        assert any(bad in r.getMessage() for r in caplog.records if r.name == "aiofins.pool")
+
+
+async def test_a_serial_device_carries_one_session(
+    pty_pair: tuple[str, str], anyio_backend: object
+) -> None:
+    """Two keys of one device opened it twice: each read the other's replies."""
+    _, host = pty_pair
+    url = f"serial://{host}?baudrate=9600"
+    async with Pool() as pool, pool.client(url):
+        with pytest.raises(CommandError, match="a serial line carries one session"):
+            async with pool.client(f"serial://{host}?baudrate=19200"):
+                pass
+        async with pool.client(url):  # the same key: shared
+            assert pool.stats(url)[url].in_use == 2
