@@ -7,7 +7,7 @@ network behind it (3.5.0), each with its own memory.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 
 import anyio
 import pytest
@@ -156,3 +156,59 @@ async def test_poller_groups_for_a_gateway_and_the_plcs_behind_it(
                 scan = await poller.scan_once(groups[query])
                 assert scan is not None and scan.error is None
                 assert (scan["d0"].quality, scan["d0"].value) == (Quality.GOOD, d0), query
+
+
+async def _serve_like_an_ethernet_unit(
+    site: Site, ready: Callable[[int], None], *, task_status: anyio.abc.TaskStatus[None]
+) -> None:
+    """FINS/UDP as an Ethernet unit does it: a reply, ready a few milliseconds later (the
+    CPU's turn), goes to the last UDP port that a command came from *for its source node*
+    (SA1), not to the port of the command."""
+    async with (
+        await anyio.create_udp_socket(local_host="127.0.0.1") as sock,
+        anyio.create_task_group() as tg,
+    ):
+        ready(sock.extra(anyio.abc.SocketAttribute.local_port))
+        task_status.started()
+        last_port: dict[int, tuple[str, int]] = {}
+        sending = anyio.Lock()
+
+        async def answer(source: int, reply: bytes) -> None:
+            await anyio.sleep(0.003)
+            async with sending:
+                await sock.sendto(reply, *last_port[source])
+
+        async for frame, peer in sock:
+            try:
+                source = CommandFrame.decode(frame).header.source.node
+            except DecodeError:
+                continue
+            last_port[source] = peer
+            reply = site.handle_frame(frame)
+            if reply is not None:
+                tg.start_soon(answer, source, reply)
+
+
+async def test_sessions_to_one_ethernet_unit_do_not_steal_each_others_replies(
+    anyio_backend: object,
+) -> None:
+    """Each key has its own session (socket): were their source nodes the same, the unit
+    would send one session's replies to the other's socket."""
+    plcs = Site(_plc(0, 1, 100), _plc(0, 7, 700), _plc(3, 5, 350))
+    ports: list[int] = []
+    async with anyio.create_task_group() as tg:
+        await tg.start(_serve_like_an_ethernet_unit, plcs, ports.append)
+        base = f"udp://127.0.0.1:{ports[0]}"
+        async with Pool(timeout=0.5, retries=0) as pool:
+
+            async def reads(query: str, d0: int) -> None:
+                for _ in range(50):
+                    async with pool.client(base + query) as plc:
+                        assert await plc.read("D0") == [d0], query
+
+            with anyio.fail_after(10):
+                async with anyio.create_task_group() as readers:
+                    for query, d0, _ in BORROWERS:
+                        readers.start_soon(reads, query, d0)
+            assert all(s.timeouts == 0 for s in pool.stats().values())
+        tg.cancel_scope.cancel()
