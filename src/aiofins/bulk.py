@@ -6,6 +6,12 @@ last-block bit). Frames go one at a time: these transfers are ordered by the PLC
 
 Restoring a program needs PROGRAM mode (the manual refuses 0307 otherwise); we check it before
 sending anything.
+
+Nothing the PLC echoes is trusted: every block address, file position, size and count in a
+response is compared with what was asked (:class:`~aiofins.DecodeError` otherwise), a transfer
+stops at the size or number of files the PLC announced, and the total size is bounded
+(``max_size``), so a confused or hostile peer can neither splice the wrong bytes into a backup
+nor keep a transfer going for ever.
 """
 
 from __future__ import annotations
@@ -29,26 +35,55 @@ from .protocol.files import Disk, FileEntry, FileWriteMode
 
 Progress = Callable[[int, "int | None"], None]
 
+#: Largest program image :func:`backup_program` reads by default (4 MiB: several times the
+#: UM of the largest CS/CJ CPU Units).
+MAX_PROGRAM_BYTES = 4 * 1024 * 1024
+#: Largest file :func:`download_file` accepts by default (64 MiB); pass ``max_size`` for more.
+MAX_FILE_BYTES = 64 * 1024 * 1024
+
 
 def _report(progress: Progress | None, done: int, total: int | None) -> None:
     if progress is not None:
         progress(done, total)
 
 
-async def backup_program(client: Client, progress: Progress | None = None) -> bytes:
-    """Read the whole user program (0306 in blocks up to the last-block bit 15)."""
+async def backup_program(
+    client: Client, progress: Progress | None = None, *, max_size: int = MAX_PROGRAM_BYTES
+) -> bytes:
+    """Read the whole user program (0306 in blocks up to the last-block bit 15).
+
+    Each response must echo the address asked and carry at most the bytes asked, in whole
+    4-byte units; more than ``max_size`` bytes without the last-block bit is refused.
+    :class:`~aiofins.DecodeError` in every case.
+    """
     limit = client.limits.program_read_bytes - client.limits.program_read_bytes % PROGRAM_BLOCK_UNIT
+    room = max_size - max_size % PROGRAM_BLOCK_UNIT
     out = bytearray()
-    address = 0
     while True:
-        result = await client.program_area_read(address, limit)
+        address = len(out)
+        size = min(limit, room - address)
+        if size <= 0:
+            raise DecodeError(
+                f"program area read: no last-block bit within {max_size} bytes (max_size)"
+            )
+        result = await client.program_area_read(address, size)
+        if result.address != address:
+            raise DecodeError(
+                f"program area read: asked for address {address:08X}, "
+                f"the PLC answered for {result.address:08X}"
+            )
+        got = len(result.data)
+        if got > size or got % PROGRAM_BLOCK_UNIT:
+            raise DecodeError(
+                f"program area read at {address:08X}: asked for {size} bytes, "
+                f"the PLC answered {got}"
+            )
+        if not got and not result.last:
+            raise DecodeError("program area read returned no data and no last-block bit")
         out += result.data
-        address += len(result.data)
         _report(progress, len(out), len(out) if result.last else None)
         if result.last:
             return bytes(out)
-        if not result.data:
-            raise DecodeError("program area read returned no data and no last-block bit")
 
 
 def check_program_image(program: bytes) -> None:
@@ -81,7 +116,13 @@ async def restore_program(client: Client, program: bytes, progress: Progress | N
     blocks = plan_program(0, len(program), client.limits.program_write_bytes)
     for block in blocks:
         data = program[block.start : block.start + block.size]
-        await client.program_area_write(block.start, data, last=block.last)
+        echo = await client.program_area_write(block.start, data, last=block.last)
+        if (echo.address, echo.byte_count, echo.last) != (block.start, block.size, block.last):
+            raise DecodeError(
+                f"program area write: sent {block.size} bytes at {block.start:08X}"
+                f"{' (last)' if block.last else ''}, the PLC echoed {echo.byte_count} at "
+                f"{echo.address:08X}{' (last)' if echo.last else ''}"
+            )
         _report(progress, block.start + block.size, len(program))
 
 
@@ -105,6 +146,13 @@ async def backup_parameters(
             0, PARAMETER_AREA_WORDS[area], client.limits.parameter_read_words
         ):
             result = await client.parameter_area_read(area, block.start, block.size)
+            echo = (result.area_code, result.begin_word, len(result.words))
+            if echo != (area, block.start, block.size):
+                raise DecodeError(
+                    f"parameter area read: asked for {block.size} words of area {area:04X} "
+                    f"from word {block.start}, the PLC answered {len(result.words)} words of "
+                    f"area {result.area_code:04X} from word {result.begin_word}"
+                )
             words.extend(result.words)
             done += len(result.words)
             _report(progress, done, total)
@@ -163,13 +211,28 @@ FILE_NOT_FOUND = 0x2006
 
 
 async def list_files(client: Client, disk: Disk, directory: str = "") -> list[FileEntry]:
-    """Every file entry of a directory (2201, 20 names a frame)."""
+    """Every file entry of a directory (2201, 20 names a frame).
+
+    Reading stops at the number of files the first response announces (``total_files``), at
+    the last-file bit or at an empty page, whichever comes first; a page with more entries
+    than asked or than announced is refused (:class:`~aiofins.DecodeError`).
+    """
     entries: list[FileEntry] = []
-    while True:
-        result = await client.file_name_read(disk, len(entries), MAX_FILE_NAMES, directory)
+    total: int | None = None
+    while total is None or len(entries) < total:
+        count = MAX_FILE_NAMES if total is None else min(MAX_FILE_NAMES, total - len(entries))
+        result = await client.file_name_read(disk, len(entries), count, directory)
+        if total is None:
+            total = result.disk_data.total_files
+        if len(result.files) > count or len(entries) + len(result.files) > total:
+            raise DecodeError(
+                f"file name read: asked for {count} of {total} files from file {len(entries)}, "
+                f"the PLC answered {len(result.files)}"
+            )
         entries.extend(result.files)
         if result.last or not result.files:
-            return entries
+            break
+    return entries
 
 
 async def download_file(
@@ -178,16 +241,49 @@ async def download_file(
     name: str,
     directory: str = "",
     progress: Progress | None = None,
+    *,
+    max_size: int = MAX_FILE_BYTES,
 ) -> bytes:
-    """A whole file from file memory (2202 in blocks as large as the route allows)."""
+    """A whole file from file memory (2202 in blocks as large as the route allows).
+
+    The first response announces the file's size (file capacity): a size over ``max_size``
+    is refused before more is read, and reading stops there. Every response must echo the
+    position asked, the same file capacity, and carry at least one and at most the bytes
+    asked, with the last-byte bit exactly at the end (:class:`~aiofins.DecodeError`).
+    """
     limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - FILE_READ_OVERHEAD)
     out = bytearray()
-    while True:
-        result = await client.single_file_read(disk, name, len(out), limit, directory)
+    capacity: int | None = None
+    while capacity is None or len(out) < capacity:
+        position = len(out)
+        size = limit if capacity is None else min(limit, capacity - position)
+        result = await client.single_file_read(disk, name, position, size, directory)
+        if capacity is None:
+            capacity = result.file_capacity
+            if capacity > max_size:
+                raise DecodeError(
+                    f"{name}: the PLC announces {capacity} bytes, more than max_size "
+                    f"({max_size}); pass a larger max_size to read it"
+                )
+        got = len(result.data)
+        end = position + got
+        if result.position != position or result.file_capacity != capacity:
+            raise DecodeError(
+                f"{name}: asked for position {position} of a {capacity}-byte file, the PLC "
+                f"answered position {result.position} of {result.file_capacity} bytes"
+            )
+        if got > size or end > capacity or (not got and end < capacity):
+            raise DecodeError(
+                f"{name}: asked for {size} bytes at position {position} of a {capacity}-byte "
+                f"file, the PLC answered {got}"
+            )
+        if result.last and end < capacity:
+            raise DecodeError(
+                f"{name}: the PLC flags byte {end} the last of a {capacity}-byte file"
+            )
         out += result.data
-        _report(progress, len(out), result.file_capacity)
-        if result.last or not result.data or len(out) >= result.file_capacity:
-            return bytes(out)
+        _report(progress, len(out), capacity)
+    return bytes(out)
 
 
 async def upload_file(

@@ -2,8 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from datetime import datetime
+from typing import Any
 
+import anyio
 import pytest
 
 from aiofins.bulk import (
@@ -17,9 +23,20 @@ from aiofins.bulk import (
     upload_file,
 )
 from aiofins.connection import connect
-from aiofins.protocol.errors import CommandError
-from aiofins.protocol.files import Disk
+from aiofins.protocol.commands._base import Request
+from aiofins.protocol.commands.file import (
+    FileNameRead,
+    SingleFileRead,
+    SingleFileReadResult,
+)
+from aiofins.protocol.commands.parameter import ParameterAreaRead
+from aiofins.protocol.commands.program import ProgramAreaRead, ProgramAreaWrite
+from aiofins.protocol.errors import CommandError, DecodeError
+from aiofins.protocol.files import Disk, DiskData, FileDate, FileEntry, FileNameReadResult
+from aiofins.protocol.header import CommandFrame, ResponseFrame
 from aiofins.protocol.limits import NetworkType
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import run_simulator
 
 pytestmark = pytest.mark.anyio
 
@@ -124,3 +141,198 @@ async def test_an_upload_that_does_not_fit_leaves_the_old_file(url: str) -> None
         assert await download_file(plc, disk, "CFG.BIN") == b"good old contents"
         await upload_file(plc, disk, "CFG.BIN", bytes(1000))  # fits with the old file's room
         assert await download_file(plc, disk, "CFG.BIN") == bytes(1000)
+
+
+# -- a PLC that lies in its echoes ------------------------------------------------------------
+
+#: Rewrites the result of one command (the request as decoded, the true result).
+Lie = Callable[[Any, Any], Any]
+
+
+class LyingPLC:
+    """The virtual PLC, except that one command's results pass through ``lie`` first (with
+    ``invent``, the lie alone answers that command: it gets ``None`` for the true result)."""
+
+    def __init__(self, command: type[Request[Any]], lie: Lie, *, invent: bool = False) -> None:
+        self.plc = VirtualPLC()
+        self.command = command
+        self.lie = lie
+        self.invent = invent
+        #: Frames of ``command`` received.
+        self.asked = 0
+
+    def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
+        cmd = CommandFrame.decode(frame)
+        mine = (cmd.mrc, cmd.src) == (self.command.MRC, self.command.SRC)
+        if mine and self.invent:
+            self.asked += 1
+            result = self.lie(self.command.decode(cmd.params), None)
+            return ResponseFrame.reply_to(cmd, 0, result.encode()).encode()
+        reply = self.plc.handle_frame(frame, from_network=from_network)
+        if not mine or reply is None:
+            return reply
+        self.asked += 1
+        request = self.command.decode(cmd.params)
+        response = ResponseFrame.decode(reply)
+        if response.end_code.code:  # an error answer: nothing to lie about
+            return reply
+        result = self.lie(request, request.decode_response(response.data))
+        return dataclasses.replace(response, data=result.encode()).encode()
+
+
+@asynccontextmanager
+async def lying(
+    scheme: str, command: type[Request[Any]], lie: Lie, *, invent: bool = False
+) -> AsyncIterator[Any]:
+    """A client of a :class:`LyingPLC` on loopback; yields ``(client, peer)``."""
+    peer = LyingPLC(command, lie, invent=invent)
+    where = ("127.0.0.1", 0)
+    async with run_simulator(
+        peer, udp=where if scheme == "udp" else None, tcp=where if scheme == "tcp" else None
+    ) as sim:
+        port = sim.udp_port if scheme == "udp" else sim.tcp_port
+        async with connect(f"{scheme}://127.0.0.1:{port}", timeout=2) as plc:
+            yield plc, peer
+
+
+@pytest.fixture
+def anyio_scheme(anyio_backend: object, scheme: str) -> str:
+    return scheme
+
+
+async def test_a_program_backup_refuses_a_block_echoed_at_the_wrong_address(
+    anyio_scheme: str,
+) -> None:
+    """A PLC echoing address 0 gave a 2,976-byte "backup" of three overlapping blocks."""
+
+    def lie(request: ProgramAreaRead, result: Any) -> Any:
+        return dataclasses.replace(result, address=0)
+
+    async with lying(anyio_scheme, ProgramAreaRead, lie) as (plc, peer):
+        await restore_program(plc, bytes(range(256)) * 10)  # 3 blocks of 992 bytes
+        with pytest.raises(DecodeError, match=r"asked for address 000003E0, .* for 00000000"):
+            await backup_program(plc)
+        assert peer.asked == 2
+
+
+async def test_a_program_backup_without_a_last_block_stops_at_max_size(
+    anyio_scheme: str,
+) -> None:
+    def lie(request: ProgramAreaRead, result: Any) -> Any:
+        return dataclasses.replace(result, last=False)
+
+    async with lying(anyio_scheme, ProgramAreaRead, lie) as (plc, peer):
+        with pytest.raises(DecodeError, match="no last-block bit within 4002 bytes"):
+            await backup_program(plc, max_size=4002)
+        assert peer.asked == 5  # 992 * 4 + 32
+
+
+async def test_a_program_backup_refuses_more_bytes_than_asked(anyio_scheme: str) -> None:
+    def lie(request: ProgramAreaRead, result: Any) -> Any:
+        return dataclasses.replace(result, data=bytes(request.byte_count + 4))
+
+    async with lying(anyio_scheme, ProgramAreaRead, lie) as (plc, _):
+        with pytest.raises(DecodeError, match="asked for 992 bytes, the PLC answered 996"):
+            await backup_program(plc)
+
+
+async def test_a_program_restore_refuses_a_wrong_echo(anyio_scheme: str) -> None:
+    def lie(request: ProgramAreaWrite, result: Any) -> Any:
+        return dataclasses.replace(result, address=0)
+
+    async with lying(anyio_scheme, ProgramAreaWrite, lie) as (plc, peer):
+        with pytest.raises(DecodeError, match=r"sent 996 bytes at 000003E4, .* echoed 996 at 0"):
+            await restore_program(plc, bytes(4000))
+        assert peer.asked == 2
+
+
+async def test_a_parameter_backup_refuses_a_wrong_echo(anyio_scheme: str) -> None:
+    def lie(request: ParameterAreaRead, result: Any) -> Any:
+        return dataclasses.replace(result, begin_word=0)
+
+    async with lying(anyio_scheme, ParameterAreaRead, lie) as (plc, _):
+        with pytest.raises(DecodeError, match=r"from word 498, the PLC answered 14 words .* 0$"):
+            await backup_parameters(plc, (0x8010,))
+
+
+def _endless_file(request: SingleFileRead, result: Any) -> SingleFileReadResult:
+    """A 4 GiB file that never ends: whatever was asked, never the last byte."""
+    return SingleFileReadResult(0xFFFFFFFF, request.position, bytes(request.length), False)
+
+
+async def test_a_download_refuses_a_file_larger_than_max_size(anyio_scheme: str) -> None:
+    """173,000 requests in 20 s, RSS growing, until "last" that never came."""
+    async with lying(anyio_scheme, SingleFileRead, _endless_file) as (plc, peer):
+        await upload_file(plc, Disk.MEMORY_CARD, "A.BIN", b"x")
+        with anyio.fail_after(5), pytest.raises(DecodeError, match="4294967295 bytes, more"):
+            await download_file(plc, Disk.MEMORY_CARD, "A.BIN")
+        assert peer.asked == 2  # the upload's existence check, then one read
+        with anyio.fail_after(5), pytest.raises(DecodeError, match="4294967295 bytes, more"):
+            await download_file(plc, Disk.MEMORY_CARD, "A.BIN", max_size=10_000_000)
+
+
+@pytest.mark.parametrize(
+    ("lie", "said"),
+    [
+        (
+            lambda q, r: dataclasses.replace(r, position=0),
+            "asked for position 1988 of a 5000-byte file, the PLC answered position 0 of 5000",
+        ),
+        (
+            lambda q, r: dataclasses.replace(r, file_capacity=r.file_capacity + q.position),
+            "asked for position 1988 of a 5000-byte file, the PLC answered position 1988 of 6988",
+        ),
+        (
+            # the last request asks for what remains (a full frame + 1 would not fit a frame)
+            lambda q, r: dataclasses.replace(r, data=r.data + b"!") if q.length < 1988 else r,
+            "asked for 1024 bytes at position 3976 of a 5000-byte file, the PLC answered 1025",
+        ),
+        (
+            lambda q, r: dataclasses.replace(r, data=b"", last=False) if q.position else r,
+            "asked for 1988 bytes at position 1988 of a 5000-byte file, the PLC answered 0",
+        ),
+        (
+            lambda q, r: dataclasses.replace(r, last=True),
+            "the PLC flags byte 1988 the last of a 5000-byte file",
+        ),
+    ],
+    ids=["position", "capacity", "more-data", "no-data", "last-early"],
+)
+async def test_a_download_checks_every_echo(anyio_scheme: str, lie: Lie, said: str) -> None:
+    async with lying(anyio_scheme, SingleFileRead, lie) as (plc, _):
+        await upload_file(plc, Disk.MEMORY_CARD, "A.BIN", bytes(5000), overwrite=False)
+        with anyio.fail_after(5), pytest.raises(DecodeError, match=re.escape(said)):
+            await download_file(plc, Disk.MEMORY_CARD, "A.BIN")
+
+
+def _pages_for_ever(total: int) -> Lie:
+    """A directory of ``total`` files that never flags its last page: it answers as many
+    made-up entries as asked, whatever the position."""
+    date = FileDate.from_datetime(datetime(2024, 1, 1))
+
+    def lie(request: FileNameRead, result: None) -> FileNameReadResult:
+        disk = DiskData("CARD", date, 1 << 20, 1 << 19, total)
+        files = tuple(
+            FileEntry(f"F{request.first_file + i}.BIN", date, 1) for i in range(request.count)
+        )
+        return FileNameReadResult(disk, files, last=False)
+
+    return lie
+
+
+async def test_a_listing_stops_at_the_announced_number_of_files(anyio_scheme: str) -> None:
+    """65,536 requests against a PLC that never flags the last page."""
+    async with lying(anyio_scheme, FileNameRead, _pages_for_ever(45), invent=True) as (
+        plc,
+        peer,
+    ):
+        with anyio.fail_after(5):
+            entries = await list_files(plc, Disk.MEMORY_CARD)
+        assert [e.name for e in entries] == [f"F{i}.BIN" for i in range(45)]
+        assert peer.asked == 3
+
+
+async def test_a_listing_refuses_more_files_than_announced(anyio_scheme: str) -> None:
+    async with lying(anyio_scheme, FileNameRead, _pages_for_ever(3), invent=True) as (plc, _):
+        with pytest.raises(DecodeError, match=r"asked for 20 of 3 files from file 0, .* 20"):
+            await list_files(plc, Disk.MEMORY_CARD)
