@@ -229,6 +229,44 @@ async def test_tcp_max_connections() -> None:
         assert sim.tcp is not None and sim.tcp.handshake_refusals == 1
 
 
+async def test_idle_sockets_do_not_lock_clients_out() -> None:
+    """17 sockets that never sent a handshake locked every FINS/TCP client out (the limit
+    counted them, decided at accept). Now only handshaken connections count, and sockets
+    without a handshake are capped at 8: the oldest are closed to make room."""
+    async with run_simulator(make_plc(), tcp=("127.0.0.1", 0)) as sim:
+        assert sim.tcp is not None and sim.tcp.max_connections == 16
+        idle = [await connect(sim.tcp_port) for _ in range(17)]
+        try:
+            ok, reply = await handshake(sim.tcp_port)
+            async with ok.stream:
+                assert reply == node_response(239, 10)
+                await ok.stream.send(tcp_frame(READ_D100))
+                reply_to_239 = READ_D100_REPLY[:4] + bytes((239,)) + READ_D100_REPLY[5:]
+                assert (await ok.read_message())[16:] == reply_to_239  # DA1: its node
+            # accepted 18 sockets with room for 8 waiting: the 10 oldest idle ones closed
+            assert sim.tcp.pending_evictions == 10
+            for peer in idle[:10]:
+                assert await peer.closed_by_server()
+        finally:
+            for peer in idle:
+                await peer.stream.aclose()
+
+
+async def test_the_connection_limit_counts_handshaken_connections_only() -> None:
+    async with run_simulator(make_plc(), tcp=("127.0.0.1", 0), max_connections=2) as sim:
+        idle = [await connect(sim.tcp_port) for _ in range(3)]
+        a, reply_a = await handshake(sim.tcp_port)
+        b, reply_b = await handshake(sim.tcp_port)
+        c, reply_c = await handshake(sim.tcp_port)
+        async with a.stream, b.stream, c.stream:
+            assert (reply_a, reply_b) == (node_response(239, 10), node_response(240, 10))
+            assert reply_c == node_response(0, 10, 0x20)  # two handshaken: all in use
+            assert await c.closed_by_server()
+        assert sim.tcp is not None and sim.tcp.pending_evictions == 0
+        for peer in idle:
+            await peer.stream.aclose()
+
+
 async def test_tcp_connection_without_handshake_is_closed(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -252,9 +290,11 @@ async def test_tcp_connection_without_handshake_is_closed(
 async def test_tcp_accept_failure_does_not_stop_the_simulator(tmp_path: object) -> None:
     """Out of file descriptors (EMFILE), accept() failed and the whole simulator (UDP
     included) exited. In a process with a low descriptor limit: fill it, then it must
-    still answer over UDP and, once descriptors are free, over TCP."""
+    still answer over UDP and, once descriptors are free, over TCP. (The simulator uses
+    about 10 descriptors of its own; sockets without a handshake are capped at 8, so the
+    limit must be lower than that for accept() to fail.)"""
     script = (
-        "import resource, sys; resource.setrlimit(resource.RLIMIT_NOFILE, (48, 48)); "
+        "import resource, sys; resource.setrlimit(resource.RLIMIT_NOFILE, (17, 17)); "
         "from aiofins.cli import main; sys.exit(main(sys.argv[1:]))"
     )
     proc = subprocess.Popen(

@@ -3,7 +3,8 @@
 Handshake: the client sends command 0 with its FINS node (0 = allocate one); the server answers
 command 1 with the client node and its own node, or with an error code and closes:
 
-* ``0x20`` all connections in use (more than ``max_connections`` open),
+* ``0x20`` all connections in use (``max_connections`` connections have completed the
+  handshake),
 * ``0x21`` the fixed node asked for is held by another connection,
 * ``0x23`` the node asked for is out of range 1..254,
 * ``0x24`` the node asked for is the server's own node,
@@ -13,6 +14,11 @@ command 1 with the client node and its own node, or with an error code and close
 A bad header (1), an impossible length (2) or a command other than 2 after the handshake (3)
 gets command 3 with that error code, and the connection closes. SA1 of every FINS frame is
 set to the connection's node so that the response's DA1 names it.
+
+Only connections that completed the handshake count against ``max_connections``. The others
+(accepted, no node yet) are held to a small separate cap, ``max_pending``, and a short
+deadline, ``handshake_timeout``: when one more arrives over the cap, the oldest of them is
+closed (a real client sends its handshake at once; idle sockets cannot lock it out).
 """
 
 from __future__ import annotations
@@ -44,8 +50,10 @@ from .faults import Dispatcher
 DEFAULT_NODE_POOL = tuple(range(239, 255))
 #: FINS/TCP connections per Ethernet Unit (W421).
 DEFAULT_MAX_CONNECTIONS = 16
-#: A connection that has not completed the FINS/TCP handshake by then is closed.
-HANDSHAKE_TIMEOUT = 10.0
+#: A connection that has not completed the FINS/TCP handshake by then (seconds) is closed.
+HANDSHAKE_TIMEOUT = 2.0
+#: Connections accepted but not yet through the handshake; over this, the oldest is closed.
+MAX_PENDING_HANDSHAKES = 8
 _SA1 = 7
 _logger = logging.getLogger(__name__)
 
@@ -57,6 +65,8 @@ class _Connection:
     port: int
     lock: anyio.Lock = field(default_factory=anyio.Lock)
     node: int | None = None
+    #: Cancelled to close the connection (handshake deadline, eviction, end of its run).
+    scope: anyio.CancelScope = field(default_factory=anyio.CancelScope)
 
     async def send(self, data: bytes) -> None:
         async with self.lock:
@@ -75,11 +85,19 @@ class TcpServer:
         server_node: int = 1,
         node_pool: Sequence[int] = DEFAULT_NODE_POOL,
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
+        max_pending: int = MAX_PENDING_HANDSHAKES,
+        handshake_timeout: float | None = None,
     ) -> None:
         if not 1 <= server_node <= 254:
             raise ValueError(f"FINS/TCP server node {server_node} out of range 1..254")
         if max_connections < 1:
             raise ValueError(f"max_connections {max_connections} must be at least 1")
+        if max_pending < 1:
+            raise ValueError(f"max_pending {max_pending} must be at least 1")
+        if handshake_timeout is None:
+            handshake_timeout = HANDSHAKE_TIMEOUT
+        if not 0 < handshake_timeout < float("inf"):
+            raise ValueError(f"handshake_timeout {handshake_timeout} must be a positive number")
         self.dispatcher = dispatcher
         self.host = host
         self.requested_port = port
@@ -87,17 +105,22 @@ class TcpServer:
         self.server_node = server_node
         self.node_pool = tuple(n for n in node_pool if n != server_node)
         self.max_connections = max_connections
+        self.max_pending = max_pending
+        self.handshake_timeout = handshake_timeout
         #: FINS frames whose SA1 was not the connection's node (rewritten).
         self.source_node_rewrites = 0
         #: accept() failures (e.g. no file descriptors left): the listener goes on.
         self.accept_errors = 0
-        #: Connections closed for not completing the handshake within HANDSHAKE_TIMEOUT.
+        #: Connections closed for not completing the handshake within ``handshake_timeout``.
         self.handshake_timeouts = 0
+        #: Connections without a handshake closed to make room for a newer one (max_pending).
+        self.pending_evictions = 0
         #: Error notifications sent (command 3: bad magic or length, unexpected command).
         self.error_notifications = 0
         #: Handshakes refused (node in use, none free, out of range, all connections in use...).
         self.handshake_refusals = 0
-        self._open: set[_Connection] = set()
+        #: Accepted, no handshake yet; oldest first (a dict keeps insertion order).
+        self._pending: dict[_Connection, None] = {}
         self._nodes: dict[int, _Connection] = {}
 
     @property
@@ -129,23 +152,34 @@ class TcpServer:
                 _logger.warning("FINS/TCP accept failed: %s", exc)
                 await anyio.sleep(0.05)
                 continue
-            tg.start_soon(self._connection, stream)
+            tg.start_soon(self._connection, self._admit(stream))
 
-    async def _connection(self, stream: SocketStream) -> None:
+    def _admit(self, stream: SocketStream) -> _Connection:
+        """A new connection, pending its handshake; the oldest pending one is closed if
+        there are already ``max_pending``."""
         address = stream.extra(SocketAttribute.remote_address)
         host, port = (str(address[0]), int(address[1])) if isinstance(address, tuple) else ("", 0)
         conn = _Connection(stream, host, port)
-        self._open.add(conn)
+        while len(self._pending) >= self.max_pending:
+            oldest = next(iter(self._pending))
+            del self._pending[oldest]
+            oldest.scope.cancel()
+            self.pending_evictions += 1
+        self._pending[conn] = None
+        return conn
+
+    async def _connection(self, conn: _Connection) -> None:
         try:
-            async with stream, anyio.create_task_group() as tg:
-                tg.start_soon(self._handshake_deadline, conn, tg.cancel_scope)
-                await self._run(conn, tg)
-                tg.cancel_scope.cancel()
+            with conn.scope:
+                async with conn.stream, anyio.create_task_group() as tg:
+                    tg.start_soon(self._handshake_deadline, conn)
+                    await self._run(conn, tg)
+                    conn.scope.cancel()
         except Exception:
             # one connection's failure must not stop the listener and the other connections
             _logger.exception("FINS/TCP connection from %s:%s failed", conn.host, conn.port)
         finally:
-            self._open.discard(conn)
+            self._pending.pop(conn, None)
             if conn.node is not None and self._nodes.get(conn.node) is conn:
                 del self._nodes[conn.node]
 
@@ -153,17 +187,16 @@ class TcpServer:
         self.error_notifications += 1
         await conn.send(encode_error_notification(code))
 
-    async def _handshake_deadline(self, conn: _Connection, scope: anyio.CancelScope) -> None:
+    async def _handshake_deadline(self, conn: _Connection) -> None:
         """Close a connection that holds a descriptor without ever completing the handshake."""
-        await anyio.sleep(HANDSHAKE_TIMEOUT)
+        await anyio.sleep(self.handshake_timeout)
         if conn.node is None:
             self.handshake_timeouts += 1
-            scope.cancel()
+            conn.scope.cancel()
 
     async def _run(self, conn: _Connection, tg: TaskGroup) -> None:
         """Read messages until the peer closes or breaks the protocol."""
         decoder = TcpDecoder()
-        over_limit = len(self._open) > self.max_connections
         try:
             async for chunk in conn.stream:
                 try:
@@ -172,20 +205,18 @@ class TcpServer:
                     await self._notify_error(conn, exc.tcp_error_code)
                     return
                 for message in messages:
-                    if not await self._message(conn, message, over_limit, tg):
+                    if not await self._message(conn, message, tg):
                         return
         except (anyio.BrokenResourceError, anyio.ClosedResourceError, OSError):
             return
 
-    async def _message(
-        self, conn: _Connection, message: TcpMessage, over_limit: bool, tg: TaskGroup
-    ) -> bool:
+    async def _message(self, conn: _Connection, message: TcpMessage, tg: TaskGroup) -> bool:
         """Handle one message; ``False`` closes the connection."""
         if conn.node is None:
             if message.command != TcpCommand.NODE_ADDRESS_REQUEST or len(message.payload) != 4:
                 await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
                 return False
-            return await self._handshake(conn, parse_node_request(message), over_limit)
+            return await self._handshake(conn, parse_node_request(message))
         if message.command != TcpCommand.FRAME:
             await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
             return False
@@ -202,14 +233,14 @@ class TcpServer:
         )
         return True
 
-    async def _handshake(self, conn: _Connection, requested: int, over_limit: bool) -> bool:
+    async def _handshake(self, conn: _Connection, requested: int) -> bool:
         plan = self.dispatcher.plan
         error = TcpErrorCode.NORMAL.value
         node = requested
         if plan.tcp_refusal is not None:
             error = plan.tcp_refusal
             plan.counters.tcp_refusals += 1
-        elif over_limit:
+        elif len(self._nodes) >= self.max_connections:
             error = TcpErrorCode.ALL_CONNECTIONS_IN_USE
         elif requested == 0:
             free = [n for n in self.node_pool if n not in self._nodes]
@@ -230,10 +261,12 @@ class TcpServer:
                     anyio.BrokenResourceError, anyio.ClosedResourceError, OSError
                 ):
                     await holder.send(encode_message(TcpCommand.CONNECTION_CONFIRMATION))
+        if not error:  # taken before the answer goes out: no other handshake may take it
+            conn.node = node
+            self._nodes[node] = conn
+            self._pending.pop(conn, None)
         await conn.send(encode_node_response(node, self.server_node, error))
         if error:
             self.handshake_refusals += 1
             return False
-        conn.node = node
-        self._nodes[node] = conn
         return True
