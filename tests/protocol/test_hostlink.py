@@ -187,6 +187,25 @@ def test_line_decoder_drops_over_long_lines() -> None:
     assert decoder.feed(DIRECT_COMMAND) == [DIRECT_COMMAND]
 
 
+def test_line_decoder_starts_a_line_at_the_last_at_sign() -> None:
+    """A stray '@' (or a frame cut off half-way) swallowed the next command: the line ran
+    from the first '@' and failed its FCS. '@' never occurs inside a frame."""
+    decoder = LineDecoder()
+    assert decoder.feed(b"@" + DIRECT_COMMAND) == [DIRECT_COMMAND]
+    assert decoder.discarded == 1
+    cut_off = NETWORK_COMMAND[:20]
+    assert decoder.feed(cut_off + b"@@" + DIRECT_RESPONSE) == [DIRECT_RESPONSE]
+    assert decoder.discarded == 1 + 22
+    # byte by byte, the same
+    decoder = LineDecoder()
+    lines: list[bytes] = []
+    for b in cut_off + b"@" + DIRECT_COMMAND:
+        lines += decoder.feed(bytes((b,)))
+    assert lines == [DIRECT_COMMAND]
+    # bytes before a CR without any '@' are noise, not a line
+    assert LineDecoder().feed(b"0E*\r" + DIRECT_COMMAND) == [DIRECT_COMMAND]
+
+
 commands = st.builds(
     CommandFrame,
     st.builds(
@@ -229,3 +248,53 @@ def test_arbitrary_lines_raise_only_decode_errors(line: bytes) -> None:
     decoder = LineDecoder(max_chars=50)
     for produced in decoder.feed(line):
         assert produced.startswith(b"@") and produced.endswith(b"\r")
+
+
+_LINES = st.one_of(
+    st.just(DIRECT_COMMAND),
+    st.just(DIRECT_RESPONSE),
+    st.just(NETWORK_COMMAND),
+    st.builds(
+        lambda frame, unit: hostlink.encode_command(frame, unit=unit, full_header=True),
+        st.builds(
+            CommandFrame,
+            st.builds(
+                Header,
+                st.just(FinsAddress(1, 2, 0)),
+                st.just(FinsAddress()),
+                sid=st.integers(0, 255),
+            ),
+            st.integers(0, 255),
+            st.integers(0, 255),
+            st.binary(max_size=100),
+        ),
+        st.integers(0, 31),
+    ),
+)
+
+
+@given(
+    st.lists(st.tuples(st.binary(max_size=30), _LINES), max_size=6),
+    st.lists(st.integers(0, 2000), max_size=8),
+)
+def test_line_decoder_finds_every_line_through_noise(
+    parts: list[tuple[bytes, bytes]], cuts: list[int]
+) -> None:
+    """Whatever comes before a line (noise, '@'s, a cut-off frame) and however the stream is
+    split, every line comes out whole; without a CR in the noise, nothing else does."""
+    stream = b"".join(noise + line for noise, line in parts)
+    decoder = LineDecoder()
+    produced: list[bytes] = []
+    start = 0
+    for cut in [*sorted({c for c in cuts if c < len(stream)}), len(stream)]:
+        produced += decoder.feed(stream[start:cut])
+        start = cut
+    expected = [line for _, line in parts]
+    if not any(b"\r" in noise for noise, _ in parts):
+        assert produced == expected
+        assert decoder.discarded == sum(len(noise) for noise, _ in parts)
+    else:  # a CR in the noise may end a garbage line of its own (refused later by its FCS)
+        rest = iter(produced)
+        assert all(any(line == got for got in rest) for line in expected)
+    for line in produced:
+        assert line.count(b"@") == 1 and line.startswith(b"@") and line.endswith(b"\r")

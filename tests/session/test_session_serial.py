@@ -155,3 +155,19 @@ async def test_routed_request_uses_the_full_header(pty_pair: tuple[str, str]) ->
         assert response.data == bytes.fromhex("2007")
         # Full form: ICF RSV GCT DNA DA1 DA2 SNA SA1 SA2 SID after "@00FA0".
         assert lines[0][6:24] == b"800002010500000000"
+
+
+async def test_a_stray_at_sign_before_a_reply_is_skipped(pty_pair: tuple[str, str]) -> None:
+    """The reply line ran from the first '@' and failed its FCS; it starts at the last one."""
+    plc, host = pty_pair
+
+    def noisy(line: bytes) -> bytes:
+        return b"@0@" + read_reply(line)
+
+    async with hostlink_peer(plc, noisy) as lines, serial_session(host, timeout=0.5) as session:
+        response = await session.request(0x01, 0x01, bytes.fromhex("820005000001"))
+        assert response.data == bytes.fromhex("2005")
+        transport = session.transport
+        assert isinstance(transport, SerialTransport)
+        assert transport.frame_errors == 0 and session.stats.retries == 0
+        assert len(lines) == 1

@@ -491,6 +491,23 @@ async def test_serial_worked_example(pty_pair: tuple[str, str]) -> None:
 
 
 @pytest.mark.serial
+async def test_a_stray_at_sign_does_not_swallow_the_next_command(
+    pty_pair: tuple[str, str],
+) -> None:
+    server_end, host_end = pty_pair
+    async with run_simulator(make_plc(), serial=server_end) as sim:
+        line = Line(host_end)
+        try:
+            await line.write(b"@" + HOSTLINK_READ)
+            assert await line.read_line() == HOSTLINK_REPLY
+            await line.write(HOSTLINK_READ[:10] + HOSTLINK_READ)  # a command cut off
+            assert await line.read_line() == HOSTLINK_REPLY
+            assert sim.serial is not None and sim.serial.ignored_lines == 0
+        finally:
+            line.close()
+
+
+@pytest.mark.serial
 async def test_serial_unit_number_filter(pty_pair: tuple[str, str]) -> None:
     server_end, host_end = pty_pair
     async with run_simulator(make_plc(), serial=server_end, serial_unit=1) as sim:

@@ -192,8 +192,11 @@ def decode_response(line: bytes, *, full_header: bool) -> tuple[int, ResponseFra
 class LineDecoder:
     """Splits a serial byte stream into Host Link lines (``@`` … CR).
 
-    Bytes before an ``@`` are noise and are counted in ``discarded``; a line longer than
-    ``max_chars`` is discarded whole.
+    A line starts at the *last* ``@`` before its CR: ``@`` never occurs inside a frame (only
+    hex digits, ``*`` and CR follow it), so an ``@`` means a new frame begins and whatever came
+    before it (noise, a stray ``@``, a frame cut off by a reset) is dropped rather than glued
+    in front of the next command. Dropped bytes are counted in ``discarded``; a line longer
+    than ``max_chars`` is discarded whole, and so are bytes before a CR with no ``@``.
     """
 
     __slots__ = ("_buffer", "discarded", "max_chars")
@@ -208,24 +211,24 @@ class LineDecoder:
         buf += data
         lines: list[bytes] = []
         while True:
-            start = buf.find(b"@")
-            if start < 0:
-                self.discarded += len(buf)
-                buf.clear()
-                break
-            if start:
-                self.discarded += start
-                del buf[:start]
             end = buf.find(b"\r")
             if end < 0:
-                if len(buf) > self.max_chars:
-                    self.discarded += len(buf)
-                    buf.clear()
-                break
-            line = bytes(buf[: end + 1])
+                # no line complete yet: keep what follows the last '@', within the limit
+                start = buf.rfind(b"@")
+                drop = len(buf) if start < 0 or len(buf) - start > self.max_chars else start
+                if drop:
+                    self.discarded += drop
+                    del buf[:drop]
+                return lines
+            start = buf.rfind(b"@", 0, end)
+            if start < 0:
+                self.discarded += end + 1
+                del buf[: end + 1]
+                continue
+            line = bytes(buf[start : end + 1])
+            self.discarded += start
             del buf[: end + 1]
             if len(line) > self.max_chars:
                 self.discarded += len(line)
                 continue
             lines.append(line)
-        return lines
