@@ -118,13 +118,55 @@ def test_tcp_refusal_option(process_factory: list[SimulatorProcess]) -> None:
     assert sim.stop()[0] == 0
 
 
-def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["simulate", "--udp", "127.0.0.1:0", "--node", "0"]) == 2
-    assert "--node 0 out of range" in capsys.readouterr().err
-    for bad in (["--drop", "2"], ["--udp", "host:port"], ["--delay", "9-1"], ["--mode", "x"]):
-        with pytest.raises(SystemExit) as info:
-            main(["simulate", *bad])
-        assert info.value.code == 2
+@pytest.mark.parametrize(
+    ("bad", "said"),
+    [
+        (["--node", "0"], "argument --node: 0 out of range 1..254"),
+        (["--node", "x"], "argument --node: 'x' is not an integer"),
+        (["--network", "128"], "argument --network: 128 out of range 0..127"),
+        (["--serial-unit", "32"], "argument --serial-unit: 32 out of range 0..31"),
+        (["--baudrate", "0"], "argument --baudrate: 0 out of range at least 1"),
+        (["--max-connections", "0"], "argument --max-connections: 0 out of range at least 1"),
+        (["--max-concurrent", "-1"], "argument --max-concurrent: -1 out of range at least 1"),
+        (["--max-held", "0"], "argument --max-held: 0 out of range at least 1"),
+        (["--late-after", "nan"], "argument --late-after: nan ms: give a finite number"),
+        (["--late-after", "inf"], "argument --late-after: inf ms: give a finite number"),
+        (["--late-after=-5"], "argument --late-after: -5 ms: give a finite number"),
+        (["--delay", "nan"], "argument --delay: delay range nan..nan is not finite"),
+        (["--delay", "inf"], "argument --delay: delay range inf..inf is not finite"),
+        (["--delay=-5"], "argument --delay: delay '-5' is not MS or MIN-MAX"),
+        (["--delay", "9-1"], "argument --delay: delay range 0.009..0.001 is not 0 <= min"),
+        (["--drop", "2"], "argument --drop: probability 2 out of range 0..1"),
+        (["--late", "nan"], "argument --late: probability nan out of range 0..1"),
+        (["--corrupt=-0.1"], "argument --corrupt: probability -0.1 out of range 0..1"),
+        (["--udp", "host:port"], "argument --udp: 'host:port' is not HOST:PORT"),
+        (["--mode", "x"], "argument --mode: invalid choice: 'x'"),
+    ],
+)
+def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str], bad: list[str], said: str) -> None:
+    """--max-connections 0 ended in a traceback; --late-after nan was accepted."""
+    with pytest.raises(SystemExit) as info:
+        main(["simulate", "--udp", "127.0.0.1:0", *bad])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("bad", "said"),
+    [
+        (["--end-code", "10000"], "end code 0x10000 out of range 0..0xFFFF"),
+        (["--flags", "41"], "flags 0x41 may only combine 0x40 and 0x80"),
+        (["--relay", "300.1", "--end-code", "8101"], "relay point (300, 1) out of range"),
+        (["--tcp-refuse", "0"], "FINS/TCP refusal code 0x0 must be non-zero u32"),
+    ],
+)
+def test_bad_fault_settings_exit_2(
+    capsys: pytest.CaptureFixture[str], bad: list[str], said: str
+) -> None:
+    assert main(["simulate", "--udp", "127.0.0.1:0", *bad]) == 2
+    err = capsys.readouterr().err
+    assert f"aiofins simulate: {said}" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize(

@@ -387,3 +387,28 @@ async def test_frame_log_to_file_and_urls(tmp_path: pathlib.Path) -> None:
     words = [line.split(" ") for line in path.read_text().splitlines()]
     assert [w[1] for w in words] == ["rx", "tx"]
     assert bytes.fromhex("".join(words[0][3:])) == READ_D100
+
+
+@pytest.mark.anyio
+async def test_held_answers_are_bounded_the_rest_dropped_and_counted() -> None:
+    """--delay/--late held one task per delayed request without bound (61k requests: RSS
+    31 -> 388 MB). At most max_held wait; the rest are dropped and counted."""
+    plan = plan_for_read(FaultRule(delay=Delay(0.2, 0.2)))
+    plan.max_held = 3
+    async with udp_sim(plan) as (sim, sock):
+        for sid in range(10):
+            await send(sim, sock, with_sid(READ_D100, sid))
+        await send(sim, sock, MARKER)  # answered at once, after the ten were dispatched
+        assert (await recv(sock)).startswith(MARKER_REPLY_HEAD)
+        assert sim.counters.held_dropped == 7
+        assert sim.dispatcher.waiting == 3
+        replies = [await recv(sock) for _ in range(3)]
+        assert sorted(r[9] for r in replies) == [0, 1, 2]
+        assert all(with_sid(r, 1) == with_sid(READ_D100_REPLY, 1) for r in replies)
+        assert sim.counters.delayed == 3
+        with anyio.fail_after(5):
+            while sim.dispatcher.waiting:  # the tasks end right after their answer
+                await anyio.sleep(0.001)
+        await send(sim, sock, with_sid(READ_D100, 42))  # room again
+        assert await recv(sock) == with_sid(READ_D100_REPLY, 42)
+        assert sim.counters.held_dropped == 7

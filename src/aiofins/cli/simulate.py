@@ -7,15 +7,17 @@ SIGTERM, then prints the frame and fault counters to stderr and exits 0.
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import anyio
 
 from ..protocol.errors import FinsError
 from ..protocol.tcp import DEFAULT_PORT
-from ..simulator.faults import Delay, FaultPlan, FaultRule, FrameLog
+from ..simulator.faults import DEFAULT_MAX_HELD, Delay, FaultPlan, FaultRule, FrameLog
 from ..simulator.runner import Simulator, run_simulator
 from ..simulator.serial import SerialSettings
 from ..simulator.tcp import DEFAULT_MAX_CONNECTIONS
@@ -50,9 +52,36 @@ def probability(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a probability") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"probability {value} out of range 0..1")
+    if not 0.0 <= value <= 1.0:  # NaN fails this too
+        raise argparse.ArgumentTypeError(f"probability {text} out of range 0..1")
     return value
+
+
+def milliseconds(text: str) -> float:
+    """A finite duration in milliseconds, 0 or more."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of milliseconds") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text} ms: give a finite number of milliseconds >= 0")
+    return value
+
+
+def integer_in(low: int, high: int | None = None) -> Callable[[str], int]:
+    """An argparse type: a decimal integer in ``low..high`` (no upper bound: ``None``)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < low or (high is not None and value > high):
+            span = f"{low}..{high}" if high is not None else f"at least {low}"
+            raise argparse.ArgumentTypeError(f"{value} out of range {span}")
+        return value
+
+    return parse
 
 
 def hex_int(text: str) -> int:
@@ -91,16 +120,29 @@ def register(subparsers: SubParsers) -> None:
     where.add_argument("--udp", type=endpoint, metavar="HOST:PORT", help="FINS/UDP endpoint")
     where.add_argument("--tcp", type=endpoint, metavar="HOST:PORT", help="FINS/TCP endpoint")
     where.add_argument("--serial", metavar="DEVICE", help="serial device for Host Link FINS")
-    where.add_argument("--serial-unit", type=int, default=0, metavar="N", help="Host Link unit")
-    where.add_argument("--baudrate", type=int, default=9600)
+    where.add_argument(
+        "--serial-unit", type=integer_in(0, 31), default=0, metavar="N", help="Host Link unit"
+    )
+    where.add_argument("--baudrate", type=integer_in(1), default=9600)
     where.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
     where.add_argument("--parity", choices=("N", "E", "O"), default="N")
     where.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
-    where.add_argument("--max-connections", type=int, default=DEFAULT_MAX_CONNECTIONS, metavar="N")
+    where.add_argument(
+        "--max-connections",
+        type=integer_in(1),
+        default=DEFAULT_MAX_CONNECTIONS,
+        metavar="N",
+        help="FINS/TCP connections through the handshake at once "
+        f"(default {DEFAULT_MAX_CONNECTIONS})",
+    )
 
     plc = p.add_argument_group("PLC")
-    plc.add_argument("--node", type=int, default=1, help="FINS node (1-254, default 1)")
-    plc.add_argument("--network", type=int, default=0, help="FINS network (default 0)")
+    plc.add_argument(
+        "--node", type=integer_in(1, 254), default=1, help="FINS node (1-254, default 1)"
+    )
+    plc.add_argument(
+        "--network", type=integer_in(0, 127), default=0, help="FINS network (0-127, default 0)"
+    )
     plc.add_argument("--mode", choices=MODES, default="run", help="operating mode")
 
     f = p.add_argument_group("faults (probabilities 0..1 per request)")
@@ -118,7 +160,7 @@ def register(subparsers: SubParsers) -> None:
         metavar="P",
         help="answer after --late-after instead",
     )
-    f.add_argument("--late-after", type=float, default=10000.0, metavar="MS")
+    f.add_argument("--late-after", type=milliseconds, default=10000.0, metavar="MS")
     f.add_argument("--end-code", type=hex_int, metavar="HEX", help="answer this end code")
     f.add_argument("--end-code-probability", type=probability, default=1.0, metavar="P")
     f.add_argument(
@@ -142,7 +184,18 @@ def register(subparsers: SubParsers) -> None:
         help="apply the faults to these command codes only, e.g. 0101,0102",
     )
     f.add_argument(
-        "--max-concurrent", type=int, metavar="N", help="answer 2604 above N commands in progress"
+        "--max-concurrent",
+        type=integer_in(1),
+        metavar="N",
+        help="answer 2604 above N commands in progress",
+    )
+    f.add_argument(
+        "--max-held",
+        type=integer_in(1),
+        default=DEFAULT_MAX_HELD,
+        metavar="N",
+        help="most delayed/late answers waiting at once; more are dropped and counted "
+        f"(default {DEFAULT_MAX_HELD})",
     )
     f.add_argument(
         "--tcp-refuse",
@@ -185,20 +238,13 @@ def build_plan(args: argparse.Namespace) -> FaultPlan:
         max_concurrent=args.max_concurrent,
         tcp_refusal=args.tcp_refuse,
         log=log,
+        max_held=args.max_held,
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    """The ``simulate`` handler: exit code 0 after an interrupt, 2 on bad options."""
-    if not 1 <= args.node <= 254:
-        print(f"aiofins simulate: --node {args.node} out of range 1..254", file=sys.stderr)
-        return 2
-    if not 0 <= args.serial_unit <= 31:
-        print(
-            f"aiofins simulate: --serial-unit {args.serial_unit} out of range 0..31",
-            file=sys.stderr,
-        )
-        return 2
+    """The ``simulate`` handler: exit code 0 after an interrupt, 2 on bad options (most are
+    refused by argparse already, as ``aiofins simulate: error: argument ...``)."""
     try:
         plan = build_plan(args)
     except (ValueError, OSError) as exc:
@@ -211,6 +257,8 @@ def run(args: argparse.Namespace) -> int:
     except Exception as exc:  # cannot listen (port in use, bad host, no such serial device)
         if report("aiofins simulate", exc, (OSError, FinsError)):
             return 1
+        if report("aiofins simulate", exc, (ValueError,)):  # a setting a server refused
+            return 2
         raise
     finally:
         if plan.log is not None:
@@ -271,6 +319,7 @@ def _report(sim: Simulator) -> None:
     if sim.tcp is not None:
         counts["tcp_accept_errors"] = sim.tcp.accept_errors
         counts["tcp_handshake_timeouts"] = sim.tcp.handshake_timeouts
+        counts["tcp_pending_evictions"] = sim.tcp.pending_evictions
         counts["tcp_handshake_refusals"] = sim.tcp.handshake_refusals
         counts["tcp_error_notifications"] = sim.tcp.error_notifications
     if sim.serial is not None:

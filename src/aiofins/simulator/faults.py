@@ -14,6 +14,7 @@ whatever the rules are. Rules apply per run (``rule``) and per command code (``p
 from __future__ import annotations
 
 import logging
+import math
 import random
 import time
 from collections.abc import Awaitable, Callable, Mapping
@@ -38,6 +39,8 @@ from .state import BUSY
 BUSY_END_CODE = BUSY
 #: Commands a CPU Unit processes at once before it answers 2604 (manual 5-1-3).
 DEFAULT_MAX_CONCURRENT = 5
+#: Delayed (or late) answers a dispatcher holds at once; more are dropped and counted.
+DEFAULT_MAX_HELD = 1000
 _HEX_DIGITS = b"0123456789ABCDEF"
 _logger = logging.getLogger(__name__)
 
@@ -55,6 +58,8 @@ class Delay:
     maximum: float
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.minimum) and math.isfinite(self.maximum)):
+            raise ValueError(f"delay range {self.minimum}..{self.maximum} is not finite")
         if not 0.0 <= self.minimum <= self.maximum:
             raise ValueError(f"delay range {self.minimum}..{self.maximum} is not 0 <= min <= max")
 
@@ -109,8 +114,8 @@ class FaultRule:
             "end_code_probability",
         ):
             _check_probability(name, getattr(self, name))
-        if self.late_after < 0:
-            raise ValueError(f"late_after {self.late_after} must not be negative")
+        if not (math.isfinite(self.late_after) and self.late_after >= 0):
+            raise ValueError(f"late_after {self.late_after} must be a finite number >= 0")
         if self.end_code is not None and not 0 <= self.end_code <= 0xFFFF:
             raise ValueError(f"end code {self.end_code:#x} out of range 0..0xFFFF")
         if self.flags & ~CPU_ERROR_FLAGS:
@@ -165,11 +170,13 @@ class FaultCounters:
     busy: int = 0
     tcp_refusals: int = 0
     handler_errors: int = 0
+    #: Delayed or late answers dropped because ``max_held`` were already waiting.
+    held_dropped: int = 0
 
     @property
     def faults(self) -> int:
         """Total faults injected."""
-        skip = ("requests", "responses", "handler_errors")
+        skip = ("requests", "responses", "handler_errors", "held_dropped")
         return sum(v for k, v in self.as_dict().items() if k not in skip)
 
     def as_dict(self) -> dict[str, int]:
@@ -217,9 +224,12 @@ class FaultPlan:
         max_concurrent: int | None = None,
         tcp_refusal: int | None = None,
         log: FrameLog | None = None,
+        max_held: int = DEFAULT_MAX_HELD,
     ) -> None:
         if max_concurrent is not None and max_concurrent < 1:
             raise ValueError(f"max_concurrent {max_concurrent} must be at least 1")
+        if max_held < 1:
+            raise ValueError(f"max_held {max_held} must be at least 1")
         if tcp_refusal is not None and not 1 <= tcp_refusal <= 0xFFFFFFFF:
             raise ValueError(f"FINS/TCP refusal code {tcp_refusal:#x} must be non-zero u32")
         self.rule = rule if rule is not None else FaultRule()
@@ -228,6 +238,9 @@ class FaultPlan:
         self.max_concurrent = max_concurrent
         self.tcp_refusal = tcp_refusal
         self.log = log
+        #: Most delayed or late answers held at once (each one waits in a task): over it,
+        #: a request that should be answered later is dropped and counted (``held_dropped``).
+        self.max_held = max_held
         self.counters = FaultCounters()
         self._rng = random.Random(seed)
 
@@ -343,6 +356,8 @@ class Dispatcher:
         self.plc = plc
         self.plan = plan if plan is not None else FaultPlan()
         self.in_flight = 0
+        #: Delayed or late answers waiting in their own task (at most ``plan.max_held``).
+        self.waiting = 0
         self._held: tuple[list[bytes], Send, str] | None = None
 
     def _handle(self, request: bytes, from_network: bool) -> bytes | None:
@@ -414,16 +429,37 @@ class Dispatcher:
                 counters.busy += 1
                 await self._send([encode(busy) if encode else busy], send, peer)
             return
+        later = task_group if decision.delay > 0 else None  # answered from its own task
+        if later is not None and self.waiting >= plan.max_held:
+            counters.held_dropped += 1  # one task per held answer: bounded, not a leak
+            return
         if decision.delay > 0:
             if decision.late:
                 counters.late += 1
             else:
                 counters.delayed += 1
         self.in_flight += 1
-        if decision.delay > 0 and task_group is not None:
-            task_group.start_soon(self._answer, request, decision, send, peer, encode, from_network)
+        if later is not None:
+            self.waiting += 1
+            later.start_soon(
+                self._answer_later, request, decision, send, peer, encode, from_network
+            )
         else:
             await self._answer(request, decision, send, peer, encode, from_network)
+
+    async def _answer_later(
+        self,
+        request: bytes,
+        decision: FaultDecision,
+        send: Send,
+        peer: str,
+        encode: Callable[[bytes], bytes] | None,
+        from_network: bool,
+    ) -> None:
+        try:
+            await self._answer(request, decision, send, peer, encode, from_network)
+        finally:
+            self.waiting -= 1
 
     async def _answer(
         self,
@@ -477,6 +513,7 @@ class Dispatcher:
 __all__ = [
     "BUSY_END_CODE",
     "DEFAULT_MAX_CONCURRENT",
+    "DEFAULT_MAX_HELD",
     "NO_FAULT",
     "Delay",
     "Dispatcher",
