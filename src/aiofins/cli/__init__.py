@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 
 from .. import __version__
 from ..protocol.errors import FinsError, leaf_errors
+from .text import escape
 
 #: Subcommand modules (relative to this package), in the order ``--help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = ("plc", "poll", "bulk", "simulate", "demo")
@@ -48,14 +49,15 @@ def build_parser() -> argparse.ArgumentParser:
 def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException], ...]) -> bool:
     """Print ``exc`` (each error of a group) on stderr if all are ``expected``; whether it did.
 
-    A :class:`FinsError` is printed with its type name, anything else as its message.
+    A :class:`FinsError` is printed with its type name, anything else as its message; both
+    may quote the PLC, so control characters are shown escaped.
     """
     leaves = leaf_errors(exc)
     if not all(isinstance(e, expected) for e in leaves):
         return False
     for e in leaves:
         text = f"{type(e).__name__}: {e}" if isinstance(e, FinsError) else str(e)
-        print(f"{prefix}: {text}", file=sys.stderr)
+        print(f"{prefix}: {escape(text)}", file=sys.stderr)
     return True
 
 

@@ -33,6 +33,7 @@ from ..connection import connect
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
 from .plc import warn_of_cpu_errors
+from .text import escape
 
 
 class ProgressBar:
@@ -182,7 +183,7 @@ async def _files(plc: Client, args: argparse.Namespace) -> int:
             )
         else:
             for e in entries:
-                print(f"{e.name:<12} {e.size:>10}  {e.date.to_datetime()}")
+                print(f"{escape(e.name):<12} {e.size:>10}  {e.date.to_datetime()}")
         return 0
     if not args.name:
         print("aiofins: files get/put/delete need a file name", file=sys.stderr)

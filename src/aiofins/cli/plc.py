@@ -25,6 +25,7 @@ from ..connection import connect
 from ..protocol.endcodes import EndCode
 from ..protocol.errors import CommandError
 from ..protocol.values import TYPE_NAMES, Value, parse_value_type
+from .text import escape
 
 Handler = Callable[[Client, argparse.Namespace], Awaitable[Any]]
 
@@ -126,19 +127,20 @@ def _json_default(value: object) -> object:
 
 
 def _print_text(result: Any, prefix: str = "") -> None:
-    """``key: value`` lines; nested objects as ``outer.inner: value``."""
+    """``key: value`` lines; nested objects as ``outer.inner: value``. Values come from the
+    PLC: control characters are shown escaped (:func:`~aiofins.cli.text.escape`)."""
     if isinstance(result, dict):
         for key, value in result.items():
             if isinstance(value, dict):
                 _print_text(value, f"{prefix}{key}.")
                 continue
             if isinstance(value, list):
-                value = " ".join(str(v) for v in value)
+                value = " ".join(escape(v) for v in value)
             elif not isinstance(value, (int, str)):
                 value = _json_default(value)
-            print(f"{prefix}{key}: {value}")
+            print(f"{prefix}{key}: {escape(value)}")
     else:
-        print(result)
+        print(escape(result))
 
 
 async def _read(plc: Client, args: argparse.Namespace) -> dict[str, Any]:

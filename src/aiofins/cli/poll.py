@@ -16,6 +16,7 @@ from ..poller import Poller, Snapshot
 from ..pool import Pool
 from ..protocol.errors import CommandError
 from .plc import warn_of_cpu_errors
+from .text import escape
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -50,11 +51,11 @@ def format_line(snap: Snapshot) -> str:
     parts = []
     for name, reading in snap.readings.items():
         value = reading.value
-        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        text = f"{value:.6g}" if isinstance(value, float) else escape(value)
         mark = "" if reading.quality.value == "good" else f"({reading.quality.value})"
         parts.append(f"{name}={text}{mark}")
     line = f"#{snap.scan} " + " ".join(parts)
-    return line if snap.error is None else f"{line}  ({snap.error})"
+    return line if snap.error is None else f"{line}  ({escape(snap.error)})"
 
 
 def to_json(snap: Snapshot) -> str:
