@@ -12,7 +12,7 @@ from ..protocol.errors import leaf_errors
 from ..protocol.header import FinsAddress
 from .faults import Dispatcher, FaultCounters, FaultPlan, FrameHandler
 from .serial import SerialServer, SerialSettings
-from .tcp import DEFAULT_MAX_CONNECTIONS, DEFAULT_NODE_POOL, TcpServer
+from .tcp import DEFAULT_MAX_CONNECTIONS, DEFAULT_NODE_POOL, MAX_PENDING_HANDSHAKES, TcpServer
 from .udp import UdpServer
 
 
@@ -97,13 +97,16 @@ async def run_simulator(
     server_node: int | None = None,
     node_pool: Sequence[int] = DEFAULT_NODE_POOL,
     max_connections: int = DEFAULT_MAX_CONNECTIONS,
+    max_pending: int = MAX_PENDING_HANDSHAKES,
+    handshake_timeout: float | None = None,
     serial_unit: int = 0,
     serial_settings: SerialSettings | None = None,
 ) -> AsyncIterator[Simulator]:
     """Serve ``plc`` on the given endpoints while the ``async with`` block runs.
 
     Port 0 binds an ephemeral port (read it from ``sim.udp_port`` / ``sim.tcp_port``). The
-    FINS/TCP server node defaults to the PLC's node (``plc.address.node``) or 1.
+    FINS/TCP server node defaults to the PLC's node (``plc.address.node``) or 1;
+    ``max_connections``, ``max_pending`` and ``handshake_timeout`` are :class:`TcpServer`'s.
     """
     dispatcher = Dispatcher(plc, faults)
     sim = Simulator(plc, dispatcher)
@@ -120,6 +123,8 @@ async def run_simulator(
                 server_node=server_node if server_node is not None else _plc_node(plc),
                 node_pool=node_pool,
                 max_connections=max_connections,
+                max_pending=max_pending,
+                handshake_timeout=handshake_timeout,
             )
             with _naming_the_endpoint("FINS/TCP", tcp):
                 await tg.start(sim.tcp.serve)
