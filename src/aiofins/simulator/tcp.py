@@ -27,6 +27,7 @@ import contextlib
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from enum import Enum
 
 import anyio
 from anyio.abc import SocketAttribute, SocketListener, SocketStream, TaskGroup, TaskStatus
@@ -58,6 +59,18 @@ _SA1 = 7
 _logger = logging.getLogger(__name__)
 
 
+class ConnectionState(Enum):
+    """Where one accepted FINS/TCP connection is (:meth:`TcpServer._enter` moves it)."""
+
+    #: Accepted, no handshake yet: counts against ``max_pending``; ``handshake_timeout`` runs.
+    PENDING = "pending"
+    #: Through the handshake, holding its client node: counts against ``max_connections``.
+    CONNECTED = "connected"
+    #: Closed (by the peer, a refusal, a protocol error, the deadline or an eviction); its
+    #: node, if it had one, is free again.
+    CLOSED = "closed"
+
+
 @dataclass(eq=False, slots=True)
 class _Connection:
     stream: SocketStream
@@ -65,6 +78,7 @@ class _Connection:
     port: int
     lock: anyio.Lock = field(default_factory=anyio.Lock)
     node: int | None = None
+    state: ConnectionState = ConnectionState.PENDING
     #: Cancelled to close the connection (handshake deadline, eviction, end of its run).
     scope: anyio.CancelScope = field(default_factory=anyio.CancelScope)
 
@@ -162,11 +176,26 @@ class TcpServer:
         conn = _Connection(stream, host, port)
         while len(self._pending) >= self.max_pending:
             oldest = next(iter(self._pending))
-            del self._pending[oldest]
+            self._enter(oldest, ConnectionState.CLOSED)
             oldest.scope.cancel()
             self.pending_evictions += 1
         self._pending[conn] = None
         return conn
+
+    def _enter(self, conn: _Connection, state: ConnectionState, node: int | None = None) -> None:
+        """The one place a connection changes state, and the pending and node tables with it."""
+        self._pending.pop(conn, None)
+        if state is ConnectionState.CONNECTED:
+            assert node is not None and conn.state is ConnectionState.PENDING
+            conn.node = node
+            self._nodes[node] = conn
+        elif (
+            state is ConnectionState.CLOSED
+            and conn.node is not None
+            and self._nodes.get(conn.node) is conn
+        ):
+            del self._nodes[conn.node]
+        conn.state = state
 
     async def _connection(self, conn: _Connection) -> None:
         try:
@@ -179,9 +208,7 @@ class TcpServer:
             # one connection's failure must not stop the listener and the other connections
             _logger.exception("FINS/TCP connection from %s:%s failed", conn.host, conn.port)
         finally:
-            self._pending.pop(conn, None)
-            if conn.node is not None and self._nodes.get(conn.node) is conn:
-                del self._nodes[conn.node]
+            self._enter(conn, ConnectionState.CLOSED)
 
     async def _notify_error(self, conn: _Connection, code: int) -> None:
         self.error_notifications += 1
@@ -190,7 +217,7 @@ class TcpServer:
     async def _handshake_deadline(self, conn: _Connection) -> None:
         """Close a connection that holds a descriptor without ever completing the handshake."""
         await anyio.sleep(self.handshake_timeout)
-        if conn.node is None:
+        if conn.state is ConnectionState.PENDING:
             self.handshake_timeouts += 1
             conn.scope.cancel()
 
@@ -212,11 +239,13 @@ class TcpServer:
 
     async def _message(self, conn: _Connection, message: TcpMessage, tg: TaskGroup) -> bool:
         """Handle one message; ``False`` closes the connection."""
-        if conn.node is None:
+        if conn.state is ConnectionState.PENDING:
             if message.command != TcpCommand.NODE_ADDRESS_REQUEST or len(message.payload) != 4:
                 await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
                 return False
             return await self._handshake(conn, parse_node_request(message))
+        if conn.node is None:  # CLOSED (evicted): its scope is cancelled already
+            return False
         if message.command != TcpCommand.FRAME:
             await self._notify_error(conn, TcpErrorCode.COMMAND_NOT_SUPPORTED)
             return False
@@ -262,9 +291,7 @@ class TcpServer:
                 ):
                     await holder.send(encode_message(TcpCommand.CONNECTION_CONFIRMATION))
         if not error:  # taken before the answer goes out: no other handshake may take it
-            conn.node = node
-            self._nodes[node] = conn
-            self._pending.pop(conn, None)
+            self._enter(conn, ConnectionState.CONNECTED, node)
         await conn.send(encode_node_response(node, self.server_node, error))
         if error:
             self.handshake_refusals += 1
