@@ -15,6 +15,7 @@ from .protocol.errors import (
     FinsError,
     FinsTimeout,
     FrameError,
+    ReadOnlyError,
     RelayError,
 )
 from .protocol.header import FinsAddress
@@ -38,6 +39,7 @@ __all__ = [
     "Pool",
     "PoolFull",
     "Quality",
+    "ReadOnlyError",
     "RelayError",
     "Snapshot",
     "__version__",

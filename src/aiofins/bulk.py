@@ -27,8 +27,10 @@ from .protocol.commands.file import (
     MAX_FILE_NAMES,
     MAX_FILE_READ,
     MAX_FILE_WRITE,
+    SingleFileWrite,
 )
-from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea
+from .protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea, ParameterAreaWrite
+from .protocol.commands.program import ProgramAreaWrite
 from .protocol.commands.status import CpuMode
 from .protocol.errors import CommandError, DecodeError, EndCodeError
 from .protocol.files import Disk, FileEntry, FileWriteMode
@@ -107,6 +109,7 @@ def check_program_image(program: bytes) -> None:
 async def restore_program(client: Client, program: bytes, progress: Progress | None = None) -> None:
     """Write a program backup (0307, last block flagged); the PLC must be in PROGRAM mode."""
     check_program_image(program)
+    client.guard(ProgramAreaWrite)
     status = await client.cpu_unit_status_read()
     if status.mode != CpuMode.PROGRAM:
         raise CommandError(
@@ -187,6 +190,7 @@ async def restore_parameters(
     not.
     """
     check_parameter_backup(backup)
+    client.guard(ParameterAreaWrite)
     status = await client.cpu_unit_status_read()
     if status.mode != CpuMode.PROGRAM:
         raise CommandError(
@@ -302,6 +306,7 @@ async def upload_file(
     size, 2202): the first frame replaces the old file, so running out of space half-way
     would leave a truncated file under its name and the old contents gone.
     """
+    client.guard(SingleFileWrite)
     room = client.limits.max_parameter_bytes - FILE_WRITE_OVERHEAD - len(directory)
     limit = min(MAX_FILE_WRITE - len(directory), room)
     if limit < 1:

@@ -17,11 +17,13 @@ from ._commands import CommandMethods
 from .chunking import plan_memory
 from .protocol.addresses import parse_span
 from .protocol.areas import MemoryAddress
-from .protocol.commands import Request
+from .protocol.commands import Request, operation_for
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
 from .protocol.endcodes import EndCode
-from .protocol.errors import CommandError, EndCodeError
+from .protocol.errors import CommandError, DecodeError, EndCodeError
+from .protocol.guard import changes, check_read_only
 from .protocol.header import FinsAddress
+from .protocol.inputs import seconds, shown, whole_number
 from .protocol.limits import RouteLimits, limits_for
 from .protocol.values import (
     Value,
@@ -77,13 +79,38 @@ class Client(CommandMethods):
         dest: FinsAddress | str | None = None,
         limits: RouteLimits | None = None,
         word_order: WordOrder | str = WordOrder.LOW_FIRST,
+        read_only: bool = False,
     ) -> None:
         self.session = session
         self.dest = session.dest if dest is None else FinsAddress.of(dest)
         self.limits = limits if limits is not None else limits_for()
         self.word_order = WordOrder.parse(word_order)
+        #: Refuse every command that changes the PLC (:class:`ReadOnlyError`, nothing sent).
+        self.read_only = read_only
         #: End code of the latest normal response (look here for the 0040/0080 flags).
         self.last_end_code: EndCode | None = None
+        self._twin: Client | None = None
+
+    def with_read_only(self, read_only: bool = True) -> Client:
+        """This client, or a twin on the same session whose only difference is
+        ``read_only`` (made once): how a :class:`Pool` lends one session to borrowers that
+        differ in ``?read_only=``."""
+        if read_only == self.read_only:
+            return self
+        twin = self._twin
+        if twin is None:
+            twin = Client(self.session, dest=self.dest, limits=self.limits, read_only=read_only)
+            twin.word_order = self.word_order
+            twin._twin = self
+            self._twin = twin
+        return twin
+
+    def guard(self, operation: type[Request[Any]]) -> None:
+        """Raise :class:`ReadOnlyError` now if this client is read-only and ``operation``
+        changes the PLC: a transfer of several steps (restore, upload) calls it before its
+        first frame, even a read, so that a refused transfer sends nothing at all."""
+        if self.read_only:
+            check_read_only(operation.MRC, operation.SRC, b"", operation.NAME)
 
     # -- raw and typed requests ---------------------------------------------------------
 
@@ -102,6 +129,10 @@ class Client(CommandMethods):
 
         Non-normal end codes raise :class:`~aiofins.EndCodeError` subclasses.
         """
+        if timeout is not None or retries is not None:
+            timeout, retries = _call_options(timeout, retries)
+        if self.read_only:
+            _check_read_only(mrc, src, params)
         target = self._target(dest)
         try:
             response = await self.session.request(
@@ -132,6 +163,11 @@ class Client(CommandMethods):
 
         See :meth:`Session.request_many`; the first error is raised as by :meth:`execute`.
         """
+        if timeout is not None or retries is not None:
+            timeout, retries = _call_options(timeout, retries)
+        if self.read_only:
+            for mrc, src, params in commands:
+                _check_read_only(mrc, src, params)
         target = self._target(dest)
         try:
             responses = await self.session.request_many(
@@ -201,8 +237,8 @@ class Client(CommandMethods):
         Transfers over the route's limit go as several 0101 frames, sent pipelined and
         reassembled in order.
         """
-        if count < 0:
-            raise CommandError(f"count must not be negative, got {count}")
+        if type(count) is not int or count < 0:
+            count = whole_number("count", count, 0)
         start = _start(address, count)
         chunks = plan_memory(start, count, self.limits.memory_read_words)
         if len(chunks) == 1:
@@ -243,6 +279,8 @@ class Client(CommandMethods):
         the PLC's program may run between them and see half-old, half-new data, and a failure
         midway leaves a partial write. It is refused unless ``allow_split=True``.
         """
+        if type(values) is not list and type(values) is not tuple:
+            _check_words(values)
         start = _start(address, len(values))
         chunks = plan_memory(start, len(values), self.limits.memory_write_words)
         if len(chunks) > 1 and not allow_split:
@@ -441,3 +479,37 @@ def _start(address: AddressLike, count: int) -> MemoryAddress:
     write. A :class:`MemoryAddress` is sent as given (it may be meant for another series).
     """
     return address if isinstance(address, MemoryAddress) else parse_span(address, count)
+
+
+def _call_options(timeout: float | None, retries: int | None) -> tuple[float | None, int | None]:
+    """A call's ``timeout`` and ``retries``, checked (NaN would disable the deadline;
+    ``math.inf`` is no time limit, which a call may ask for)."""
+    return (
+        None if timeout is None else seconds("timeout", timeout, allow_inf=True),
+        None if retries is None else whole_number("retries", retries, 0),
+    )
+
+
+def _check_words(values: object) -> None:
+    """``values`` of :meth:`Client.write` must be a sequence of element values."""
+    if isinstance(values, (bytes, bytearray, memoryview)):
+        raise CommandError(
+            f"values must be a sequence of word (or bit) values, got {type(values).__name__}: "
+            "pass list(data) for one element per byte, or memory_area_write(address, data) "
+            "for the raw bytes"
+        )
+    if isinstance(values, str) or not isinstance(values, Sequence):
+        raise CommandError(
+            "values must be a sequence of word (or bit) values such as [1, 2, 3]; "
+            f"got {shown(values)}"
+        )
+
+
+def _check_read_only(mrc: int, src: int, params: bytes) -> None:
+    """:func:`check_read_only`, naming the command as the manual does."""
+    if changes(mrc, src, params) is not None:
+        try:
+            name = operation_for(mrc, src, params).NAME
+        except DecodeError:
+            name = ""
+        check_read_only(mrc, src, params, name)

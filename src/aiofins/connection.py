@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import inspect
 import socket
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -24,6 +24,7 @@ from .client import Client
 from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, option_value, parse_endpoint
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
+from .protocol.inputs import seconds, shown, whole_number
 from .protocol.limits import NetworkType, RouteLimits, limits_for
 from .protocol.values import WordOrder
 from .session import Session
@@ -41,6 +42,11 @@ def request_timeout(endpoint: Endpoint, timeout: float = DEFAULT_TIMEOUT) -> flo
     ``timeout``."""
     text = endpoint.option("timeout")
     return float(option_value("timeout", text)) if text else timeout
+
+
+def url_read_only(url: str) -> bool:
+    """Whether a connection URL asks for a read-only client (``?read_only=1``)."""
+    return bool(option_value("read_only", parse_endpoint(url).option("read_only", "0")))
 
 
 def _address(value: FinsAddress | str | None) -> FinsAddress | None:
@@ -138,13 +144,37 @@ TRANSPORT_OPTIONS = SERIAL_SETTINGS | {"tcp_node", "tcp_connect_timeout", "tcp_g
 
 
 def check_options(options: Mapping[str, Any]) -> None:
-    """Refuse option names :func:`connect` does not take, naming them (before anything opens)."""
+    """Refuse option names :func:`connect` does not take, naming them, and values out of
+    range or of the wrong type (before anything opens; a :class:`Pool` checks its options
+    when it is made, not at its first connection)."""
     unknown = set(options) - CONNECT_OPTIONS
     if unknown:
         raise CommandError(
             f"unknown option(s): {', '.join(sorted(unknown))} "
             f"(known: {', '.join(sorted(CONNECT_OPTIONS))})"
         )
+    for name, value in options.items():
+        check = _NUMBER_CHECKS.get(name)
+        if check is not None and value is not None:
+            check(value)
+        elif name in TRANSPORT_OPTIONS and name != "tcp_gather_writes":
+            option_value(name, value)
+
+
+#: Checks of :func:`connect`'s numeric options (the same wording as the URL's).
+_NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
+    "timeout": lambda v: seconds("timeout", v),
+    "retries": lambda v: whole_number("retries", v, 0),
+    "max_in_flight": lambda v: whole_number("max_in_flight", v, 1, 255),
+    "gct": lambda v: whole_number("gct", v, 0, 255),
+    "read_only": lambda v: _flag("read_only", v),
+}
+
+
+def _flag(name: str, value: object) -> bool:
+    if not isinstance(value, bool):
+        raise CommandError(f"{name} must be True or False; got {shown(value)}")
+    return value
 
 
 @asynccontextmanager
@@ -160,6 +190,7 @@ async def connect(
     networks: tuple[NetworkType, ...] = (),
     limits: RouteLimits | None = None,
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
+    read_only: bool = False,
     **transport_options: Any,
 ) -> AsyncIterator[Client]:
     """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
@@ -173,9 +204,25 @@ async def connect(
     handshake (default 5 s; a call waits for it at most its own ``timeout``);
     ``tcp_gather_writes=False`` writes each frame on its own instead of the frames of one
     event-loop step together.
+
+    ``read_only=True`` (or ``?read_only=1`` in the URL; either one is enough) makes a client
+    that refuses every command changing the PLC — memory, parameters, program, mode, clock,
+    messages, errors and logs, files, forced bits, access right — with
+    :class:`~aiofins.ReadOnlyError` before anything is sent (see
+    :mod:`aiofins.protocol.guard`).
     """
     endpoint = parse_endpoint(url)
+    check_options(
+        {
+            "timeout": timeout,
+            "retries": retries,
+            "max_in_flight": max_in_flight,
+            "gct": gct,
+            "read_only": read_only,
+        }
+    )
     check_options(transport_options)
+    guarded = read_only or bool(option_value("read_only", endpoint.option("read_only", "0")))
     d, s = await default_addresses(endpoint, dest, src)
     route = limits or limits_for(
         *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
@@ -199,7 +246,7 @@ async def connect(
             and endpoint.option("node") is None
         ):
             session.dest = FinsAddress(0, transport.remote_node, 0)
-        yield Client(session, limits=route, word_order=word_order)
+        yield Client(session, limits=route, word_order=word_order, read_only=guarded)
 
 
 #: Every keyword option :func:`connect` takes (what :class:`Pool` passes on to it).

@@ -6,7 +6,8 @@
   FINS on a serial port (``serial:///dev/ttyUSB0`` or ``serial://COM3``).
 
 Query parameters on UDP/TCP URLs set node addressing: ``?dest=1.2.0`` (DNA.DA1.DA2),
-``?src=0.10.0`` and ``?node=N`` (the destination node, DA1).
+``?src=0.10.0`` and ``?node=N`` (the destination node, DA1). On every URL, ``?timeout=S``
+sets the seconds per attempt and ``?read_only=1`` makes a read-only client.
 """
 
 from __future__ import annotations
@@ -16,27 +17,21 @@ from urllib.parse import parse_qsl, urlsplit
 
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
+from .protocol.inputs import seconds, switch, whole_number
 from .transport.base import url_host
 
 DEFAULT_PORT = 9600
 
 #: Serial line settings, from a ``serial://`` URL's query or keyword arguments of ``connect``.
 SERIAL_SETTINGS = frozenset({"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait"})
-_SERIAL_KEYS = SERIAL_SETTINGS | {"timeout"}
-_NET_KEYS = {"dest", "src", "node", "timeout"}
+_SERIAL_KEYS = SERIAL_SETTINGS | {"timeout", "read_only"}
+_NET_KEYS = {"dest", "src", "node", "timeout", "read_only"}
 
 _PARITIES = ("N", "E", "O", "M", "S")
 
 
 def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
-    try:
-        number = int(str(value), 10) if not isinstance(value, int) else value
-    except ValueError:
-        number = None
-    if number is None or number < low or (high is not None and number > high):
-        span = f"{low}..{high}" if high is not None else f"at least {low}"
-        raise CommandError(f"{name} must be a whole number, {span}; got {value!r}")
-    return number
+    return whole_number(name, value, low, high, text=True)
 
 
 def option_value(name: str, value: object) -> int | float | str:
@@ -45,13 +40,9 @@ def option_value(name: str, value: object) -> int | float | str:
     :class:`CommandError` says what is wrong (``?node=abc``, ``?baudrate=-1``, ...).
     """
     if name in ("timeout", "tcp_connect_timeout"):
-        try:
-            seconds = float(str(value))
-        except ValueError:
-            seconds = 0.0
-        if not 0 < seconds < float("inf"):
-            raise CommandError(f"{name} must be a positive number of seconds; got {value!r}")
-        return seconds
+        return seconds(name, value, text=True)
+    if name == "read_only":
+        return switch(name, value)
     if name in ("node", "tcp_node"):
         return _integer(name, value, 0, 254)
     if name == "baudrate":
@@ -104,10 +95,12 @@ class Endpoint:
         """The link and every option that changes what is addressed or how, in one
         spelling: ``udp://h:9600?dest=3.5.0&timeout=0.3``. A pool shares a session only
         among URLs with the same key. An option given twice counts by its first value (the
-        one :meth:`option` and ``connect`` use)."""
+        one :meth:`option` and ``connect`` use). ``read_only`` is left out: it changes
+        what a borrower may send, not how, and each borrower of the shared session gets its
+        own guard (:meth:`Client.with_read_only`)."""
         seen: dict[str, str] = {}
         for name, value in self.options:
-            if name not in seen:
+            if name not in seen and name != "read_only":
                 seen[name] = _canonical(name, value)
         if not seen:
             return self.link
@@ -126,6 +119,10 @@ class Endpoint:
 
 def parse_endpoint(url: str) -> Endpoint:
     """Parse a connection URL; :class:`CommandError` names what is wrong."""
+    if not isinstance(url, str):
+        raise CommandError(
+            f"the connection URL must be text such as 'udp://HOST'; got {type(url).__name__}"
+        )
     if "://" not in url:
         raise CommandError(
             f"{url!r} is not a connection URL; use udp://HOST[:PORT], tcp://HOST[:PORT] or "

@@ -45,7 +45,6 @@ import asyncio
 import dataclasses
 import enum
 import logging
-import math
 import random
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
@@ -63,10 +62,12 @@ from .connection import (
     connect,
     default_addresses,
     request_timeout,
+    url_read_only,
 )
 from .endpoint import Endpoint, option_value, parse_endpoint
 from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout, leaf_errors
 from .protocol.header import FinsAddress
+from .protocol.inputs import seconds, whole_number
 from .session import SessionStats
 from .transport.base import is_asyncio
 
@@ -233,32 +234,28 @@ def _last_used(entry: _Entry) -> float:
     return entry.last_used
 
 
-def _seconds(name: str, value: object, *, low: float = 0.0, allow_low: bool = False) -> float:
-    """``value`` as a finite number of seconds above ``low`` (or equal, ``allow_low``)."""
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    seconds = float(value) if number else math.nan  # type: ignore[arg-type]
-    if not (math.isfinite(seconds) and (seconds > low or (allow_low and seconds == low))):
-        bound = f"at least {low}" if allow_low else f"above {low}"
-        raise CommandError(f"{name} must be a finite number of seconds, {bound}; got {value!r}")
-    return seconds
+def _seconds(name: str, value: object, *, allow_low: bool = False) -> float:
+    """``value`` as a positive, finite number of seconds (0 too, ``allow_low``)."""
+    return seconds(name, value, allow_zero=allow_low)
 
 
 def _count(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise CommandError(f"{name} must be a whole number, at least 1; got {value!r}")
-    return value
+    return whole_number(name, value, 1)
 
 
 class _Lease:
     """``async with pool.client(url) as client``: one use of an endpoint's client."""
 
-    __slots__ = ("entry", "pool", "timeout", "url")
+    __slots__ = ("entry", "pool", "read_only", "timeout", "url")
 
     def __init__(self, pool: Pool, url: str, timeout: float | None) -> None:
         self.pool = pool
         self.url = url
         self.timeout = timeout
         self.entry: _Entry | None = None
+        #: The borrower's guard (the pool's, or its URL's ``?read_only=``): borrowers of one
+        #: session may differ in it, each gets the client it asked for.
+        self.read_only = pool.read_only or ("read_only" in url and url_read_only(url))
 
     def borrow_ready(self) -> Client | None:
         """The client at once if a ready session can be lent without waiting, else None
@@ -268,7 +265,8 @@ class _Lease:
         if entry is None:
             return None
         self.entry = entry
-        return entry.client
+        client = entry.client
+        return client if client is None else client.with_read_only(self.read_only)
 
     async def borrow(self) -> Client:
         """The client, once the endpoint's session is ready, where :meth:`borrow_ready` had
@@ -276,7 +274,7 @@ class _Lease:
         entry = await self.pool._acquire(self.url, self.timeout)
         self.entry = entry
         assert entry.client is not None
-        return entry.client
+        return entry.client.with_read_only(self.read_only)
 
     def release(self) -> None:
         """Give the client back (nothing if none was borrowed)."""
@@ -326,6 +324,8 @@ class Pool:
                 f"backoff_min ({backoff_min}) must not be above backoff_max ({backoff_max})"
             )
         check_options(connect_options)
+        #: Every borrower's client refuses commands that change the PLC (``read_only=True``).
+        self.read_only = bool(connect_options.get("read_only", False))
         for name in ("timeout", "tcp_connect_timeout"):
             if name in connect_options:
                 option_value(name, connect_options[name])

@@ -32,6 +32,7 @@ from ..client import Client
 from ..connection import connect
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
+from .options import add_read_only, add_timeout, add_yes, confirm, refuse
 from .plc import warn_of_cpu_errors
 from .text import escape
 
@@ -65,7 +66,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("url")
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
-    p.add_argument("--timeout", type=float, default=5.0, help="seconds per frame")
+    add_timeout(p, 5.0, "seconds per frame (default 5)")
+    add_read_only(p)
 
 
 def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -80,7 +82,8 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     p.add_argument("file", type=Path)
     p.add_argument("--what", choices=("program", "parameters"), default="program")
     p.add_argument("--stop", action="store_true", help="switch to PROGRAM mode first")
-    p.set_defaults(func=_sync(_restore))
+    add_yes(p)
+    p.set_defaults(func=_sync(_restore, _ask_restore))
 
     p = sub.add_parser("files", help="file memory: list, get, put, delete")
     _common(p)
@@ -90,18 +93,36 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     p.add_argument("--disk", choices=("card", "em"), default="card")
     p.add_argument("--directory", default="", help="directory on the PLC (\\ separated)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_sync(_files))
+    add_yes(p)
+    p.set_defaults(func=_sync(_files, _ask_files))
 
 
-def _sync(handler: Any) -> Any:
+def _ask_restore(args: argparse.Namespace) -> str | None:
+    if not args.stop:
+        return None
+    return f"stop {args.url} (switch it to PROGRAM mode) and restore its {args.what}?"
+
+
+def _ask_files(args: argparse.Namespace) -> str | None:
+    if args.action != "delete" or not args.name:
+        return None
+    return f"delete {args.name} from the file memory of {args.url}?"
+
+
+def _sync(handler: Any, question: Any = None) -> Any:
     def run(args: argparse.Namespace) -> int:
+        text = question(args) if question is not None and not args.read_only else None
+        if text is not None and not confirm(args, text):
+            return refuse(args.command)
         return int(anyio.run(_with_client, handler, args))
 
     return run
 
 
 async def _with_client(handler: Any, args: argparse.Namespace) -> int:
-    async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
+    async with connect(
+        args.url, dest=args.dest, src=args.src, timeout=args.timeout, read_only=args.read_only
+    ) as plc:
         code = int(await handler(plc, args))
         warn_of_cpu_errors(plc.last_end_code)
         return code

@@ -1,4 +1,7 @@
-"""``aiofins read|write|status|info|clock|ping URL ...``: one-shot commands against a PLC.
+"""``aiofins read|write|status|info|clock|ping|run|stop URL ...``: one-shot commands.
+
+``write``, ``run``, ``stop`` and ``clock --set`` change the PLC: on a terminal they ask first
+unless ``--yes``; ``--read-only`` refuses them (see :mod:`aiofins.cli.options`).
 
 Stable interface (scripts depend on it): ``--json`` prints one JSON document on stdout; errors
 go to stderr with a non-zero exit code. A response with the CPU error flags (end code bits 6/7)
@@ -22,9 +25,12 @@ import anyio
 
 from ..client import Client
 from ..connection import connect
+from ..protocol.commands.mode import RunMode
 from ..protocol.endcodes import EndCode
 from ..protocol.errors import CommandError
+from ..protocol.inputs import float_value, shown
 from ..protocol.values import TYPE_NAMES, Value, parse_value_type
+from .options import add_read_only, add_timeout, add_yes, confirm, refuse
 from .text import escape
 
 Handler = Callable[[Client, argparse.Namespace], Awaitable[Any]]
@@ -34,8 +40,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds per attempt (default 2)")
+    add_timeout(p, 2.0, "seconds per attempt (default 2)")
     p.add_argument("--json", action="store_true", help="print one JSON document")
+    add_read_only(p)
 
 
 def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -60,7 +67,8 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     p.add_argument(
         "--allow-split", action="store_true", help="allow a non-atomic write of several frames"
     )
-    p.set_defaults(func=_runner(_write))
+    add_yes(p)
+    p.set_defaults(func=_runner(_write, _ask_write))
 
     for name, handler, text in (
         ("status", _status, "CPU UNIT STATUS READ (0601): mode, errors, messages"),
@@ -72,11 +80,42 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
         _common(p)
         if name == "ping":
             p.add_argument("--count", type=int, default=4, help="number of pings (default 4)")
+        if name == "clock":
+            p.add_argument(
+                "--set",
+                nargs="?",
+                const="now",
+                metavar="TIME",
+                help="CLOCK WRITE (0702) first: an ISO time (2026-01-02T03:04:05) or, alone, "
+                "this computer's local time",
+            )
+            add_yes(p)
+            p.set_defaults(func=_runner(handler, _ask_clock))
+            continue
         p.set_defaults(func=_runner(handler))
 
+    p = sub.add_parser("run", help="RUN (0401): switch the PLC to MONITOR (default) or RUN mode")
+    _common(p)
+    p.add_argument("--mode", choices=("monitor", "run"), default="monitor")
+    add_yes(p)
+    p.set_defaults(func=_runner(_run, lambda a: f"switch {a.url} to {a.mode.upper()} mode?"))
 
-def _runner(handler: Handler) -> Callable[[argparse.Namespace], int]:
+    p = sub.add_parser("stop", help="STOP (0402): switch the PLC to PROGRAM mode")
+    _common(p)
+    add_yes(p)
+    p.set_defaults(func=_runner(_stop, lambda a: f"stop {a.url} (switch it to PROGRAM mode)?"))
+
+
+Question = Callable[[argparse.Namespace], str | None]
+
+
+def _runner(
+    handler: Handler, question: Question | None = None
+) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
+        text = question(args) if question is not None and not args.read_only else None
+        if text is not None and not confirm(args, text):
+            return refuse(args.command)
         result = anyio.run(_with_client, handler, args)
         if args.json:
             print(json.dumps(result, default=_json_default, sort_keys=True))
@@ -88,7 +127,9 @@ def _runner(handler: Handler) -> Callable[[argparse.Namespace], int]:
 
 
 async def _with_client(handler: Handler, args: argparse.Namespace) -> Any:
-    async with connect(args.url, dest=args.dest, src=args.src, timeout=args.timeout) as plc:
+    async with connect(
+        args.url, dest=args.dest, src=args.src, timeout=args.timeout, read_only=args.read_only
+    ) as plc:
         result = await handler(plc, args)
         warn_of_cpu_errors(plc.last_end_code)
         return result
@@ -152,15 +193,44 @@ async def _read(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
     return {"address": args.address, "type": args.type or "raw", "values": values}
 
 
+#: Longer integer text is no value of any PLC type (and Python refuses to convert decimal
+#: text over 4,300 digits): refused up front with a clear message.
+_MAX_INTEGER_TEXT = 64
+
+
 def _parse_value(text: str, kind: str) -> Value:
     """A command-line value of a type's kind; :class:`CommandError` says what was expected."""
     if kind == "string":
         return text
+    if kind.startswith("float"):
+        return float_value("value", text, kind)
+    if len(text) > _MAX_INTEGER_TEXT:
+        raise CommandError(f"value {shown(text)} is too long ({len(text)} characters) for {kind}")
     try:
-        return float(text) if kind.startswith("float") else int(text, 0)
+        return int(text, 0)
     except ValueError:
-        expected = "a number" if kind.startswith("float") else "an integer (0x.. hex accepted)"
-        raise CommandError(f"value {text!r} is not {expected}") from None
+        raise CommandError(f"value {text!r} is not an integer (0x.. hex accepted)") from None
+
+
+def _ask_write(args: argparse.Namespace) -> str:
+    return f"write {len(args.values)} value(s) to {args.address} of {args.url}?"
+
+
+def _ask_clock(args: argparse.Namespace) -> str | None:
+    return None if args.set is None else f"set the clock of {args.url} to {_clock_time(args)}?"
+
+
+def _clock_time(args: argparse.Namespace) -> datetime:
+    """The time ``clock --set`` writes: ``now`` (local time, to the second) or ISO text."""
+    if args.set == "now":
+        return datetime.now().replace(microsecond=0)
+    try:
+        return datetime.fromisoformat(args.set)
+    except ValueError:
+        raise CommandError(
+            f"--set {args.set!r}: give an ISO time such as 2026-01-02T03:04:05, or nothing for "
+            "this computer's time"
+        ) from None
 
 
 async def _write(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
@@ -221,6 +291,8 @@ def _plain(value: object) -> object:
 
 
 async def _clock(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
+    if args.set is not None:
+        await plc.clock_write(_clock_time(args), timeout=args.timeout)
     c = await plc.clock_read(timeout=args.timeout)
     return {"time": c.time, "day_of_week": c.day_of_week}
 
@@ -239,3 +311,14 @@ async def _ping(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
         "avg_ms": round(sum(times) / len(times), 3),
         "max_ms": round(max(times), 3),
     }
+
+
+async def _run(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
+    mode = RunMode.RUN if args.mode == "run" else RunMode.MONITOR
+    await plc.run(mode, timeout=args.timeout)
+    return {"mode": mode.name}
+
+
+async def _stop(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
+    await plc.stop(timeout=args.timeout)
+    return {"mode": "PROGRAM"}

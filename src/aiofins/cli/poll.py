@@ -15,6 +15,7 @@ import anyio
 from ..poller import Poller, Snapshot
 from ..pool import Pool
 from ..protocol.errors import CommandError
+from .options import add_timeout
 from .plc import warn_of_cpu_errors
 from .text import escape
 
@@ -28,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--changes-only", action="store_true", help="print only changed tags")
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds per attempt")
+    add_timeout(p, 2.0, "seconds per attempt")
     p.add_argument("--json", action="store_true", help="one JSON document per scan")
     p.set_defaults(func=run)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from .errors import CommandError, DecodeError
+from .inputs import shown
 
 
 class Reader:
@@ -82,13 +83,13 @@ class Reader:
 def check_range(name: str, value: int, low: int, high: int) -> None:
     """Raise :class:`CommandError` unless ``low <= value <= high``."""
     if not low <= value <= high:
-        raise CommandError(f"{name} {value} out of range {low}..{high}")
+        raise CommandError(f"{name} {shown(value)} out of range {low}..{high}")
 
 
 def to_bcd(value: int, digits: int = 2) -> int:
     """``to_bcd(59) == 0x59``. Raises :class:`CommandError` if it does not fit."""
     if value < 0 or value >= 10**digits:
-        raise CommandError(f"{value} does not fit in {digits} BCD digits")
+        raise CommandError(f"{shown(value)} does not fit in {digits} BCD digits")
     out = 0
     for shift in range(digits):
         out |= (value % 10) << (4 * shift)

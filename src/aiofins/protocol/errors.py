@@ -50,6 +50,20 @@ class CommandError(FinsError, ValueError):
         self.end_code = end_code
 
 
+class ReadOnlyError(CommandError):
+    """A command that changes the PLC, refused by a read-only client before it was sent.
+
+    ``command_code`` is the refused command (``0x0102``), ``changes`` what it would have
+    changed (``"I/O memory"``). A :class:`CommandError`: like every input error it is raised
+    before anything is sent, and nothing reached the PLC.
+    """
+
+    def __init__(self, message: str, *, command_code: int, changes: str) -> None:
+        super().__init__(message)
+        self.command_code = command_code
+        self.changes = changes
+
+
 class DecodeError(FinsError):
     """Bytes that do not form a valid frame, command or response.
 

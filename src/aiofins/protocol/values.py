@@ -26,6 +26,7 @@ from enum import Enum
 
 from .codec import from_bcd, to_bcd
 from .errors import CommandError, DecodeError
+from .inputs import float_value, shown
 
 
 class WordOrder(Enum):
@@ -165,40 +166,44 @@ class ValueType:
         if kind in _NUMERIC:
             code, _ = _NUMERIC[kind]
             if isinstance(value, str):
-                raise CommandError(f"{kind} needs a number, got {value!r}")
+                raise CommandError(f"{kind} needs a number, got {shown(value)}")
             if kind.startswith("float"):
-                number: int | float = float(value)
+                number: int | float = float_value("value", value, kind)
             else:
                 if isinstance(value, float) and not value.is_integer():
-                    raise CommandError(f"{kind} needs an integer, got {value!r}")
+                    raise CommandError(f"{kind} needs an integer, got {shown(value)}")
                 number = int(value)
             try:
                 raw = struct.pack(code, number)
-            except (struct.error, OverflowError) as exc:
-                raise CommandError(f"{value!r} does not fit in {kind}") from exc
+            except OverflowError as exc:  # a finite float beyond float32's range
+                raise CommandError(f"value {shown(value)} overflows {kind}") from exc
+            except struct.error as exc:
+                raise CommandError(f"{shown(value)} does not fit in {kind}") from exc
             return _words_from_bytes(raw, self.word_order)
         if kind in ("bcd16", "bcd32"):
             digits = 4 if kind == "bcd16" else 8
             if isinstance(value, (str, float)) or int(value) != value:
-                raise CommandError(f"{kind} needs an integer, got {value!r}")
+                raise CommandError(f"{kind} needs an integer, got {shown(value)}")
             n = int(value)
             if not 0 <= n < 10**digits:
-                raise CommandError(f"{n} does not fit in {digits} BCD digits (0..{10**digits - 1})")
+                raise CommandError(
+                    f"{shown(n)} does not fit in {digits} BCD digits (0..{10**digits - 1})"
+                )
             raw = to_bcd(n, digits).to_bytes(digits // 2, "big")
             return _words_from_bytes(raw, self.word_order)
         if kind == "bit":
             if value not in (0, 1, True, False):
-                raise CommandError(f"bit needs 0/1 or a bool, got {value!r}")
+                raise CommandError(f"bit needs 0/1 or a bool, got {shown(value)}")
             return (int(value),)
         # string
         if not isinstance(value, str):
-            raise CommandError(f"string needs a str, got {value!r}")
+            raise CommandError(f"string needs a str, got {shown(value)}")
         try:
             raw = value.encode(self.encoding)
         except UnicodeEncodeError as exc:
-            raise CommandError(f"{value!r} cannot be encoded as {self.encoding}") from exc
+            raise CommandError(f"{shown(value)} cannot be encoded as {self.encoding}") from exc
         if len(raw) > self.length:
-            raise CommandError(f"{value!r} is {len(raw)} bytes, longer than {self.length}")
+            raise CommandError(f"{shown(value)} is {len(raw)} bytes, longer than {self.length}")
         return _words_from_bytes(raw.ljust(self.words * 2, self.padding), self._string_order)
 
     # -- decoding -----------------------------------------------------------------------

@@ -18,6 +18,7 @@ from ..codec import Reader
 from ..decoding import as_decode_error
 from ..errors import AddressError, CommandError, DecodeError
 from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
+from ..inputs import shown
 from ._base import (
     Request,
     _decode_fields,
@@ -103,7 +104,7 @@ def _check_word_area(address: MemoryAddress, what: str) -> None:
 
 def _check_count(name: str, value: int, high: int, end_code: int) -> None:
     if not isinstance(value, int) or not 0 <= value <= high:
-        raise CommandError(f"{name} {value} out of range 0..{high}", end_code=end_code)
+        raise CommandError(f"{name} {shown(value)} out of range 0..{high}", end_code=end_code)
 
 
 def _element_values(data: bytes, size: int) -> tuple[int, ...]:
@@ -115,7 +116,7 @@ def _element_bytes(values: Iterable[int], size: int, what: str) -> bytes:
     limit = (1 << (8 * size)) - 1
     for value in values:
         if not isinstance(value, int) or not 0 <= value <= limit:
-            raise CommandError(f"{what} value {value!r} out of range 0..{limit}")
+            raise CommandError(f"{what} value {shown(value)} out of range 0..{limit}")
         out += value.to_bytes(size, "big")
     return bytes(out)
 
@@ -343,7 +344,7 @@ class MultipleMemoryAreaReadItem:
         limit = (1 << (8 * size)) - 1
         if not isinstance(self.value, int) or not 0 <= self.value <= limit:
             raise CommandError(
-                f"value {self.value!r} of area {self.area_code:02X} out of range 0..{limit}"
+                f"value {shown(self.value)} of area {self.area_code:02X} out of range 0..{limit}"
             )
 
     @property

@@ -1,0 +1,74 @@
+"""Option types and guards shared by the subcommands: ``--timeout``, ``--read-only``, ``--yes``.
+
+Values are checked by :mod:`aiofins.protocol.inputs`, so ``--timeout nan`` gets the words
+``timeout=nan`` gets from the API and ``?timeout=nan`` from a URL.
+
+Commands that change a PLC's memory, mode or files (``write``, ``run``, ``stop``,
+``clock --set``, ``files delete``, ``restore --stop``) ask for confirmation when stdin is a
+terminal, unless ``--yes`` is given. Without a terminal (a script, a pipe, cron) they proceed
+as they always did: scripts keep working, and a script cannot answer a question anyway.
+``--read-only`` refuses every such command before anything is sent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+from ..protocol.errors import CommandError
+from ..protocol.inputs import seconds
+
+
+def argument_type(check: Callable[[str], object]) -> Callable[[str], object]:
+    """An argparse ``type=`` from a check of :mod:`aiofins.protocol.inputs` (its message
+    becomes argparse's, exit code 2)."""
+
+    def convert(text: str) -> object:
+        try:
+            return check(text)
+        except CommandError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    convert.__name__ = getattr(check, "__name__", "value")
+    return convert
+
+
+#: ``--timeout``: a positive, finite number of seconds.
+timeout_seconds = argument_type(lambda value: seconds("timeout", value, text=True))
+
+
+def add_timeout(p: argparse.ArgumentParser, default: float, help: str) -> None:
+    p.add_argument("--timeout", type=timeout_seconds, default=default, help=help)
+
+
+def add_read_only(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--read-only",
+        action="store_true",
+        help="refuse every command that changes the PLC (memory, mode, clock, files, logs, "
+        "forced bits) before anything is sent",
+    )
+
+
+def add_yes(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "-y", "--yes", action="store_true", help="do not ask for confirmation on a terminal"
+    )
+
+
+def confirm(args: argparse.Namespace, question: str) -> bool:
+    """Whether to go on with a command that changes the PLC: ``--yes``, no terminal on stdin
+    (scripts), or the user answered yes to ``question`` on stderr."""
+    if getattr(args, "yes", False) or not sys.stdin.isatty():
+        return True
+    sys.stderr.write(f"{question} [y/N] ")
+    sys.stderr.flush()
+    answer = sys.stdin.readline()
+    return answer.strip().lower() in ("y", "yes")
+
+
+def refuse(what: str) -> int:
+    """Say the user declined; the exit code of a declined command (1)."""
+    print(f"aiofins: {what}: not confirmed, nothing sent", file=sys.stderr)
+    return 1
