@@ -7,10 +7,12 @@ and ``retries``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from datetime import datetime
 from typing import TYPE_CHECKING, TypeVar
 
-from .protocol.areas import MemoryAddress
+from .protocol import arguments as arg
+from .protocol.arguments import AddressLike, DataLike, ForceLike
 from .protocol.commands._file_manage import (
     CreateDeleteDirectory,
     FileCopy,
@@ -34,7 +36,7 @@ from .protocol.commands.access import (
     AccessRightRelease,
 )
 from .protocol.commands.clock import ClockData, ClockRead, ClockWrite
-from .protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel, ForcedSetResetEntry
+from .protocol.commands.debug import ForcedSetReset, ForcedSetResetCancel
 from .protocol.commands.errorlog import (
     ErrorClear,
     ErrorLog,
@@ -83,6 +85,7 @@ from .protocol.commands.message import (
 )
 from .protocol.commands.mode import Run, RunMode, Stop
 from .protocol.commands.parameter import (
+    ParameterArea,
     ParameterAreaClear,
     ParameterAreaRead,
     ParameterAreaReadResult,
@@ -135,7 +138,7 @@ class CommandMethods:
 
     async def memory_area_read(
         self,
-        address: MemoryAddress,
+        address: AddressLike,
         count: int,
         *,
         dest: FinsAddress | str | None = None,
@@ -144,7 +147,7 @@ class CommandMethods:
     ) -> MemoryAreaReadResult:
         """MEMORY AREA READ (01 01); see :class:`MemoryAreaRead`."""
         return await self.call(
-            MemoryAreaRead(address=address, count=count),
+            MemoryAreaRead(address=arg.address(address), count=count),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -152,21 +155,26 @@ class CommandMethods:
 
     async def memory_area_write(
         self,
-        address: MemoryAddress,
-        data: bytes,
+        address: AddressLike,
+        data: DataLike,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
-        """MEMORY AREA WRITE (01 02); see :class:`MemoryAreaWrite`."""
+        """MEMORY AREA WRITE (01 02); see :class:`MemoryAreaWrite`. ``data``: bytes, or one
+        int per element (``[5, 6]`` to words, ``[1, 0]`` to bits)."""
+        start = arg.address(address)
         return await self.call(
-            MemoryAreaWrite(address=address, data=data), dest=dest, timeout=timeout, retries=retries
+            MemoryAreaWrite(address=start, data=arg.element_data(start, data)),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def memory_area_fill(
         self,
-        address: MemoryAddress,
+        address: AddressLike,
         count: int,
         value: int,
         *,
@@ -176,7 +184,7 @@ class CommandMethods:
     ) -> None:
         """MEMORY AREA FILL (01 03); see :class:`MemoryAreaFill`."""
         return await self.call(
-            MemoryAreaFill(address=address, count=count, value=value),
+            MemoryAreaFill(address=arg.address(address), count=count, value=value),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -184,7 +192,7 @@ class CommandMethods:
 
     async def multiple_memory_area_read(
         self,
-        addresses: tuple[MemoryAddress, ...],
+        addresses: AddressLike | Iterable[AddressLike],
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -192,13 +200,16 @@ class CommandMethods:
     ) -> MultipleMemoryAreaReadResult:
         """MULTIPLE MEMORY AREA READ (01 04); see :class:`MultipleMemoryAreaRead`."""
         return await self.call(
-            MultipleMemoryAreaRead(addresses=addresses), dest=dest, timeout=timeout, retries=retries
+            MultipleMemoryAreaRead(addresses=arg.addresses(addresses)),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def memory_area_transfer(
         self,
-        source: MemoryAddress,
-        destination: MemoryAddress,
+        source: AddressLike,
+        destination: AddressLike,
         count: int,
         *,
         dest: FinsAddress | str | None = None,
@@ -207,7 +218,11 @@ class CommandMethods:
     ) -> None:
         """MEMORY AREA TRANSFER (01 05); see :class:`MemoryAreaTransfer`."""
         return await self.call(
-            MemoryAreaTransfer(source=source, destination=destination, count=count),
+            MemoryAreaTransfer(
+                source=arg.address(source, "source"),
+                destination=arg.address(destination, "destination"),
+                count=count,
+            ),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -215,7 +230,7 @@ class CommandMethods:
 
     async def parameter_area_read(
         self,
-        area_code: int,
+        area_code: ParameterArea | int | str,
         begin_word: int,
         count: int,
         *,
@@ -225,7 +240,7 @@ class CommandMethods:
     ) -> ParameterAreaReadResult:
         """PARAMETER AREA READ (02 01); see :class:`ParameterAreaRead`."""
         return await self.call(
-            ParameterAreaRead(area_code=area_code, begin_word=begin_word, count=count),
+            ParameterAreaRead(area_code=_area(area_code), begin_word=begin_word, count=count),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -233,9 +248,9 @@ class CommandMethods:
 
     async def parameter_area_write(
         self,
-        area_code: int,
+        area_code: ParameterArea | int | str,
         begin_word: int,
-        words: tuple[int, ...],
+        words: Iterable[int],
         last: bool | None = None,
         *,
         dest: FinsAddress | str | None = None,
@@ -244,7 +259,12 @@ class CommandMethods:
     ) -> None:
         """PARAMETER AREA WRITE (02 02); see :class:`ParameterAreaWrite`."""
         return await self.call(
-            ParameterAreaWrite(area_code=area_code, begin_word=begin_word, words=words, last=last),
+            ParameterAreaWrite(
+                area_code=_area(area_code),
+                begin_word=begin_word,
+                words=arg.words(words),
+                last=last,
+            ),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -252,7 +272,7 @@ class CommandMethods:
 
     async def parameter_area_clear(
         self,
-        area_code: int,
+        area_code: ParameterArea | int | str,
         count: int | None = None,
         *,
         dest: FinsAddress | str | None = None,
@@ -261,7 +281,7 @@ class CommandMethods:
     ) -> None:
         """PARAMETER AREA CLEAR (02 03); see :class:`ParameterAreaClear`."""
         return await self.call(
-            ParameterAreaClear(area_code=area_code, count=count),
+            ParameterAreaClear(area_code=_area(area_code), count=count),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -287,7 +307,7 @@ class CommandMethods:
     async def program_area_write(
         self,
         address: int,
-        data: bytes,
+        data: bytes | bytearray | Sequence[int],
         last: bool = False,
         *,
         dest: FinsAddress | str | None = None,
@@ -296,7 +316,7 @@ class CommandMethods:
     ) -> ProgramAreaWriteResult:
         """PROGRAM AREA WRITE (03 07); see :class:`ProgramAreaWrite`."""
         return await self.call(
-            ProgramAreaWrite(address=address, data=data, last=last),
+            ProgramAreaWrite(address=address, data=arg.payload(data), last=last),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -304,7 +324,7 @@ class CommandMethods:
 
     async def program_area_clear(
         self,
-        clear_code: int = ProgramClearCode.WITHOUT_INTERRUPT_TASKS,
+        clear_code: ProgramClearCode | int | str = ProgramClearCode.WITHOUT_INTERRUPT_TASKS,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -312,19 +332,27 @@ class CommandMethods:
     ) -> None:
         """PROGRAM AREA CLEAR (03 08); see :class:`ProgramAreaClear`."""
         return await self.call(
-            ProgramAreaClear(clear_code=clear_code), dest=dest, timeout=timeout, retries=retries
+            ProgramAreaClear(clear_code=arg.member(ProgramClearCode, clear_code, "clear_code")),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def run(
         self,
-        mode: int = RunMode.MONITOR,
+        mode: RunMode | int | str = RunMode.MONITOR,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> None:
         """RUN (04 01); see :class:`Run`."""
-        return await self.call(Run(mode=mode), dest=dest, timeout=timeout, retries=retries)
+        return await self.call(
+            Run(mode=arg.member(RunMode, mode, "mode")),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+        )
 
     async def stop(
         self,
@@ -378,7 +406,7 @@ class CommandMethods:
 
     async def cycle_time_read(
         self,
-        parameter: CycleTimeParameter = CycleTimeParameter.READ,
+        parameter: CycleTimeParameter | int | str = CycleTimeParameter.READ,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -386,7 +414,10 @@ class CommandMethods:
     ) -> CycleTime | None:
         """CYCLE TIME READ (06 20); see :class:`CycleTimeRead`."""
         return await self.call(
-            CycleTimeRead(parameter=parameter), dest=dest, timeout=timeout, retries=retries
+            CycleTimeRead(parameter=arg.member(CycleTimeParameter, parameter, "parameter")),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def clock_read(
@@ -401,7 +432,7 @@ class CommandMethods:
 
     async def clock_write(
         self,
-        time: datetime,
+        time: datetime | str,
         day_of_week: int | None = None,
         with_second: bool = True,
         *,
@@ -411,7 +442,7 @@ class CommandMethods:
     ) -> None:
         """CLOCK WRITE (07 02); see :class:`ClockWrite`."""
         return await self.call(
-            ClockWrite(time=time, day_of_week=day_of_week, with_second=with_second),
+            ClockWrite(time=arg.moment(time), day_of_week=day_of_week, with_second=with_second),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -571,7 +602,7 @@ class CommandMethods:
 
     async def file_name_read(
         self,
-        disk: Disk,
+        disk: Disk | str,
         first_file: int = 0,
         count: int = 20,
         directory: str = "",
@@ -582,7 +613,7 @@ class CommandMethods:
     ) -> FileNameReadResult:
         """FILE NAME READ (22 01); see :class:`FileNameRead`."""
         return await self.call(
-            FileNameRead(disk=disk, first_file=first_file, count=count, directory=directory),
+            FileNameRead(disk=_disk(disk), first_file=first_file, count=count, directory=directory),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -590,7 +621,7 @@ class CommandMethods:
 
     async def single_file_read(
         self,
-        disk: Disk,
+        disk: Disk | str,
         name: str,
         position: int = 0,
         length: int = 1988,
@@ -603,7 +634,7 @@ class CommandMethods:
         """SINGLE FILE READ (22 02); see :class:`SingleFileRead`."""
         return await self.call(
             SingleFileRead(
-                disk=disk, name=name, position=position, length=length, directory=directory
+                disk=_disk(disk), name=name, position=position, length=length, directory=directory
             ),
             dest=dest,
             timeout=timeout,
@@ -612,10 +643,10 @@ class CommandMethods:
 
     async def single_file_write(
         self,
-        disk: Disk,
+        disk: Disk | str,
         name: str,
-        data: bytes,
-        mode: FileWriteMode = FileWriteMode.NEW,
+        data: bytes | bytearray | Sequence[int],
+        mode: FileWriteMode | int | str = FileWriteMode.NEW,
         position: int = 0,
         directory: str = "",
         *,
@@ -626,7 +657,12 @@ class CommandMethods:
         """SINGLE FILE WRITE (22 03); see :class:`SingleFileWrite`."""
         return await self.call(
             SingleFileWrite(
-                disk=disk, name=name, data=data, mode=mode, position=position, directory=directory
+                disk=_disk(disk),
+                name=name,
+                data=arg.payload(data),
+                mode=arg.member(FileWriteMode, mode, "mode"),
+                position=position,
+                directory=directory,
             ),
             dest=dest,
             timeout=timeout,
@@ -635,7 +671,7 @@ class CommandMethods:
 
     async def file_memory_format(
         self,
-        disk: Disk,
+        disk: Disk | str,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -643,13 +679,13 @@ class CommandMethods:
     ) -> None:
         """FILE MEMORY FORMAT (22 04); see :class:`FileMemoryFormat`."""
         return await self.call(
-            FileMemoryFormat(disk=disk), dest=dest, timeout=timeout, retries=retries
+            FileMemoryFormat(disk=_disk(disk)), dest=dest, timeout=timeout, retries=retries
         )
 
     async def file_delete(
         self,
-        disk: Disk,
-        names: tuple[str, ...],
+        disk: Disk | str,
+        names: str | Iterable[str],
         directory: str = "",
         *,
         dest: FinsAddress | str | None = None,
@@ -658,7 +694,7 @@ class CommandMethods:
     ) -> FileDeleteResult:
         """FILE DELETE (22 05); see :class:`FileDelete`."""
         return await self.call(
-            FileDelete(disk=disk, names=names, directory=directory),
+            FileDelete(disk=_disk(disk), names=arg.names(names), directory=directory),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -666,9 +702,9 @@ class CommandMethods:
 
     async def file_copy(
         self,
-        source_disk: Disk,
+        source_disk: Disk | str,
         source_name: str,
-        destination_disk: Disk,
+        destination_disk: Disk | str,
         destination_name: str,
         source_directory: str = "",
         destination_directory: str = "",
@@ -680,9 +716,9 @@ class CommandMethods:
         """FILE COPY (22 07); see :class:`FileCopy`."""
         return await self.call(
             FileCopy(
-                source_disk=source_disk,
+                source_disk=_disk(source_disk),
                 source_name=source_name,
-                destination_disk=destination_disk,
+                destination_disk=_disk(destination_disk),
                 destination_name=destination_name,
                 source_directory=source_directory,
                 destination_directory=destination_directory,
@@ -694,7 +730,7 @@ class CommandMethods:
 
     async def file_name_change(
         self,
-        disk: Disk,
+        disk: Disk | str,
         old_name: str,
         new_name: str,
         directory: str = "",
@@ -705,7 +741,9 @@ class CommandMethods:
     ) -> None:
         """FILE NAME CHANGE (22 08); see :class:`FileNameChange`."""
         return await self.call(
-            FileNameChange(disk=disk, old_name=old_name, new_name=new_name, directory=directory),
+            FileNameChange(
+                disk=_disk(disk), old_name=old_name, new_name=new_name, directory=directory
+            ),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -713,10 +751,10 @@ class CommandMethods:
 
     async def memory_area_file_transfer(
         self,
-        mode: FileTransferMode,
-        address: MemoryAddress,
+        mode: FileTransferMode | int | str,
+        address: AddressLike,
         count: int,
-        disk: Disk,
+        disk: Disk | str,
         name: str,
         directory: str = "",
         *,
@@ -727,7 +765,12 @@ class CommandMethods:
         """MEMORY AREA-FILE TRANSFER (22 0A); see :class:`MemoryAreaFileTransfer`."""
         return await self.call(
             MemoryAreaFileTransfer(
-                mode=mode, address=address, count=count, disk=disk, name=name, directory=directory
+                mode=_transfer(mode),
+                address=arg.address(address),
+                count=count,
+                disk=_disk(disk),
+                name=name,
+                directory=directory,
             ),
             dest=dest,
             timeout=timeout,
@@ -736,9 +779,9 @@ class CommandMethods:
 
     async def parameter_area_file_transfer(
         self,
-        mode: FileTransferMode,
-        area_code: int,
-        disk: Disk,
+        mode: FileTransferMode | int | str,
+        area_code: ParameterArea | int | str,
+        disk: Disk | str,
         name: str,
         begin: int = 0,
         count: int = 65535,
@@ -751,9 +794,9 @@ class CommandMethods:
         """PARAMETER AREA-FILE TRANSFER (22 0B); see :class:`ParameterAreaFileTransfer`."""
         return await self.call(
             ParameterAreaFileTransfer(
-                mode=mode,
-                area_code=area_code,
-                disk=disk,
+                mode=_transfer(mode),
+                area_code=_area(area_code),
+                disk=_disk(disk),
                 name=name,
                 begin=begin,
                 count=count,
@@ -766,8 +809,8 @@ class CommandMethods:
 
     async def program_area_file_transfer(
         self,
-        mode: FileTransferMode,
-        disk: Disk,
+        mode: FileTransferMode | int | str,
+        disk: Disk | str,
         name: str,
         program_number: int = 65535,
         begin_word: int = 0,
@@ -781,8 +824,8 @@ class CommandMethods:
         """PROGRAM AREA-FILE TRANSFER (22 0C); see :class:`ProgramAreaFileTransfer`."""
         return await self.call(
             ProgramAreaFileTransfer(
-                mode=mode,
-                disk=disk,
+                mode=_transfer(mode),
+                disk=_disk(disk),
                 name=name,
                 program_number=program_number,
                 begin_word=begin_word,
@@ -796,8 +839,8 @@ class CommandMethods:
 
     async def create_delete_directory(
         self,
-        disk: Disk,
-        operation: DirectoryOperation,
+        disk: Disk | str,
+        operation: DirectoryOperation | int | str,
         name: str,
         directory: str = "",
         *,
@@ -807,7 +850,12 @@ class CommandMethods:
     ) -> None:
         """CREATE/DELETE DIRECTORY (22 15); see :class:`CreateDeleteDirectory`."""
         return await self.call(
-            CreateDeleteDirectory(disk=disk, operation=operation, name=name, directory=directory),
+            CreateDeleteDirectory(
+                disk=_disk(disk),
+                operation=arg.member(DirectoryOperation, operation, "operation"),
+                name=name,
+                directory=directory,
+            ),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -815,9 +863,9 @@ class CommandMethods:
 
     async def memory_cassette_transfer(
         self,
-        operation: CassetteOperation,
+        operation: CassetteOperation | int | str,
         areas: CassetteArea = CassetteArea(0),  # noqa: B008
-        disk: Disk = Disk.MEMORY_CASSETTE,
+        disk: Disk | str = Disk.MEMORY_CASSETTE,
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -825,7 +873,11 @@ class CommandMethods:
     ) -> MemoryCassetteDataType | None:
         """MEMORY CASSETTE TRANSFER (22 20); see :class:`MemoryCassetteTransfer`."""
         return await self.call(
-            MemoryCassetteTransfer(operation=operation, areas=areas, disk=disk),
+            MemoryCassetteTransfer(
+                operation=arg.member(CassetteOperation, operation, "operation"),
+                areas=areas,
+                disk=_disk(disk),
+            ),
             dest=dest,
             timeout=timeout,
             retries=retries,
@@ -833,7 +885,7 @@ class CommandMethods:
 
     async def forced_set_reset(
         self,
-        entries: tuple[ForcedSetResetEntry, ...],
+        entries: ForceLike | Iterable[ForceLike],
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -841,7 +893,10 @@ class CommandMethods:
     ) -> None:
         """FORCED SET/RESET (23 01); see :class:`ForcedSetReset`."""
         return await self.call(
-            ForcedSetReset(entries=entries), dest=dest, timeout=timeout, retries=retries
+            ForcedSetReset(entries=arg.force_entries(entries)),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def forced_set_reset_cancel(
@@ -856,7 +911,7 @@ class CommandMethods:
 
     async def convert_to_compoway_f_command(
         self,
-        payload: bytes,
+        payload: bytes | bytearray | Sequence[int],
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -864,12 +919,15 @@ class CommandMethods:
     ) -> CompowayFResponse:
         """CONVERT TO COMPOWAY/F COMMAND (28 03); see :class:`ConvertToCompowayFCommand`."""
         return await self.call(
-            ConvertToCompowayFCommand(payload=payload), dest=dest, timeout=timeout, retries=retries
+            ConvertToCompowayFCommand(payload=arg.payload(payload, "payload")),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def convert_to_modbus_rtu_command(
         self,
-        payload: bytes,
+        payload: bytes | bytearray | Sequence[int],
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -877,12 +935,15 @@ class CommandMethods:
     ) -> ModbusRtuResponse:
         """CONVERT TO MODBUS-RTU COMMAND (28 04); see :class:`ConvertToModbusRtuCommand`."""
         return await self.call(
-            ConvertToModbusRtuCommand(payload=payload), dest=dest, timeout=timeout, retries=retries
+            ConvertToModbusRtuCommand(payload=arg.payload(payload, "payload")),
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
         )
 
     async def convert_to_modbus_ascii_command(
         self,
-        payload: bytes,
+        payload: bytes | bytearray | Sequence[int],
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
@@ -890,8 +951,20 @@ class CommandMethods:
     ) -> ModbusAsciiResponse:
         """CONVERT TO MODBUS-ASCII COMMAND (28 05); see :class:`ConvertToModbusAsciiCommand`."""
         return await self.call(
-            ConvertToModbusAsciiCommand(payload=payload),
+            ConvertToModbusAsciiCommand(payload=arg.payload(payload, "payload")),
             dest=dest,
             timeout=timeout,
             retries=retries,
         )
+
+
+def _disk(value: Disk | str) -> Disk:
+    return arg.member(Disk, value, "disk")
+
+
+def _transfer(value: FileTransferMode | int | str) -> FileTransferMode:
+    return arg.member(FileTransferMode, value, "mode")
+
+
+def _area(value: ParameterArea | int | str) -> int:
+    return arg.member(ParameterArea, value, "area_code")
