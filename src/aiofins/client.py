@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Mapping, Sequence
-from typing import Any, TypeVar
+from typing import Any, TypeVar, overload
 
 from ._commands import CommandMethods
 from .chunking import plan_memory
@@ -26,6 +26,9 @@ from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
 from .protocol.limits import RouteLimits, limits_for
 from .protocol.values import (
+    BoolTypeName,
+    FloatTypeName,
+    IntTypeName,
     Value,
     ValueType,
     WordOrder,
@@ -311,16 +314,49 @@ class Client(CommandMethods):
     def _type(self, vtype: str | ValueType) -> ValueType:
         return parse_value_type(vtype, default_word_order=self.word_order)
 
+    @overload
+    async def read_value(self, address: AddressLike, vtype: FloatTypeName, **kw: Any) -> float: ...
+    @overload
+    async def read_value(self, address: AddressLike, vtype: BoolTypeName, **kw: Any) -> bool: ...
+    @overload
+    async def read_value(
+        self, address: AddressLike, vtype: IntTypeName = "uint16", **kw: Any
+    ) -> int: ...
+    @overload
+    async def read_value(
+        self, address: AddressLike, vtype: str | ValueType, **kw: Any
+    ) -> Value: ...
     async def read_value(
         self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
     ) -> Value:
-        """Read one typed value: ``await plc.read_value("D200", "float32")``."""
+        """Read one typed value: ``await plc.read_value("D200", "float32")``.
+
+        Its static type follows a literal type name (``float`` for ``"float32"``, ``int`` for
+        ``"int32"`` or ``"bcd16"``, ``bool`` for ``"bit"``); other specs (``"string:8"``,
+        ``"float32:ABCD"``, a :class:`ValueType`) give the union :data:`Value`.
+        """
         return (await self.read_values(address, vtype, 1, **kw))[0]
 
+    @overload
+    async def read_values(
+        self, address: AddressLike, vtype: FloatTypeName, count: int, **kw: Any
+    ) -> list[float]: ...
+    @overload
+    async def read_values(
+        self, address: AddressLike, vtype: BoolTypeName, count: int, **kw: Any
+    ) -> list[bool]: ...
+    @overload
+    async def read_values(
+        self, address: AddressLike, vtype: IntTypeName, count: int, **kw: Any
+    ) -> list[int]: ...
+    @overload
     async def read_values(
         self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
-    ) -> list[Value]:
-        """Read ``count`` consecutive typed values."""
+    ) -> list[Value]: ...
+    async def read_values(
+        self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
+    ) -> list[Any]:  # list[Value], of the one type the overloads name
+        """Read ``count`` consecutive typed values (typed as :meth:`read_value` says)."""
         t = self._type(vtype)
         start = _typed_start(address, t, count)
         return words_to_values(t, await self.read(start, t.words * count, **kw))

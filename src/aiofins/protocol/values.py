@@ -23,6 +23,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
+from typing import Literal
 
 from .codec import from_bcd, to_bcd
 from .errors import CommandError, DecodeError
@@ -109,6 +110,40 @@ _ALIASES = {
 
 Value = int | float | str | bool
 
+#: Type names whose values are floats, for the typed overloads of ``Client.read_value``
+#: (``x: float = await plc.read_value("D100", "float32")`` type-checks).
+FloatTypeName = Literal["float32", "float64", "real", "float", "lreal", "double", "REAL", "LREAL"]
+#: Type names whose values are ints (BCD included).
+IntTypeName = Literal[
+    "int16",
+    "uint16",
+    "int32",
+    "uint32",
+    "int64",
+    "uint64",
+    "bcd16",
+    "bcd32",
+    "int",
+    "word",
+    "uint",
+    "dint",
+    "udint",
+    "lint",
+    "ulint",
+    "bcd",
+    "bcd4",
+    "bcd8",
+    "INT",
+    "UINT",
+    "WORD",
+    "DINT",
+    "UDINT",
+    "LINT",
+    "ULINT",
+]
+#: Type names whose values are bools.
+BoolTypeName = Literal["bit", "bool", "BOOL"]
+
 
 @dataclass(frozen=True)
 class ValueType:
@@ -153,7 +188,9 @@ class ValueType:
         return WordOrder.HIGH_FIRST_SWAPPED if self.swap_bytes else WordOrder.HIGH_FIRST
 
     def __str__(self) -> str:
-        text = f"{self.kind}:{self.length}" if self.kind == "string" else self.kind
+        if self.kind == "string":
+            return f"string:{self.length}" + (":BADC" if self.swap_bytes else "")
+        text = self.kind
         if self.words > 1 and self.kind != "string" and self.word_order != WordOrder.LOW_FIRST:
             text += f":{self.word_order.value}"
         return text
@@ -248,7 +285,9 @@ def parse_value_type(
     """``"float32"``, ``"int32:ABCD"``, ``"string:16"``, ``"bcd8"``, ``"real"`` → a type.
 
     ``word_order`` overrides the order written in the spec; ``default_word_order`` applies
-    when the spec names none (Omron's CDAB unless given).
+    when the spec names none (Omron's CDAB unless given). Strings take ABCD (the default:
+    first character in the high byte) or BADC (``string:8:BADC``, in the low byte), honoured
+    on read and write alike; other orders are refused for them.
     """
     if isinstance(spec, ValueType):
         return spec
@@ -262,12 +301,29 @@ def parse_value_type(
         raise CommandError("a string type needs its length in bytes, e.g. string:16")
     if name != "string" and length:
         raise CommandError(f"{name} takes no length")
-    order = WordOrder.parse(default_word_order)
-    if m.group(3):
-        order = WordOrder.parse(m.group(3))
-    if word_order is not None:
-        order = WordOrder.parse(word_order)
+    given = word_order if word_order is not None else m.group(3)
+    if name == "string":
+        return ValueType(name, length=length, swap_bytes=_string_swap(given))
+    order = WordOrder.parse(given) if given else WordOrder.parse(default_word_order)
     return ValueType(name, word_order=order, length=length)
+
+
+def _string_swap(given: WordOrder | str | None) -> bool:
+    """Whether a string's byte order (written ``string:N:ABCD`` or ``string:N:BADC``) swaps
+    the bytes of each word. A string runs first word first: CDAB and DCBA, which reverse the
+    words of a number, mean nothing for it and are refused (the client's default word order
+    applies to numbers only)."""
+    if not given:
+        return False
+    order = WordOrder.parse(given)
+    if order is WordOrder.HIGH_FIRST:
+        return False
+    if order is WordOrder.HIGH_FIRST_SWAPPED:
+        return True
+    raise CommandError(
+        f"a string's byte order is ABCD (first character in the high byte of each word, "
+        f"Omron's) or BADC (in the low byte); got {order.value}"
+    )
 
 
 def words_to_values(vtype: ValueType, words: Sequence[int]) -> list[Value]:
@@ -288,6 +344,9 @@ def values_to_words(vtype: ValueType, values: Sequence[Value]) -> list[int]:
 
 __all__ = [
     "TYPE_NAMES",
+    "BoolTypeName",
+    "FloatTypeName",
+    "IntTypeName",
     "Value",
     "ValueType",
     "WordOrder",
