@@ -132,7 +132,9 @@ class Client(CommandMethods):
 
         Non-normal end codes raise :class:`~aiofins.EndCodeError` subclasses.
         """
-        if timeout is not None or retries is not None:
+        if retries is not None or (
+            timeout is not None and (type(timeout) is not float or not timeout > 0.0)
+        ):  # checked unless a positive float (NaN is not > 0): one comparison per call
             timeout, retries = _call_options(timeout, retries)
         if self.read_only:
             _check_read_only(mrc, src, params)
@@ -166,7 +168,9 @@ class Client(CommandMethods):
 
         See :meth:`Session.request_many`; the first error is raised as by :meth:`execute`.
         """
-        if timeout is not None or retries is not None:
+        if retries is not None or (
+            timeout is not None and (type(timeout) is not float or not timeout > 0.0)
+        ):  # checked unless a positive float (NaN is not > 0): one comparison per call
             timeout, retries = _call_options(timeout, retries)
         if self.read_only:
             for mrc, src, params in commands:
