@@ -103,6 +103,20 @@ def test_a_terminal_is_asked_and_no_means_nothing_is_sent(
     assert d0(capsys, url) == [6]
 
 
+def test_restore_in_run_mode_says_what_to_type(
+    url: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Not 'client.stop()': a command-line user is told about --stop."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO())
+    image = tmp_path / "program.bin"
+    assert run(capsys, "backup", url, str(image))[0] == 0
+    code, out, err = run(capsys, "restore", url, str(image))
+    assert code == 1 and out == "" and "needs PROGRAM mode: add --stop" in err, err
+    assert "client.stop()" not in err
+    assert run(capsys, "restore", url, str(image), "--stop")[0] == 0
+    assert mode(capsys, url) == "PROGRAM"
+
+
 def test_run_stop_and_clock_set(
     url: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -30,6 +30,9 @@ from ..bulk import (
 )
 from ..client import Client
 from ..connection import connect
+from ..protocol.commands.parameter import ParameterAreaWrite
+from ..protocol.commands.program import ProgramAreaWrite
+from ..protocol.commands.status import CpuMode
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
 from .options import add_read_only, add_timeout, add_yes, confirm, refuse
@@ -157,6 +160,14 @@ async def _restore(plc: Client, args: argparse.Namespace) -> int:
         backup = _parameter_backup(args.file)
         check_parameter_backup(backup)
         size = sum(len(v) for v in backup.values())
+    plc.guard(ProgramAreaWrite if args.what == "program" else ParameterAreaWrite)
+    if not args.stop:  # say what to do in the command line's words, not the API's
+        mode = (await plc.cpu_unit_status_read()).mode
+        if mode is not CpuMode.PROGRAM:
+            raise CommandError(
+                f"the PLC is in {mode.name} mode; restoring needs PROGRAM mode: add --stop to "
+                "switch to it first (or run 'aiofins stop URL')"
+            )
     bar = ProgressBar(f"restore {args.what}", "bytes" if args.what == "program" else "words")
     try:
         if args.stop:
