@@ -80,7 +80,7 @@ async def poll(args: argparse.Namespace) -> None:
     if args.count < 0:
         raise CommandError(f"--count {args.count}: give a number of scans, or 0 to run until ^C")
     options = {"timeout": args.timeout, "dest": args.dest, "src": args.src}
-    pool = Pool(**options)
+    pool = Pool(read_only=True, **options)  # polling only reads: nothing else can be sent
     # Every scan is delivered (--count counts scans); --changes-only filters here.
     poller = Poller(pool)
     # Before anything opens: a bad URL, tag or interval is an error, not a scan error.
