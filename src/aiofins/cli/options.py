@@ -60,11 +60,12 @@ def add_yes(p: argparse.ArgumentParser) -> None:
 def confirm(args: argparse.Namespace, question: str) -> bool:
     """Whether to go on with a command that changes the PLC: ``--yes``, no terminal on stdin
     (scripts), or the user answered yes to ``question`` on stderr."""
-    if getattr(args, "yes", False) or not sys.stdin.isatty():
+    stdin = sys.stdin
+    if getattr(args, "yes", False) or stdin is None or not stdin.isatty():
         return True
     sys.stderr.write(f"{question} [y/N] ")
     sys.stderr.flush()
-    answer = sys.stdin.readline()
+    answer = stdin.readline()  # "" at end of input (^D): no
     return answer.strip().lower() in ("y", "yes")
 
 
