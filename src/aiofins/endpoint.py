@@ -133,7 +133,13 @@ def parse_endpoint(url: str) -> Endpoint:
     except ValueError as exc:  # e.g. an unclosed [ of an IPv6 address
         raise CommandError(f"{url!r}: {exc}") from None
     scheme = parts.scheme.lower()
-    options = tuple(parse_qsl(parts.query, keep_blank_values=False))
+    # Blank options are dropped, but a bare ``?read_only`` turns the guard on: a guard asked
+    # for must never be ignored.
+    options = tuple(
+        (key, value or "1")
+        for key, value in parse_qsl(parts.query, keep_blank_values=True)
+        if value or key == "read_only"
+    )
     if scheme == "serial":
         device = (parts.netloc + parts.path) if parts.netloc else parts.path
         if not device:

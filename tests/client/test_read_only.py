@@ -97,6 +97,10 @@ async def test_helpers_raw_frames_and_tags_are_guarded(url: str, sim: Simulator)
 
 async def test_pool_read_only_and_per_borrower_urls(url: str, sim: Simulator) -> None:
     plc_state = vplc(sim)
+    async with aiofins.connect(url + "?read_only") as plc:  # bare: on, never ignored
+        assert plc.read_only
+    async with aiofins.connect(url + "?read_only=0") as plc:
+        assert not plc.read_only
     async with aiofins.Pool(read_only=True) as pool, pool.client(url) as plc:
         with pytest.raises(aiofins.ReadOnlyError):
             await plc.write("D0", [1])
