@@ -73,7 +73,7 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     for name, handler, text in (
         ("status", _status, "CPU UNIT STATUS READ (0601): mode, errors, messages"),
         ("info", _info, "CPU UNIT DATA READ (0501): model, version, areas"),
-        ("clock", _clock, "CLOCK READ (0701)"),
+        ("clock", _clock, "CLOCK READ (0701); with --set, CLOCK WRITE (0702) first"),
         ("ping", _ping, "round-trip time of CPU UNIT STATUS READ (0601), in ms"),
     ):
         p = sub.add_parser(name, help=text)
