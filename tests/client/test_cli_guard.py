@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import pty
+import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -115,6 +118,28 @@ def test_restore_in_run_mode_says_what_to_type(
     assert "client.stop()" not in err
     assert run(capsys, "restore", url, str(image), "--stop")[0] == 0
     assert mode(capsys, url) == "PROGRAM"
+
+
+@pytest.mark.parametrize(("answer", "code"), [(b"n\n", 1), (b"yes\n", 0)])
+def test_a_real_terminal_is_asked(
+    url: str, capsys: pytest.CaptureFixture[str], answer: bytes, code: int
+) -> None:
+    """``aiofins stop`` in its own process with a pseudo-terminal as stdin."""
+    controller, terminal = pty.openpty()
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "aiofins", "stop", url],
+            stdin=terminal,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        os.write(controller, answer)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        os.close(controller)
+        os.close(terminal)
+    assert proc.returncode == code and b"(switch it to PROGRAM mode)? [y/N]" in err
+    assert mode(capsys, url) == ("RUN" if code else "PROGRAM")
 
 
 def test_run_stop_and_clock_set(
