@@ -53,6 +53,7 @@ def test_switch() -> None:
 def test_huge_integers_are_described_not_printed() -> None:
     huge = int("f" * 5000, 16)  # repr() of it would raise ValueError (4,300-digit limit)
     assert shown(huge) == "an integer of 20000 bits"
+    assert shown([huge]) == "a list too large to print"
     assert shown("x" * 100).endswith("...x'") and len(shown("x" * 100)) == 40
 
 

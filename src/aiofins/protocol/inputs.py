@@ -20,7 +20,10 @@ def shown(value: object, limit: int = 40) -> str:
     to print (Python refuses over 4,300 digits) is described by its size instead."""
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
         return f"an integer of {value.bit_length()} bits"
-    text = repr(value)
+    try:
+        text = repr(value)
+    except ValueError:  # e.g. a list holding such an integer
+        return f"a {type(value).__name__} too large to print"
     return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-2:]}"
 
 
