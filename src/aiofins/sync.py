@@ -1,0 +1,304 @@
+"""A blocking facade for scripts and notebooks: ``aiofins.sync.connect(url)``.
+
+The async :class:`~aiofins.Client` runs on a private event loop in a thread of its own; each
+method of the blocking :class:`Client` sends its call there and waits for the result, so a
+script needs neither ``async`` nor ``await``::
+
+    with aiofins.sync.connect("udp://192.168.250.1") as plc:
+        words = plc.read("D100", 10)
+
+The methods are the async client's, with the same parameters, results and exceptions (a
+:class:`~aiofins.FinsTimeout` is raised in the calling thread). One blocking client may be
+used from several threads at once: their calls run concurrently on the loop, as async tasks
+would. :meth:`Client.close` (or leaving the ``with`` block) closes the session and joins the
+thread. Inside a running event loop (``async def``, FastAPI, a notebook that awaits) use the
+async client instead: a blocking call there would stall that loop for the call's duration.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import threading
+from collections.abc import Callable, Coroutine, Mapping, Sequence
+from contextlib import AbstractContextManager, ExitStack
+from types import TracebackType
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
+
+import anyio
+from anyio.from_thread import BlockingPortal
+
+from .client import AddressLike
+from .client import Client as AsyncClient
+from .connection import connect as _async_connect
+from .protocol.endcodes import EndCode
+from .protocol.errors import ConnectionLost
+from .protocol.header import FinsAddress
+from .protocol.values import Value, ValueType
+from .tags import ReadPlan
+
+__all__ = ["Client", "connect"]
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+
+class _LoopThread:
+    """An event loop in a daemon thread, reached through an anyio blocking portal.
+
+    A daemon thread, so that a script which forgets to close its client still exits (the
+    operating system closes the socket).
+    """
+
+    def __init__(self, backend: str, backend_options: Mapping[str, Any] | None) -> None:
+        self._backend = backend
+        self._backend_options = dict(backend_options or {})
+        self._ready = threading.Event()
+        self._portal: BlockingPortal | None = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="aiofins.sync", daemon=True)
+        self._thread.start()
+        self._ready.wait()
+        if self._error is not None:
+            raise self._error
+
+    def _run(self) -> None:
+        try:
+            anyio.run(self._serve, backend=self._backend, backend_options=self._backend_options)
+        except BaseException as exc:  # the loop could not start (unknown backend, ...)
+            self._error = exc
+            self._ready.set()
+
+    async def _serve(self) -> None:
+        async with BlockingPortal() as portal:
+            self._portal = portal
+            self._ready.set()
+            await portal.sleep_until_stopped()
+
+    @property
+    def portal(self) -> BlockingPortal:
+        if self._portal is None:  # pragma: no cover - __init__ raised instead
+            raise RuntimeError("the event loop thread did not start")
+        return self._portal
+
+    def stop(self) -> None:
+        """Stop the loop (cancelling calls still running) and join the thread."""
+        if self._thread.is_alive() and self._portal is not None:
+            with contextlib.suppress(RuntimeError):  # already stopping
+                self._portal.call(self._portal.stop, True)
+        self._thread.join()
+
+
+class _Blocking(Generic[P, R]):
+    """A blocking method made from a coroutine method of the async client.
+
+    ``read = _Blocking(AsyncClient.read)`` in the class body gives the blocking client a
+    ``read`` with the async method's parameters and result type, as mypy and IDEs see them.
+    """
+
+    def __init__(self, method: Callable[Concatenate[AsyncClient, P], Coroutine[Any, Any, R]]):
+        self._name = method.__name__
+        self.__doc__ = method.__doc__
+        self.__wrapped__ = method
+
+    def __set_name__(self, owner: type[Any], name: str) -> None:
+        self._name = name
+
+    @overload
+    def __get__(self, instance: None, owner: type[Any]) -> _Blocking[P, R]: ...
+
+    @overload
+    def __get__(self, instance: Client, owner: type[Any]) -> Callable[P, R]: ...
+
+    def __get__(
+        self, instance: Client | None, owner: type[Any]
+    ) -> _Blocking[P, R] | Callable[P, R]:
+        if instance is None:
+            return self
+        method: Callable[P, Coroutine[Any, Any, R]] = getattr(instance.async_client, self._name)
+        return functools.partial(instance._call, method)
+
+
+class Client:
+    """A blocking FINS client: the methods of :class:`aiofins.Client`, without ``await``.
+
+    Made by :func:`connect`. Each method runs the async client's method of the same name on
+    the private event loop and returns its result (or raises its exception). The async
+    client is :attr:`async_client`; ``with`` closes the client on leaving the block.
+    """
+
+    def __init__(self, async_client: AsyncClient, loop: _LoopThread, resources: ExitStack):
+        #: The async client underneath (its coroutines run on the private loop only).
+        self.async_client = async_client
+        self._loop = loop
+        self._resources = resources
+        self._closed = False
+        self._close_lock = threading.Lock()
+
+    def _call(
+        self, method: Callable[P, Coroutine[Any, Any, R]], /, *args: P.args, **kwargs: P.kwargs
+    ) -> R:
+        if self._closed:
+            raise ConnectionLost("the blocking client is closed")
+
+        async def run() -> R:
+            return await method(*args, **kwargs)
+
+        return self._loop.portal.call(run)
+
+    def close(self) -> None:
+        """Close the session and stop the loop thread (joined before this returns).
+
+        Calls still running in other threads are cancelled. Closing twice does nothing.
+        """
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._resources.close()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @property
+    def dest(self) -> FinsAddress:
+        """The PLC's FINS address (the default destination of every call)."""
+        return self.async_client.dest
+
+    @property
+    def last_end_code(self) -> EndCode | None:
+        """End code of the latest normal response (the CPU error flags 0040/0080)."""
+        return self.async_client.last_end_code
+
+    def compile_tags(self, tags: Mapping[str, str], *, max_gap: int = 8) -> ReadPlan:
+        """Compile a tag list for this client's route limits (no I/O)."""
+        return self.async_client.compile_tags(tags, max_gap=max_gap)
+
+    # Methods taking ``**kw`` (the read/write options) are written out: mypy cannot take
+    # their signatures apart from ``self``.
+
+    def read_bit(self, address: AddressLike, **kw: Any) -> bool:
+        """Read one bit (``"CIO 0.01"``) as a bool."""
+        return self._call(self.async_client.read_bit, address, **kw)
+
+    def read_value(
+        self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
+    ) -> Value:
+        """Read one typed value: ``plc.read_value("D200", "float32")``."""
+        return self._call(self.async_client.read_value, address, vtype, **kw)
+
+    def read_values(
+        self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
+    ) -> list[Value]:
+        """Read ``count`` consecutive typed values."""
+        return self._call(self.async_client.read_values, address, vtype, count, **kw)
+
+    def write_value(
+        self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
+    ) -> None:
+        """Write one typed value: ``plc.write_value("D200", 21.5, "float32")``."""
+        self._call(self.async_client.write_value, address, value, vtype, **kw)
+
+    def write_values(
+        self, address: AddressLike, values: Sequence[Value], vtype: str | ValueType, **kw: Any
+    ) -> None:
+        """Write consecutive typed values."""
+        self._call(self.async_client.write_values, address, values, vtype, **kw)
+
+    # Each line below is one blocking method with the async method's signature; the test
+    # suite checks that every public coroutine method of the async client is here.
+    execute = _Blocking(AsyncClient.execute)
+    execute_many = _Blocking(AsyncClient.execute_many)
+    call = _Blocking(AsyncClient.call)
+    read = _Blocking(AsyncClient.read)
+    write = _Blocking(AsyncClient.write)
+    read_tags = _Blocking(AsyncClient.read_tags)
+    memory_area_read = _Blocking(AsyncClient.memory_area_read)
+    memory_area_write = _Blocking(AsyncClient.memory_area_write)
+    memory_area_fill = _Blocking(AsyncClient.memory_area_fill)
+    multiple_memory_area_read = _Blocking(AsyncClient.multiple_memory_area_read)
+    memory_area_transfer = _Blocking(AsyncClient.memory_area_transfer)
+    parameter_area_read = _Blocking(AsyncClient.parameter_area_read)
+    parameter_area_write = _Blocking(AsyncClient.parameter_area_write)
+    parameter_area_clear = _Blocking(AsyncClient.parameter_area_clear)
+    program_area_read = _Blocking(AsyncClient.program_area_read)
+    program_area_write = _Blocking(AsyncClient.program_area_write)
+    program_area_clear = _Blocking(AsyncClient.program_area_clear)
+    run = _Blocking(AsyncClient.run)
+    stop = _Blocking(AsyncClient.stop)
+    cpu_unit_data_read = _Blocking(AsyncClient.cpu_unit_data_read)
+    connection_data_read = _Blocking(AsyncClient.connection_data_read)
+    cpu_unit_status_read = _Blocking(AsyncClient.cpu_unit_status_read)
+    cycle_time_read = _Blocking(AsyncClient.cycle_time_read)
+    clock_read = _Blocking(AsyncClient.clock_read)
+    clock_write = _Blocking(AsyncClient.clock_write)
+    message_read = _Blocking(AsyncClient.message_read)
+    message_clear = _Blocking(AsyncClient.message_clear)
+    fal_fals_read = _Blocking(AsyncClient.fal_fals_read)
+    access_right_acquire = _Blocking(AsyncClient.access_right_acquire)
+    access_right_forced_acquire = _Blocking(AsyncClient.access_right_forced_acquire)
+    access_right_release = _Blocking(AsyncClient.access_right_release)
+    error_clear = _Blocking(AsyncClient.error_clear)
+    error_log_read = _Blocking(AsyncClient.error_log_read)
+    error_log_clear = _Blocking(AsyncClient.error_log_clear)
+    fins_write_access_log_read = _Blocking(AsyncClient.fins_write_access_log_read)
+    fins_write_access_log_clear = _Blocking(AsyncClient.fins_write_access_log_clear)
+    file_name_read = _Blocking(AsyncClient.file_name_read)
+    single_file_read = _Blocking(AsyncClient.single_file_read)
+    single_file_write = _Blocking(AsyncClient.single_file_write)
+    file_memory_format = _Blocking(AsyncClient.file_memory_format)
+    file_delete = _Blocking(AsyncClient.file_delete)
+    file_copy = _Blocking(AsyncClient.file_copy)
+    file_name_change = _Blocking(AsyncClient.file_name_change)
+    memory_area_file_transfer = _Blocking(AsyncClient.memory_area_file_transfer)
+    parameter_area_file_transfer = _Blocking(AsyncClient.parameter_area_file_transfer)
+    program_area_file_transfer = _Blocking(AsyncClient.program_area_file_transfer)
+    create_delete_directory = _Blocking(AsyncClient.create_delete_directory)
+    memory_cassette_transfer = _Blocking(AsyncClient.memory_cassette_transfer)
+    forced_set_reset = _Blocking(AsyncClient.forced_set_reset)
+    forced_set_reset_cancel = _Blocking(AsyncClient.forced_set_reset_cancel)
+    convert_to_compoway_f_command = _Blocking(AsyncClient.convert_to_compoway_f_command)
+    convert_to_modbus_rtu_command = _Blocking(AsyncClient.convert_to_modbus_rtu_command)
+    convert_to_modbus_ascii_command = _Blocking(AsyncClient.convert_to_modbus_ascii_command)
+
+
+def connect(
+    url: str,
+    *,
+    backend: str = "asyncio",
+    backend_options: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> Client:
+    """Connect to a PLC and return a blocking :class:`Client`.
+
+    ``url`` and ``options`` are those of :func:`aiofins.connect` (``dest``, ``src``,
+    ``timeout``, ``retries``, ...). ``backend`` is the anyio backend of the private loop
+    (``"asyncio"`` or ``"trio"``; ``backend_options={"use_uvloop": True}`` for uvloop). The
+    connection is made before this returns: a bad URL or option raises here. Use it as a
+    context manager, or call :meth:`Client.close`.
+    """
+    loop = _LoopThread(backend, backend_options)
+    resources = ExitStack()
+    resources.callback(loop.stop)
+    try:
+        manager: AbstractContextManager[AsyncClient] = loop.portal.wrap_async_context_manager(
+            _async_connect(url, **options)
+        )
+        async_client = resources.enter_context(manager)
+    except BaseException:
+        resources.close()
+        raise
+    return Client(async_client, loop, resources)

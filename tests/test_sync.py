@@ -1,0 +1,119 @@
+"""aiofins.sync: the blocking facade, against the virtual PLC served from another thread."""
+
+from __future__ import annotations
+
+import inspect
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+from anyio.from_thread import start_blocking_portal
+
+import aiofins
+import aiofins.sync
+from aiofins.protocol.addresses import parse_address
+from aiofins.protocol.commands.memory import MemoryAreaRead
+from aiofins.simulator import VirtualPLC, run_simulator
+
+
+@pytest.fixture(scope="module")
+def url() -> Iterator[str]:
+    """A virtual PLC on loopback UDP, served by an event loop in a thread of its own."""
+    with (
+        start_blocking_portal() as portal,
+        portal.wrap_async_context_manager(run_simulator(VirtualPLC(), udp=("127.0.0.1", 0))) as sim,
+    ):
+        yield f"udp://127.0.0.1:{sim.udp_port}"
+
+
+def _loop_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "aiofins.sync"]
+
+
+def test_reads_and_writes_words_values_and_commands(url: str) -> None:
+    with aiofins.sync.connect(url) as plc:
+        plc.write("D100", [1, 2, 0x10])
+        assert plc.read("D100", 3) == [1, 2, 16]
+        plc.write_value("D200", 21.5, "float32")
+        assert plc.read_value("D200", "float32") == 21.5
+        plc.write_values("D300", [-1, 7], "int32")
+        assert plc.read_values("D300", "int32", 2) == [-1, 7]
+        plc.write("CIO 0.00", [1, 0])
+        assert plc.read_bit("CIO 0.00") is True
+        assert plc.read_tags({"t": "D200:float32", "x": "D101"}) == {"t": 21.5, "x": 2}
+        assert plc.cpu_unit_status_read().mode.name == "PROGRAM"
+        result = plc.call(MemoryAreaRead(parse_address("D100"), 2))
+        assert list(result.values) == [1, 2]
+        assert plc.last_end_code is not None and plc.last_end_code.raw == 0
+        assert plc.dest == plc.async_client.dest
+
+
+def test_a_plc_error_is_raised_in_the_calling_thread(url: str) -> None:
+    with aiofins.sync.connect(url) as plc, pytest.raises(aiofins.EndCodeError) as caught:
+        plc.write("A0", [1])  # A0-A447 are read-only
+    assert caught.value.end_code.raw == 0x2101
+
+
+def test_close_joins_the_loop_thread_and_later_calls_fail(url: str) -> None:
+    before = len(_loop_threads())
+    plc = aiofins.sync.connect(url)
+    assert len(_loop_threads()) == before + 1
+    plc.read("D0")
+    plc.close()
+    assert plc.closed and len(_loop_threads()) == before
+    with pytest.raises(aiofins.ConnectionLost, match="closed"):
+        plc.read("D0")
+    plc.close()  # a second close does nothing
+
+
+def test_a_failed_connect_leaves_no_thread() -> None:
+    before = len(_loop_threads())
+    with pytest.raises(aiofins.CommandError):
+        aiofins.sync.connect("ftp://127.0.0.1")
+    assert len(_loop_threads()) == before
+
+
+def test_a_timeout_is_bounded_and_raised_as_fins_timeout() -> None:
+    # A UDP port nobody answers on: the datagram goes nowhere, the call times out.
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        port = silent.getsockname()[1]
+        with (
+            aiofins.sync.connect(f"udp://127.0.0.1:{port}", timeout=0.2, retries=0) as plc,
+            pytest.raises(aiofins.FinsTimeout),
+        ):
+            plc.read("D0")
+
+
+def test_threads_share_one_client(url: str) -> None:
+    with aiofins.sync.connect(url) as plc:
+        plc.write("D500", list(range(8)))
+        with ThreadPoolExecutor(4) as pool:
+            results = list(pool.map(lambda i: plc.read(f"D{500 + i}", 1)[0], range(8)))
+    assert results == list(range(8))
+
+
+def test_trio_backend(url: str) -> None:
+    pytest.importorskip("trio")
+    with aiofins.sync.connect(url, backend="trio") as plc:
+        plc.write("D600", [42])
+        assert plc.read("D600") == [42]
+
+
+def test_every_coroutine_method_of_the_async_client_is_here_with_its_signature() -> None:
+    names = [
+        name
+        for name, member in inspect.getmembers(aiofins.Client)
+        if not name.startswith("_") and inspect.iscoroutinefunction(member)
+    ]
+    assert len(names) > 47
+    for name in names:
+        blocking = getattr(aiofins.sync.Client, name, None)
+        assert blocking is not None, f"aiofins.sync.Client has no {name}"
+        expected = inspect.signature(getattr(aiofins.Client, name))
+        got = inspect.signature(getattr(blocking, "__wrapped__", blocking))
+        assert got.parameters == expected.parameters, name
+        assert blocking.__doc__, name
