@@ -1,5 +1,7 @@
 """aiofins: async Omron FINS client, protocol codec and virtual PLC."""
 
+from importlib.metadata import PackageNotFoundError, version
+
 from .client import Client
 from .connection import connect
 from .poller import Poller, Quality, Snapshot
@@ -20,7 +22,10 @@ from .protocol.errors import (
 )
 from .protocol.header import FinsAddress
 
-__version__ = "0.1.0"
+try:
+    __version__ = version("aiofins")  #: The installed distribution's version (pyproject.toml).
+except PackageNotFoundError:  # pragma: no cover - imported from a source tree, not installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "AddressError",

@@ -16,11 +16,10 @@ import os
 from dataclasses import dataclass
 
 import anyio
-import serial  # type: ignore[import-untyped]  # no types-pyserial in the env
 from anyio.abc import TaskStatus
 
 from ..protocol.endcodes import CPU_ERROR_FLAGS, EndCode
-from ..protocol.errors import DecodeError
+from ..protocol.errors import CommandError, DecodeError
 from ..protocol.header import ICF_NO_RESPONSE, ICF_RESPONSE, ResponseFrame
 from ..protocol.hostlink import (
     MAX_COMMAND_CHARS,
@@ -66,6 +65,13 @@ class SerialServer:
     async def serve(self, *, task_status: TaskStatus[str] = anyio.TASK_STATUS_IGNORED) -> None:
         """Answer Host Link lines until cancelled or the device goes away."""
         s = self.settings
+        try:
+            import serial  # type: ignore[import-untyped]  # no types-pyserial in the env
+        except ImportError as exc:  # the optional ``serial`` extra
+            raise CommandError(
+                "serving a serial device needs pyserial, which is not installed: "
+                "pip install 'aiofins[serial]'"
+            ) from exc
         port = serial.Serial(
             self.device,
             baudrate=s.baudrate,

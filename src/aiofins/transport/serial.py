@@ -14,6 +14,7 @@ pyserial is used in non-blocking mode with ``anyio.wait_readable`` (POSIX only).
 from __future__ import annotations
 
 import asyncio
+import importlib
 from typing import Any
 
 import anyio
@@ -22,6 +23,18 @@ from ..protocol.errors import CommandError, ConnectionLost, DecodeError
 from ..protocol.header import CommandFrame
 from ..protocol.hostlink import LineDecoder, decode_response, encode_command
 from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
+
+
+def _import_serial(name: str) -> Any:
+    """A serial package (pyserial or pyserial-asyncio-fast), imported when a port is opened:
+    they are optional (the ``serial`` extra), and Ethernet-only users do without them."""
+    try:
+        return importlib.import_module(name)
+    except ImportError as exc:
+        package = {"serial": "pyserial", "serial_asyncio_fast": "pyserial-asyncio-fast"}[name]
+        raise CommandError(
+            f"serial:// needs {package}, which is not installed: pip install 'aiofins[serial]'"
+        ) from exc
 
 
 class _LineHandler:
@@ -120,19 +133,17 @@ class SerialTransport(Transport):
         if self.is_open:
             return
         handler = _LineHandler(self, sink)
+        on_asyncio = is_asyncio()
+        package = _import_serial("serial_asyncio_fast" if on_asyncio else "serial")
         try:
-            if is_asyncio():
-                import serial_asyncio_fast
-
+            if on_asyncio:
                 loop = asyncio.get_running_loop()
-                transport, _ = await serial_asyncio_fast.create_serial_connection(
+                transport, _ = await package.create_serial_connection(
                     loop, lambda: _SerialProtocol(self, handler), self.port, **self._settings()
                 )
                 self._aio = transport
             else:
-                import serial  # type: ignore[import-untyped]
-
-                ser = serial.serial_for_url(self.port, timeout=0, **self._settings())
+                ser = package.serial_for_url(self.port, timeout=0, **self._settings())
                 self._serial = ser
                 task_group.start_soon(self._reader, ser, handler)
         except (OSError, ValueError) as exc:
