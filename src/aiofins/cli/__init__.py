@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 
 from .. import __version__
 from ..protocol.errors import FinsError, leaf_errors
+from .examples import EXAMPLES, MAIN_EXAMPLES, HelpFormatter, epilog
 from .text import escape
 
 #: Subcommand modules (relative to this package), in the order ``--help`` lists them.
@@ -30,7 +31,10 @@ Handler = Callable[[argparse.Namespace], int]
 def build_parser() -> argparse.ArgumentParser:
     """The full parser (a subcommand module that fails to import is an error, loudly)."""
     parser = argparse.ArgumentParser(
-        prog="aiofins", description="Omron FINS client tools and virtual PLC."
+        prog="aiofins",
+        description="Omron FINS client tools and virtual PLC.",
+        epilog=epilog(MAIN_EXAMPLES),
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"aiofins {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -43,7 +47,22 @@ def build_parser() -> argparse.ArgumentParser:
                 break
         else:  # pragma: no cover - a programming error
             raise RuntimeError(f"aiofins.cli.{name} has no register/add_parser(s)")
+    _add_examples(subparsers)
     return parser
+
+
+def _add_examples(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Every subcommand's ``--help``: a description (its one-line help if it has none) and
+    the examples of :data:`~aiofins.cli.examples.EXAMPLES` at the end."""
+    helps = {action.dest: action.help for action in subparsers._choices_actions}
+    for name, sub in subparsers.choices.items():
+        text = helps.get(name)
+        if sub.description is None and text:
+            sub.description = f"{text[:1].upper()}{text[1:]}."
+        if name in EXAMPLES:
+            sub.epilog = epilog(EXAMPLES[name])
+            if sub.formatter_class is argparse.HelpFormatter:
+                sub.formatter_class = HelpFormatter
 
 
 def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException], ...]) -> bool:

@@ -66,36 +66,42 @@ class ProgressBar:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("url")
+    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
     add_timeout(p, 5.0, "seconds per frame (default 5)")
     add_read_only(p)
 
 
+#: Help of ``--what``.
+WHAT = "the program area (default) or the parameter areas"
+
+
 def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("backup", help="back up the program area or the parameter areas")
     _common(p)
-    p.add_argument("file", type=Path)
-    p.add_argument("--what", choices=("program", "parameters"), default="program")
+    p.add_argument("file", type=Path, help="file to write (program: raw bytes; parameters: JSON)")
+    p.add_argument("--what", choices=("program", "parameters"), default="program", help=WHAT)
     p.set_defaults(func=_sync(_backup))
 
     p = sub.add_parser("restore", help="restore a program or parameter backup")
     _common(p)
-    p.add_argument("file", type=Path)
-    p.add_argument("--what", choices=("program", "parameters"), default="program")
+    p.add_argument("file", type=Path, help="a file made by 'aiofins backup'")
+    p.add_argument("--what", choices=("program", "parameters"), default="program", help=WHAT)
     p.add_argument("--stop", action="store_true", help="switch to PROGRAM mode first")
     add_yes(p)
     p.set_defaults(func=_sync(_restore, _ask_restore))
 
     p = sub.add_parser("files", help="file memory: list, get, put, delete")
     _common(p)
-    p.add_argument("action", choices=("list", "get", "put", "delete"))
+    p.add_argument("action", choices=("list", "get", "put", "delete"), help="what to do")
     p.add_argument("name", nargs="?", help="file name (8.3) on the PLC")
     p.add_argument("local", nargs="?", type=Path, help="local file for get/put")
-    p.add_argument("--disk", choices=("card", "em"), default="card")
+    p.add_argument(
+        "--disk", choices=("card", "em"), default="card", help="memory card or EM file memory"
+    )
     p.add_argument("--directory", default="", help="directory on the PLC (\\ separated)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON document (list, delete)")
     add_yes(p)
     p.set_defaults(func=_sync(_files, _ask_files))
 

@@ -56,7 +56,7 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 
     p = sub.add_parser("write", help="write words, bits or typed values")
     _common(p)
-    p.add_argument("address")
+    p.add_argument("address", help='first address, e.g. D100, "CIO 0.00", E3_100')
     p.add_argument(
         "values",
         nargs="+",

@@ -22,7 +22,7 @@ from .text import escape
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("poll", help="poll tags periodically and print each scan")
-    p.add_argument("url")
+    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
     p.add_argument("tags", nargs="+", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
     p.add_argument("--interval", type=float, default=1.0, help="seconds between scans")
     p.add_argument("--count", type=int, default=0, help="stop after N scans (0: run until ^C)")

@@ -123,10 +123,12 @@ def register(subparsers: SubParsers) -> None:
     where.add_argument(
         "--serial-unit", type=integer_in(0, 31), default=0, metavar="N", help="Host Link unit"
     )
-    where.add_argument("--baudrate", type=integer_in(1), default=9600)
-    where.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
-    where.add_argument("--parity", choices=("N", "E", "O"), default="N")
-    where.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    where.add_argument(
+        "--baudrate", type=integer_in(1), default=9600, help="serial speed (default 9600)"
+    )
+    where.add_argument("--bytesize", type=int, choices=(7, 8), default=8, help="serial data bits")
+    where.add_argument("--parity", choices=("N", "E", "O"), default="N", help="serial parity")
+    where.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="serial stop bits")
     where.add_argument(
         "--max-connections",
         type=integer_in(1),
@@ -147,12 +149,22 @@ def register(subparsers: SubParsers) -> None:
 
     f = p.add_argument_group("faults (probabilities 0..1 per request)")
     f.add_argument("--drop", type=probability, default=0.0, metavar="P", help="drop requests")
-    f.add_argument("--drop-response", type=probability, default=0.0, metavar="P")
+    f.add_argument(
+        "--drop-response", type=probability, default=0.0, metavar="P", help="drop responses"
+    )
     f.add_argument("--delay", type=delay, metavar="MS|MIN-MAX", help="delay every response")
-    f.add_argument("--duplicate", type=probability, default=0.0, metavar="P")
-    f.add_argument("--reorder", type=probability, default=0.0, metavar="P")
-    f.add_argument("--corrupt", type=probability, default=0.0, metavar="P")
-    f.add_argument("--truncate", type=probability, default=0.0, metavar="P")
+    f.add_argument(
+        "--duplicate", type=probability, default=0.0, metavar="P", help="send responses twice"
+    )
+    f.add_argument(
+        "--reorder", type=probability, default=0.0, metavar="P", help="send after the next response"
+    )
+    f.add_argument(
+        "--corrupt", type=probability, default=0.0, metavar="P", help="flip a response byte"
+    )
+    f.add_argument(
+        "--truncate", type=probability, default=0.0, metavar="P", help="cut responses short"
+    )
     f.add_argument(
         "--late",
         type=probability,
@@ -160,9 +172,21 @@ def register(subparsers: SubParsers) -> None:
         metavar="P",
         help="answer after --late-after instead",
     )
-    f.add_argument("--late-after", type=milliseconds, default=10000.0, metavar="MS")
+    f.add_argument(
+        "--late-after",
+        type=milliseconds,
+        default=10000.0,
+        metavar="MS",
+        help="see --late (default 10000)",
+    )
     f.add_argument("--end-code", type=hex_int, metavar="HEX", help="answer this end code")
-    f.add_argument("--end-code-probability", type=probability, default=1.0, metavar="P")
+    f.add_argument(
+        "--end-code-probability",
+        type=probability,
+        default=1.0,
+        metavar="P",
+        help="how often --end-code is answered (default 1)",
+    )
     f.add_argument(
         "--relay",
         type=relay_point,
@@ -205,7 +229,9 @@ def register(subparsers: SubParsers) -> None:
     )
     f.add_argument("--seed", type=int, help="random seed (same seed, same faults)")
     f.add_argument("--log", metavar="FILE", help="hex log of every frame ('-' = stderr)")
-    p.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
+    p.add_argument(
+        "--backend", choices=("asyncio", "trio"), default="asyncio", help="event loop to run on"
+    )
     p.set_defaults(func=run)
 
 
