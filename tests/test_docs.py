@@ -99,3 +99,15 @@ def test_sphinx_roles_become_code_spans() -> None:
     hook = _hook("sphinx_roles")
     text = "See :class:`~aiofins.Client` and :meth:`Session.request_many`, :data:`X`."
     assert hook.ROLE.sub(hook._code, text) == "See `Client` and `Session.request_many`, `X`."
+
+
+def test_the_api_reference_covers_every_export() -> None:
+    import aiofins
+
+    pages = "".join(p.read_text() for p in (ROOT / "docs" / "api").glob("*.md"))
+    missing = [
+        name
+        for name in aiofins.__all__
+        if name != "__version__" and f"::: aiofins.{name}\n" not in pages
+    ]
+    assert not missing, f"add '::: aiofins.NAME' to a page in docs/api/ for {missing}"
