@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import inspect
+import socket
 import threading
+import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
@@ -76,8 +78,6 @@ def test_a_failed_connect_leaves_no_thread() -> None:
 
 def test_a_timeout_is_bounded_and_raised_as_fins_timeout() -> None:
     # A UDP port nobody answers on: the datagram goes nowhere, the call times out.
-    import socket
-
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
         silent.bind(("127.0.0.1", 0))
         port = silent.getsockname()[1]
@@ -117,3 +117,35 @@ def test_every_coroutine_method_of_the_async_client_is_here_with_its_signature()
         got = inspect.signature(getattr(blocking, "__wrapped__", blocking))
         assert got.parameters == expected.parameters, name
         assert blocking.__doc__, name
+
+
+def test_a_bound_blocking_method_shows_the_async_methods_signature(url: str) -> None:
+    with aiofins.sync.connect(url) as plc:
+        assert plc.read.__doc__ == aiofins.Client.read.__doc__
+        assert str(inspect.signature(plc.read)) == str(inspect.signature(plc.async_client.read))
+        assert "count" in inspect.signature(plc.read).parameters
+
+
+def test_close_ends_a_call_waiting_in_another_thread() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.settimeout(10)
+        plc = aiofins.sync.connect(
+            f"udp://127.0.0.1:{silent.getsockname()[1]}", timeout=30, retries=0
+        )
+        raised: list[BaseException] = []
+
+        def call() -> None:
+            try:
+                plc.read("D0")
+            except BaseException as exc:
+                raised.append(exc)
+
+        caller = threading.Thread(target=call)
+        caller.start()
+        silent.recv(100)  # the request went out: the call is waiting for its reply
+        started = time.monotonic()
+        plc.close()
+        caller.join(10)
+        assert not caller.is_alive() and time.monotonic() - started < 10
+        assert len(raised) == 1 and isinstance(raised[0], aiofins.ConnectionLost), raised

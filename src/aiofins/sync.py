@@ -116,7 +116,12 @@ class _Blocking(Generic[P, R]):
         if instance is None:
             return self
         method: Callable[P, Coroutine[Any, Any, R]] = getattr(instance.async_client, self._name)
-        return functools.partial(instance._call, method)
+
+        @functools.wraps(method)  # name, docstring and signature of the async method
+        def blocking(*args: P.args, **kwargs: P.kwargs) -> R:
+            return instance._call(method, *args, **kwargs)
+
+        return blocking
 
 
 class Client:
