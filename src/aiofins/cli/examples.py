@@ -43,7 +43,8 @@ EXAMPLES: dict[str, str] = {
   aiofins ping tcp://192.168.250.1 --count 20 --json
 """,
     "run": """
-  aiofins run udp://192.168.250.1 --yes               # switch to RUN mode
+  aiofins run udp://192.168.250.1                     # MONITOR mode (asks first)
+  aiofins run udp://192.168.250.1 --mode run --yes    # RUN mode, no question
 """,
     "stop": """
   aiofins stop udp://192.168.250.1 --yes              # switch to PROGRAM mode
