@@ -96,7 +96,7 @@ def test_cli_reference_has_the_help_of_every_subcommand() -> None:
 
 
 def test_sphinx_roles_become_code_spans() -> None:
-    hook = _hook("sphinx_roles")
+    hook = _hook("api_reference")
     text = "See :class:`~aiofins.Client` and :meth:`Session.request_many`, :data:`X`."
     assert hook.ROLE.sub(hook._code, text) == "See `Client` and `Session.request_many`, `X`."
 
@@ -111,3 +111,17 @@ def test_the_api_reference_covers_every_export() -> None:
         if name != "__version__" and f"::: aiofins.{name}\n" not in pages
     ]
     assert not missing, f"add '::: aiofins.NAME' to a page in docs/api/ for {missing}"
+
+
+def test_an_async_context_manager_is_shown_as_one() -> None:
+    import griffe
+
+    hook = _hook("api_reference")
+    package = griffe.load(
+        "aiofins",
+        search_paths=[str(ROOT / "src")],
+        extensions=griffe.load_extensions(hook.ApiReference),
+    )
+    connect = package["connect"]
+    assert "async" not in connect.labels
+    assert str(connect.returns) == "AbstractAsyncContextManager[Client]"
