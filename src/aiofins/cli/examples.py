@@ -10,84 +10,110 @@ from __future__ import annotations
 
 import argparse
 
-#: Examples by subcommand: lines of ``aiofins ...`` commands, each with a short comment.
+#: Examples by subcommand: ``aiofins ...`` command lines, each after a ``#`` comment line.
 EXAMPLES: dict[str, str] = {
     "read": """
-  aiofins read udp://192.168.250.1 D100 10            # 10 words from D100
-  aiofins read udp://192.168.250.1 "CIO 0.01"         # one bit (0 or 1)
+  # 10 words from D100, one bit, a float as JSON
+  aiofins read udp://192.168.250.1 D100 10
+  aiofins read udp://192.168.250.1 "CIO 0.01"
   aiofins read udp://192.168.250.1 D200 --type float32 --json
-  aiofins read tcp://plc.local:9600 E3_100 4 --type int32:ABCD
+  # 32-bit integers, high word first, over FINS/TCP
+  aiofins read tcp://192.168.250.1:9600 E3_100 4 --type int32:ABCD
+  # a PLC whose FINS node is 5, not the last octet of its IP address
   aiofins read udp://10.0.0.5 D0 --dest 0.5.0 --timeout 0.5
 """,
     "write": """
-  aiofins write udp://192.168.250.1 D100 1 2 0x10     # three words
-  aiofins write udp://192.168.250.1 "CIO 0.00" 1 0 1  # three bits
+  # three words (0x.. is hex), then three bits
+  aiofins write udp://192.168.250.1 D100 1 2 0x10
+  aiofins write udp://192.168.250.1 "CIO 0.00" 1 0 1
+  # typed values; -- before a value that starts with -
   aiofins write udp://192.168.250.1 D200 21.5 --type float32
   aiofins write udp://192.168.250.1 D20 --type float64 -- -1e10
-  aiofins write udp://192.168.250.1 D0 0 0 0 --allow-split
 """,
     "status": """
-  aiofins status udp://192.168.250.1                  # mode, errors, message
+  # mode, error flags, error message
+  aiofins status udp://192.168.250.1
   aiofins status udp://192.168.250.1 --json
 """,
     "info": """
-  aiofins info udp://192.168.250.1                    # model, version, area sizes
+  # model, version, area sizes
+  aiofins info udp://192.168.250.1
   aiofins info tcp://192.168.250.1 --json
 """,
     "clock": """
+  # the PLC's clock
   aiofins clock udp://192.168.250.1
   aiofins clock udp://192.168.250.1 --json
 """,
     "ping": """
-  aiofins ping udp://192.168.250.1                    # 4 round trips, in ms
+  # 4 round trips, in ms; 20 over FINS/TCP as JSON
+  aiofins ping udp://192.168.250.1
   aiofins ping tcp://192.168.250.1 --count 20 --json
 """,
     "run": """
-  aiofins run udp://192.168.250.1                     # MONITOR mode (asks first)
-  aiofins run udp://192.168.250.1 --mode run --yes    # RUN mode, no question
+  # MONITOR mode (asks first on a terminal); RUN mode without asking
+  aiofins run udp://192.168.250.1
+  aiofins run udp://192.168.250.1 --mode run --yes
 """,
     "stop": """
-  aiofins stop udp://192.168.250.1 --yes              # switch to PROGRAM mode
+  # PROGRAM mode, without asking
+  aiofins stop udp://192.168.250.1 --yes
 """,
     "poll": """
+  # two tags every second, until Ctrl-C
   aiofins poll udp://192.168.250.1 D100 "CIO 0.01"
+  # named, typed tags every 0.5 s
   aiofins poll udp://192.168.250.1 temp=D200:float32 run=CIO0.00 --interval 0.5
+  # one JSON line per scan that changed something
   aiofins poll udp://192.168.250.1 temp=D200:float32 --changes-only --json
-  aiofins poll udp://192.168.250.1 D0 --count 10      # 10 scans, then exit
+  # 10 scans, then exit
+  aiofins poll udp://192.168.250.1 D0 --count 10
 """,
     "backup": """
-  aiofins backup udp://192.168.250.1 program.bin      # the program area, raw bytes
+  # the program area (raw bytes), the parameter areas (JSON)
+  aiofins backup udp://192.168.250.1 program.bin
   aiofins backup udp://192.168.250.1 params.json --what parameters
 """,
     "restore": """
-  aiofins restore udp://192.168.250.1 program.bin --stop   # PROGRAM mode first
+  # switch the PLC to PROGRAM mode, then write the backup back
+  aiofins restore udp://192.168.250.1 program.bin --stop
   aiofins restore udp://192.168.250.1 params.json --what parameters --stop
 """,
     "files": """
-  aiofins files udp://192.168.250.1 list --json       # the memory card's root
+  # the memory card's root, EM file memory's LOGS directory
+  aiofins files udp://192.168.250.1 list --json
   aiofins files udp://192.168.250.1 list --disk em --directory LOGS
+  # copy a file from and to the PLC, delete one
   aiofins files udp://192.168.250.1 get RECIPE.CSV recipe.csv
   aiofins files udp://192.168.250.1 put RECIPE.CSV recipe.csv
   aiofins files udp://192.168.250.1 delete OLD.CSV
 """,
     "simulate": """
-  aiofins simulate                                    # UDP and TCP 127.0.0.1:9600
+  # UDP and TCP on 127.0.0.1:9600
+  aiofins simulate
+  # node 5 on another port, in PROGRAM mode
   aiofins simulate --udp 127.0.0.1:9601 --node 5 --mode program
-  aiofins simulate --drop 0.1 --delay 5-50 --seed 1   # a lossy, slow network
+  # a lossy, slow network (the same faults for the same seed)
+  aiofins simulate --drop 0.1 --delay 5-50 --seed 1
+  # every other response is end code 2101
   aiofins simulate --end-code 2101 --end-code-probability 0.5
 """,
     "demo": """
-  aiofins demo                                        # 10 seconds of live values
+  # 10 seconds of live values; a minute, polled every 0.2 s
+  aiofins demo
   aiofins demo --duration 60 --interval 0.2
 """,
 }
 
 #: The examples under ``aiofins --help``.
 MAIN_EXAMPLES = """
-  aiofins demo                                        # see it work, no PLC needed
-  aiofins simulate &                                  # a virtual PLC on 127.0.0.1:9600
+  # see it work, no PLC needed
+  aiofins demo
+  # a virtual PLC on 127.0.0.1:9600, then a read from it
+  aiofins simulate &
   aiofins read udp://127.0.0.1 D100 3 --json
-  aiofins COMMAND --help                              # each command's options and examples
+  # each command's options and examples
+  aiofins COMMAND --help
 """
 
 
