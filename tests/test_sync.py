@@ -96,9 +96,14 @@ def test_threads_share_one_client(url: str) -> None:
     assert results == list(range(8))
 
 
-def test_trio_backend(url: str) -> None:
-    pytest.importorskip("trio")
-    with aiofins.sync.connect(url, backend="trio") as plc:
+@pytest.mark.parametrize(
+    ("backend", "options"),
+    [("asyncio", {}), ("asyncio", {"use_uvloop": True}), ("trio", {})],
+    ids=["asyncio", "uvloop", "trio"],
+)
+def test_each_backend(url: str, backend: str, options: dict[str, bool]) -> None:
+    pytest.importorskip("uvloop" if options else backend)
+    with aiofins.sync.connect(url, backend=backend, backend_options=options) as plc:
         plc.write("D600", [42])
         assert plc.read("D600") == [42]
 
