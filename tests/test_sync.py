@@ -154,3 +154,10 @@ def test_close_ends_a_call_waiting_in_another_thread() -> None:
         caller.join(10)
         assert not caller.is_alive() and time.monotonic() - started < 10
         assert len(raised) == 1 and isinstance(raised[0], aiofins.ConnectionLost), raised
+
+
+def test_an_unknown_backend_is_refused_in_the_calling_thread(url: str) -> None:
+    before = len(_loop_threads())
+    with pytest.raises(LookupError):
+        aiofins.sync.connect(url, backend="curio")
+    assert len(_loop_threads()) == before
