@@ -62,8 +62,11 @@ def test_close_joins_the_loop_thread_and_later_calls_fail(url: str) -> None:
     plc = aiofins.sync.connect(url)
     assert len(_loop_threads()) == before + 1
     plc.read("D0")
+    states = [plc.state]
     plc.close()
-    assert plc.closed and len(_loop_threads()) == before
+    states.append(plc.state)
+    assert states == [aiofins.sync.ClientState.OPEN, aiofins.sync.ClientState.CLOSED]
+    assert len(_loop_threads()) == before
     with pytest.raises(aiofins.ConnectionLost, match="closed"):
         plc.read("D0")
     plc.close()  # a second close does nothing

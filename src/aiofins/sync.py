@@ -18,6 +18,7 @@ async client instead: a blocking call there would stall that loop for the call's
 from __future__ import annotations
 
 import contextlib
+import enum
 import functools
 import threading
 from collections.abc import Callable, Coroutine, Mapping, Sequence
@@ -37,7 +38,7 @@ from .protocol.header import FinsAddress
 from .protocol.values import Value, ValueType
 from .tags import ReadPlan
 
-__all__ = ["Client", "connect"]
+__all__ = ["Client", "ClientState", "connect"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -124,6 +125,26 @@ class _Blocking(Generic[P, R]):
         return blocking
 
 
+class ClientState(enum.Enum):
+    """The life of a blocking :class:`Client`; :meth:`Client._move` makes every change."""
+
+    #: Connected: each call runs on the private loop.
+    OPEN = "open"
+    #: :meth:`Client.close` is under way: new calls are refused, the session is closing (calls
+    #: still waiting end with :class:`~aiofins.ConnectionLost`), then the loop thread stops.
+    CLOSING = "closing"
+    #: The session is closed and the loop thread joined; calls raise ``ConnectionLost``.
+    CLOSED = "closed"
+
+
+#: The changes :meth:`Client._move` allows.
+_TRANSITIONS: dict[ClientState, frozenset[ClientState]] = {
+    ClientState.OPEN: frozenset({ClientState.CLOSING}),
+    ClientState.CLOSING: frozenset({ClientState.CLOSED}),
+    ClientState.CLOSED: frozenset(),
+}
+
+
 class Client:
     """A blocking FINS client: the methods of :class:`aiofins.Client`, without ``await``.
 
@@ -137,35 +158,50 @@ class Client:
         self.async_client = async_client
         self._loop = loop
         self._resources = resources
-        self._closed = False
-        self._close_lock = threading.Lock()
+        self._state = ClientState.OPEN
+        self._lock = threading.Lock()
+
+    @property
+    def state(self) -> ClientState:
+        """Open, closing or closed."""
+        return self._state
+
+    def _move(self, to: ClientState) -> bool:
+        """Change state if allowed from the current one (thread-safe); whether it changed."""
+        with self._lock:
+            if to not in _TRANSITIONS[self._state]:
+                return False
+            self._state = to
+            return True
 
     def _call(
         self, method: Callable[P, Coroutine[Any, Any, R]], /, *args: P.args, **kwargs: P.kwargs
     ) -> R:
-        if self._closed:
-            raise ConnectionLost("the blocking client is closed")
+        if self._state is not ClientState.OPEN:
+            raise ConnectionLost(f"the blocking client is {self._state.value}")
 
         async def run() -> R:
             return await method(*args, **kwargs)
 
-        return self._loop.portal.call(run)
+        try:
+            return self._loop.portal.call(run)
+        except RuntimeError:  # the portal stopped between the check above and the call
+            if self._state is ClientState.OPEN:
+                raise
+            raise ConnectionLost(f"the blocking client is {self._state.value}") from None
 
     def close(self) -> None:
         """Close the session and stop the loop thread (joined before this returns).
 
-        Calls still running in other threads are cancelled. Closing twice does nothing.
+        Calls still waiting in other threads end with :class:`~aiofins.ConnectionLost`.
+        Closing a client that is closing or closed does nothing.
         """
-        with self._close_lock:
-            if self._closed:
-                return
-            self._closed = True
-        self._resources.close()
-
-    @property
-    def closed(self) -> bool:
-        """Whether :meth:`close` was called."""
-        return self._closed
+        if not self._move(ClientState.CLOSING):
+            return
+        try:
+            self._resources.close()
+        finally:
+            self._move(ClientState.CLOSED)
 
     def __enter__(self) -> Client:
         return self
