@@ -22,8 +22,7 @@ def test_restore_in_run_mode_says_which_option_to_use(
 
     assert main(["restore", url, str(backup), "--what", what]) == 1
     err = capsys.readouterr().err
-    assert f"the PLC is in RUN mode and restoring the {what} needs PROGRAM mode" in err
-    assert "add --stop" in err
+    assert "the PLC is in RUN mode; restoring needs PROGRAM mode: add --stop" in err
     assert "client.stop()" not in err
     assert plc.mode is Mode.RUN  # nothing was changed
     if before is not None:
