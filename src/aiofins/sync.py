@@ -190,6 +190,13 @@ class Client:
                 raise
             raise ConnectionLost(f"the blocking client is {self._state.value}") from None
 
+    def _call_any(
+        self, method: Callable[..., Coroutine[Any, Any, Any]], /, *args: Any, **kwargs: Any
+    ) -> Any:
+        """:meth:`_call` for a method whose signature the caller's annotations give (one with
+        overloads, or ``**kw``: mypy cannot take those apart)."""
+        return self._call(method, *args, **kwargs)
+
     def close(self) -> None:
         """Close the session and stop the loop thread (joined before this returns).
 
@@ -229,35 +236,39 @@ class Client:
         return self.async_client.compile_tags(tags, max_gap=max_gap)
 
     # Methods taking ``**kw`` (the read/write options) are written out: mypy cannot take
-    # their signatures apart from ``self``.
+    # their signatures apart from ``self`` (nor an overloaded one's).
 
     def read_bit(self, address: AddressLike, **kw: Any) -> bool:
         """Read one bit (``"CIO 0.01"``) as a bool."""
-        return self._call(self.async_client.read_bit, address, **kw)
+        return bool(self._call_any(self.async_client.read_bit, address, **kw))
 
     def read_value(
         self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
     ) -> Value:
         """Read one typed value: ``plc.read_value("D200", "float32")``."""
-        return self._call(self.async_client.read_value, address, vtype, **kw)
+        value: Value = self._call_any(self.async_client.read_value, address, vtype, **kw)
+        return value
 
     def read_values(
         self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
     ) -> list[Value]:
         """Read ``count`` consecutive typed values."""
-        return self._call(self.async_client.read_values, address, vtype, count, **kw)
+        values: list[Value] = self._call_any(
+            self.async_client.read_values, address, vtype, count, **kw
+        )
+        return values
 
     def write_value(
         self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
     ) -> None:
         """Write one typed value: ``plc.write_value("D200", 21.5, "float32")``."""
-        self._call(self.async_client.write_value, address, value, vtype, **kw)
+        self._call_any(self.async_client.write_value, address, value, vtype, **kw)
 
     def write_values(
         self, address: AddressLike, values: Sequence[Value], vtype: str | ValueType, **kw: Any
     ) -> None:
         """Write consecutive typed values."""
-        self._call(self.async_client.write_values, address, values, vtype, **kw)
+        self._call_any(self.async_client.write_values, address, values, vtype, **kw)
 
     # Each line below is one blocking method with the async method's signature; the test
     # suite checks that every public coroutine method of the async client is here.
