@@ -98,6 +98,13 @@ EXAMPLES: dict[str, str] = {
   # every other response is end code 2101
   aiofins simulate --end-code 2101 --end-code-probability 0.5
 """,
+    "gateway": """
+  # check a configuration, then run it
+  aiofins gateway gateway.toml --check
+  aiofins gateway gateway.toml
+  # the first of three shards (or AIOFINS_SHARD=0/3)
+  aiofins gateway gateway.toml --shard 0/3
+""",
     "demo": """
   # 10 seconds of live values; a minute, polled every 0.2 s
   aiofins demo
