@@ -51,6 +51,22 @@ def test_reads_and_writes_words_values_and_commands(url: str) -> None:
         assert plc.dest == plc.async_client.dest
 
 
+def test_typed_values_are_typed_by_their_type_name(url: str) -> None:
+    with aiofins.sync.connect(url) as plc:
+        plc.write_value("D700", 21.5, "float32")
+        plc.write_value("D702", -7, "int32")
+        plc.write("CIO 1.00", [1, 0])
+        # Annotated assignments: mypy --strict fails here if the overloads give the union.
+        x: float = plc.read_value("D700", "float32")
+        n: int = plc.read_value("D702", "int32")
+        w: int = plc.read_value("D700")
+        b: bool = plc.read_value("CIO 1.00", "bit")
+        bits: list[bool] = plc.read_values("CIO 1.00", "bit", 2)
+        ns: list[int] = plc.read_values("D702", "DINT", 1)
+        assert (x, n, b, bits, ns) == (21.5, -7, True, [True, False], [-7])
+        assert isinstance(w, int) and type(x) is float
+
+
 def test_a_plc_error_is_raised_in_the_calling_thread(url: str) -> None:
     with aiofins.sync.connect(url) as plc, pytest.raises(aiofins.EndCodeError) as caught:
         plc.write("A0", [1])  # A0-A447 are read-only

@@ -35,7 +35,7 @@ from .connection import connect as _async_connect
 from .protocol.endcodes import EndCode
 from .protocol.errors import ConnectionLost
 from .protocol.header import FinsAddress
-from .protocol.values import Value, ValueType
+from .protocol.values import BoolTypeName, FloatTypeName, IntTypeName, Value, ValueType
 from .tags import ReadPlan
 
 __all__ = ["Client", "ClientState", "connect"]
@@ -242,18 +242,43 @@ class Client:
         """Read one bit (``"CIO 0.01"``) as a bool."""
         return bool(self._call_any(self.async_client.read_bit, address, **kw))
 
+    @overload
+    def read_value(self, address: AddressLike, vtype: FloatTypeName, **kw: Any) -> float: ...
+    @overload
+    def read_value(self, address: AddressLike, vtype: BoolTypeName, **kw: Any) -> bool: ...
+    @overload
+    def read_value(self, address: AddressLike, vtype: IntTypeName = "uint16", **kw: Any) -> int: ...
+    @overload
+    def read_value(self, address: AddressLike, vtype: str | ValueType, **kw: Any) -> Value: ...
     def read_value(
         self, address: AddressLike, vtype: str | ValueType = "uint16", **kw: Any
     ) -> Value:
-        """Read one typed value: ``plc.read_value("D200", "float32")``."""
+        """Read one typed value: ``plc.read_value("D200", "float32")``, typed as the async
+        method's overloads say (a ``float`` here)."""
         value: Value = self._call_any(self.async_client.read_value, address, vtype, **kw)
         return value
 
+    @overload
+    def read_values(
+        self, address: AddressLike, vtype: FloatTypeName, count: int, **kw: Any
+    ) -> list[float]: ...
+    @overload
+    def read_values(
+        self, address: AddressLike, vtype: BoolTypeName, count: int, **kw: Any
+    ) -> list[bool]: ...
+    @overload
+    def read_values(
+        self, address: AddressLike, vtype: IntTypeName, count: int, **kw: Any
+    ) -> list[int]: ...
+    @overload
     def read_values(
         self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
-    ) -> list[Value]:
-        """Read ``count`` consecutive typed values."""
-        values: list[Value] = self._call_any(
+    ) -> list[Value]: ...
+    def read_values(
+        self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
+    ) -> list[Any]:
+        """Read ``count`` consecutive typed values (typed as :meth:`read_value` says)."""
+        values: list[Any] = self._call_any(
             self.async_client.read_values, address, vtype, count, **kw
         )
         return values

@@ -44,6 +44,9 @@ EXAMPLES: dict[str, str] = {
   # the PLC's clock
   aiofins clock udp://192.168.250.1
   aiofins clock udp://192.168.250.1 --json
+  # set it to this computer's local time, or to a given time, without asking
+  aiofins clock udp://192.168.250.1 --set --yes
+  aiofins clock udp://192.168.250.1 --set 2026-01-02T03:04:05 --yes
 """,
     "ping": """
   # 4 round trips, in ms; 20 over FINS/TCP as JSON

@@ -96,7 +96,12 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 
     p = sub.add_parser("run", help="RUN (0401): switch the PLC to MONITOR (default) or RUN mode")
     _common(p)
-    p.add_argument("--mode", choices=("monitor", "run"), default="monitor")
+    p.add_argument(
+        "--mode",
+        choices=("monitor", "run"),
+        default="monitor",
+        help="mode to switch to (default monitor)",
+    )
     add_yes(p)
     p.set_defaults(func=_runner(_run, lambda a: f"switch {a.url} to {a.mode.upper()} mode?"))
 
