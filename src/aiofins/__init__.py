@@ -4,6 +4,15 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .client import Client
 from .connection import connect
+from .hooks import (
+    ConnectionStateChanged,
+    EventHooks,
+    RequestRetried,
+    RequestSent,
+    RequestTimedOut,
+    ResponseReceived,
+    ScanDone,
+)
 from .poller import Poller, Quality, Snapshot
 from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
@@ -32,9 +41,11 @@ __all__ = [
     "Client",
     "CommandError",
     "ConnectionLost",
+    "ConnectionStateChanged",
     "DecodeError",
     "EndCode",
     "EndCodeError",
+    "EventHooks",
     "FinsAddress",
     "FinsError",
     "FinsTimeout",
@@ -46,6 +57,11 @@ __all__ = [
     "Quality",
     "ReadOnlyError",
     "RelayError",
+    "RequestRetried",
+    "RequestSent",
+    "RequestTimedOut",
+    "ResponseReceived",
+    "ScanDone",
     "Snapshot",
     "__version__",
     "connect",
