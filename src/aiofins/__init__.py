@@ -19,6 +19,7 @@ from .protocol.areas import MemoryAddress
 from .protocol.endcodes import EndCode
 from .protocol.errors import (
     AddressError,
+    CircuitOpen,
     CommandError,
     ConnectionLost,
     DecodeError,
@@ -38,6 +39,7 @@ except PackageNotFoundError:  # pragma: no cover - imported from a source tree, 
 
 __all__ = [
     "AddressError",
+    "CircuitOpen",
     "Client",
     "CommandError",
     "ConnectionLost",

@@ -97,6 +97,19 @@ class ConnectionLost(FinsError, ConnectionError):
     """The transport closed or failed while a request was in flight or being sent."""
 
 
+class CircuitOpen(ConnectionLost):
+    """Failed at once, nothing sent: the endpoint failed too many calls in a row (its
+    circuit breaker is open) and a probe is testing whether it answers again.
+
+    A :class:`ConnectionLost`, so code that handles a lost link handles this too.
+    ``retry_after``: seconds until the next probe may go (0.0 if one is in flight).
+    """
+
+    def __init__(self, message: str, *, retry_after: float = 0.0) -> None:
+        super().__init__(message)
+        self.retry_after = retry_after
+
+
 class EndCodeError(FinsError):
     """The PLC answered with an end code other than normal completion.
 

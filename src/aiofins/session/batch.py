@@ -8,7 +8,8 @@ other backends (trio) the batch runs as ``window`` concurrent :meth:`Session.req
 
 Every guarantee of ``request`` holds per command: SIDs are allocated and quarantined the same
 way, the destination's in-flight cap bounds the window, deadlines sit in the session's one
-deadline structure, timeouts of idempotent commands are retried with a fresh SID, busy end
+deadline structure, idempotent commands are retransmitted by the session with the same
+frame and SID, busy end
 codes (2604/2605) are retried after the same growing pause, other end codes raise the same
 exceptions. The first error cancels the rest: their SIDs are quarantined, their slots freed.
 """
@@ -16,7 +17,6 @@ exceptions. The first error cancels the rest: their SIDs are quarantined, their 
 from __future__ import annotations
 
 import asyncio
-import struct
 from collections.abc import Sequence
 from time import monotonic
 from typing import TYPE_CHECKING, NoReturn
@@ -24,44 +24,28 @@ from typing import TYPE_CHECKING, NoReturn
 import anyio
 import anyio.lowlevel
 
-from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
+from ..protocol.endcodes import END_CODE_MASK, EndCode
 from ..protocol.errors import (
     CommandError,
     ConnectionLost,
-    FinsError,
     FinsTimeout,
-    RelayError,
-    error_for_end_code,
 )
+from ..protocol.frames import BUSY_CODES, ERROR_BITS, check_command, end_code_error, pack_head
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
 from .response import Response, _new, _set_data, _set_end_code, _set_frame
-from .slots import DestState, Pending, SlotTimeout, no_free_sid_message
+from .slots import DestState, Pending, Retransmission, SlotTimeout, no_free_sid_message
 
 if TYPE_CHECKING:
     from .core import Session
 
 _NORMAL = EndCode(0)
-_BUSY_CODES = (0x2604, 0x2605)
-#: End code bits that make a reply an error: all but the CPU error flags (0040/0080 are normal).
-_ERROR_BITS = 0xFFFF & ~CPU_ERROR_FLAGS
-#: The header of a command: the 9-byte prefix of its destination, then SID, MRC, SRC.
-_pack_head = struct.Struct("9sBBB").pack
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
 _SID_WAIT = 0.01
 
 #: One command of a batch: (MRC, SRC, parameter bytes).
 Command = tuple[int, int, bytes]
 
-
-def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:
-    """The exception for a reply with a non-normal end code (relay errors name the relay)."""
-    end_code = EndCode((frame[12] << 8) | frame[13])
-    command_code = (mrc << 8) | src
-    if end_code.relay_error:
-        return RelayError(
-            end_code, network=frame[14], node=frame[15], command_code=command_code, data=frame[16:]
-        )
-    return error_for_end_code(end_code, command_code=command_code, data=frame[14:])
+__all__ = ["check_command", "end_code_error", "raise_after_a_turn", "request_many"]
 
 
 async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
@@ -76,18 +60,6 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
     traceback = exc.__traceback__
     await anyio.lowlevel.cancel_shielded_checkpoint()
     raise exc.with_traceback(traceback)
-
-
-def check_command(mrc: int, src: int, params: bytes) -> None:
-    """Refuse a command code or parameter block no FINS frame can carry, before sending."""
-    if not isinstance(params, (bytes, bytearray, memoryview)):
-        raise TypeError(f"command parameters must be bytes, got {type(params).__name__}")
-    if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
-        raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
-    if len(params) > MAX_PARAMETER_SIZE:
-        raise CommandError(
-            f"{len(params)} parameter bytes exceed the FINS limit of {MAX_PARAMETER_SIZE}"
-        )
 
 
 class BatchPending(Pending):
@@ -107,6 +79,12 @@ class BatchPending(Pending):
         self.index = index
         self.attempt = attempt
         self.busy = busy
+        self.deadline = 0.0
+        self.sent_at = 0.0
+        self.attempts = 1
+        self.resend: Retransmission | None = None
+        self.rtt: DestState | None = None
+        self.abandoned = False
 
     def wake(self, frame: bytes) -> None:
         """The receive callback matched a reply to this command (already out of the pending
@@ -117,7 +95,7 @@ class BatchPending(Pending):
             return
         session = batch.session
         raw = (frame[12] << 8) | frame[13]
-        if not raw & _ERROR_BITS:
+        if not raw & ERROR_BITS:
             session.stats.completed += 1
             response = _new(Response)  # new_response(), inlined
             _set_end_code(response, _NORMAL if not raw else EndCode(raw))
@@ -139,7 +117,7 @@ class BatchPending(Pending):
             else:
                 batch.slot_free()
             return
-        if (raw & END_CODE_MASK) in _BUSY_CODES and self.busy < session.busy_retries:
+        if (raw & END_CODE_MASK) in BUSY_CODES and self.busy < session.busy_retries:
             session.stats.busy_retries += 1
             batch.later(
                 session.busy_backoff * (2**self.busy), self.index, self.attempt, self.busy + 1
@@ -215,16 +193,22 @@ class Batch:
         state = self.state
         pending = session._pending
         key = state.base | state.cursor
+        now = monotonic()
         if (
             key in pending
             or key in session._quarantine
+            or session._lingering.get(key, 0.0) > now
             or (session._routed and session._sid_taken(key))
         ):
             found = session._allocate_sid(state)
             if found is None:  # every SID in use: try again shortly, keeping the slot
-                since = self.sid_waits.setdefault(index, monotonic())
-                if monotonic() - since >= self.timeout:
-                    message = no_free_sid_message(state.address, self.timeout, session._quarantine)
+                since = self.sid_waits.setdefault(index, now)
+                if index == self.next - 1 or len(self.sid_waits) == 1:
+                    session.stats.sid_exhausted += 1
+                if now - since >= self.timeout:
+                    message = no_free_sid_message(
+                        state.address, self.timeout, session._quarantine, len(session._lingering)
+                    )
                     self.finish(SlotTimeout(message))
                     return
                 self.later(_SID_WAIT, index, attempt, busy)
@@ -235,9 +219,16 @@ class Batch:
             state.cursor = (key + 1) & 0xFF
         mrc, src, params = self.commands[index]
         p = BatchPending(key, mrc, src, self, index, attempt, busy)
-        now = monotonic()
         p.sent_at = now
-        deadline = p.deadline = now + self.timeout
+        p.rtt = state
+        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
+        retries = self.retries
+        if retries:
+            wait = session.first_wait(state, retries, self.timeout, None)
+            p.resend = Retransmission(frame, retries, now + self.timeout, None, wait)
+            deadline = p.deadline = now + wait
+        else:
+            deadline = p.deadline = now + self.timeout
         pending[key] = p
         fifo = session._fifo
         if not fifo or deadline >= fifo[-1].deadline:
@@ -248,7 +239,7 @@ class Batch:
             session._arm(deadline)
         # Sent at the end of this event-loop step, together with the other frames queued in
         # it: the peer then gets a burst instead of a wake-up per frame.
-        self.outbox.append((p, _pack_head(state.prefix, key & 0xFF, mrc, src) + params))
+        self.outbox.append((p, frame))
         if self.flush_handle is None:
             self.flush_handle = session._loop.call_soon(self.flush)
 
@@ -327,16 +318,13 @@ class Batch:
     # -- receiving ----------------------------------------------------------------------
 
     def failed(self, p: BatchPending, exc: BaseException) -> None:
-        """``p`` timed out (already quarantined) or the link failed."""
+        """``p`` timed out after every transmission (already quarantined) or the link failed."""
         if self.fut.done():
             return
-        session = self.session
-        if isinstance(exc, FinsTimeout) and not session._closed:
-            if p.attempt < self.retries:
-                session.stats.retries += 1
-                self.send(p.index, p.attempt + 1, p.busy)
-                return
-            exc = FinsTimeout(session._timeout_message(self.dest, p.mrc, p.src, self.timeout))
+        if isinstance(exc, FinsTimeout):
+            exc = FinsTimeout(
+                self.session._timeout_message(self.dest, p.mrc, p.src, self.timeout, p.attempts)
+            )
         self.finish(exc)
 
     # -- ending -------------------------------------------------------------------------
@@ -351,6 +339,7 @@ class Batch:
         if not p.done:
             session = self.session
             p.done = True
+            p.abandoned = True
             session._pending.pop(p.key, None)
             session._quarantine[p.key] = session.quarantine_until(monotonic(), self.timeout)
             session.stats.cancelled += 1

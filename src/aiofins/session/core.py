@@ -1,18 +1,22 @@
-"""The session: SIDs, the in-flight table, deadlines, retries and response matching.
+"""The session: link state, SIDs, the in-flight table, deadlines, retransmission, matching.
 
 Hot path (one request): take a slot of the destination, pick a SID, build the frame from a
 pre-built header prefix, register the request in one dict keyed by the 32-bit
-``SNA SA1 SA2 SID`` the reply will carry, push its deadline on one heap, send, await one
-future. The transport pushes each reply to :meth:`Session.frame_received`, which finds the
-request with a single dict lookup and resolves its future. No task and no timer per request:
-one watcher task sleeps until the earliest deadline of the heap.
+``SNA SA1 SA2 SID`` the reply will carry, push its deadline on one structure, send, await
+one future. The transport pushes each reply to :meth:`Session.frame_received`, which finds
+the request with a single dict lookup and resolves its future. No task and no timer per
+request: one watcher task sleeps until the earliest deadline, and retransmits (same frame,
+same SID) or gives up what is due.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
+import random
 from collections.abc import Sequence
+from collections.abc import Set as AbstractSet
 from time import monotonic
 from types import TracebackType
 from typing import Any
@@ -20,27 +24,36 @@ from typing import Any
 import anyio
 from anyio.abc import TaskGroup
 
+from ..hooks import (
+    ConnectionStateChanged,
+    EventHooks,
+    RequestRetried,
+    RequestSent,
+    RequestTimedOut,
+    ResponseReceived,
+)
 from ..protocol.endcodes import EndCode
 from ..protocol.errors import (
+    CircuitOpen,
     CommandError,
     ConnectionLost,
+    EndCodeError,
     FinsError,
     FinsTimeout,
+)
+from ..protocol.frames import (
+    BUSY_CODES,
+    ERROR_BITS,
+    check_command,
+    end_code_error,
+    header_prefix,
+    pack_head,
 )
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
-from .batch import (
-    _BUSY_CODES,
-    _ERROR_BITS,
-    _NORMAL,
-    _SID_WAIT,
-    _pack_head,
-    check_command,
-    end_code_error,
-    raise_after_a_turn,
-    request_many,
-)
+from .batch import raise_after_a_turn, request_many
+from .breaker import BreakerState, CircuitBreaker
 from .deadlines import Deadlines
 from .matching import count_unmatched, match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
@@ -49,20 +62,42 @@ from .slots import (
     DestState,
     EventPending,
     Pending,
+    Retransmission,
     SlotQueue,
     SlotTimeout,
     no_free_sid_message,
 )
+from .states import LINK_TRANSITIONS, LinkState
 
+logger = logging.getLogger("aiofins.session")
+_DEBUG = logging.DEBUG
+
+_NORMAL = EndCode(0)
+_CLOSED_BREAKER = BreakerState.CLOSED
+_NONE: frozenset[int] = frozenset()
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
 _POLL_MAX_BACKOFF = 64
+#: Longest pause between two looks for a free SID while all 256 are taken.
+_SID_WAIT = 0.01
+#: A duplicate reply seen ``x`` seconds after its request completed makes SIDs linger
+#: ``LINGER_FACTOR x x`` after a completion from then on (at most :data:`MAX_LINGER`).
+LINGER_FACTOR = 2.0
+MAX_LINGER = 5.0
+
+
+class _Expired(FinsTimeout):
+    """A request's deadline passed after every transmission (the caller words the message)."""
+
+
+class _InBackoff(ConnectionLost):
+    """Failed at once during the reconnect backoff (the failed attempt was counted)."""
 
 
 class _Attempt:
     """One connection attempt, run in the background and shared by every caller that needs
-    the link while it runs; each waits for it at most its own timeout."""
+    the link while it runs; each waits for it at most its own deadline."""
 
     __slots__ = ("done", "error", "traceback")
 
@@ -88,13 +123,25 @@ class Session:
     """Multiplexes FINS requests over one transport.
 
     Use as ``async with Session(transport, source=..., dest=...) as s: await s.request(...)``.
-    ``timeout`` is per attempt (waiting for a connection being made, for a free slot, for a
-    free SID and for the reply are each bounded by it). A SID given up on stays quarantined
-    until its late reply comes, or for ``max(quarantine_factor x timeout, min_quarantine)``
-    seconds. Reads (``idempotent=True``) are retried ``retries`` times after a timeout, each
-    time with a fresh SID; other requests only if the caller passes ``retries``. End codes
-    2604/2605 (busy) are retried ``busy_retries`` times with a growing pause, as the command
-    was not executed.
+
+    ``timeout`` bounds a whole call: waiting for the link, for a slot and a SID, every
+    transmission and the wait for the reply. Requests that may be retried (reads,
+    ``idempotent=True``; others only if the caller passes ``retries``) are sent again with
+    the same frame and SID up to ``retries`` times, each after the destination's adaptive
+    retransmission timeout (RFC 6298 from measured round trips, within ``rto_bounds``,
+    doubling per retransmission); the last attempt waits until the call's deadline.
+    ``attempt_timeout`` caps each attempt's wait instead, for those who want it.
+
+    A SID given up on stays quarantined until its late reply comes, or for
+    ``max(quarantine_factor x timeout, min_quarantine)`` seconds. An answered SID lingers
+    (is not reused) while a duplicate of its reply could still come: ``min_linger`` at
+    least, longer after a retransmission (one retransmission timeout) or once the link has
+    shown late duplicates (twice the latest seen). End codes 2604/2605 (busy) are retried
+    ``busy_retries`` times with a growing pause, as the command was not executed.
+
+    After ``breaker_threshold`` calls in a row that got no answer (0: never) calls fail at
+    once with :class:`CircuitOpen` while one probe at a time tests the link (see
+    :mod:`aiofins.session.breaker`). ``hooks`` receive the request and link events.
     """
 
     def __init__(
@@ -107,11 +154,17 @@ class Session:
         max_in_flight: int = 5,
         timeout: float = 2.0,
         retries: int = 2,
+        attempt_timeout: float | None = None,
+        rto_bounds: tuple[float, float] = (0.02, 1.0),
+        min_linger: float = 0.0,
         busy_retries: int = 3,
         busy_backoff: float = 0.01,
         quarantine_factor: float = 2.0,
         min_quarantine: float = 15.0,
         reconnect_backoff: tuple[float, float] = (0.05, 5.0),
+        breaker_threshold: int = 5,
+        breaker_cooldown: tuple[float, float] = (0.05, 2.0),
+        hooks: EventHooks | None = None,
     ) -> None:
         if not 0 <= gct <= 0xFF:
             raise CommandError(f"GCT {gct} out of range 0..255")
@@ -119,7 +172,13 @@ class Session:
             raise CommandError(f"max_in_flight {max_in_flight} out of range 1..255")
         if timeout <= 0:
             raise CommandError(f"timeout {timeout} must be positive")
-        for name, count in (("retries", retries), ("busy_retries", busy_retries)):
+        if attempt_timeout is not None and attempt_timeout <= 0:
+            raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
+        for name, count in (
+            ("retries", retries),
+            ("busy_retries", busy_retries),
+            ("breaker_threshold", breaker_threshold),
+        ):
             if count < 0:
                 raise CommandError(f"{name} {count} must not be negative")
         if busy_backoff < 0:
@@ -128,32 +187,50 @@ class Session:
             raise CommandError(f"quarantine_factor {quarantine_factor} must be positive")
         if not 0 <= min_quarantine < math.inf:
             raise CommandError(f"min_quarantine {min_quarantine} must be 0 or more seconds")
-        low, high = reconnect_backoff
-        if not 0 <= low <= high:
-            raise CommandError(
-                f"reconnect_backoff {reconnect_backoff} must be (min, max), 0 <= min <= max"
-            )
+        if not 0 <= min_linger <= MAX_LINGER:
+            raise CommandError(f"min_linger {min_linger} must be 0..{MAX_LINGER} seconds")
+        for name, (low, high) in (
+            ("reconnect_backoff", reconnect_backoff),
+            ("breaker_cooldown", breaker_cooldown),
+        ):
+            if not 0 <= low <= high:
+                raise CommandError(f"{name} {(low, high)} must be (min, max), 0 <= min <= max")
+        low, high = rto_bounds
+        if not 0 < low <= high < math.inf:
+            raise CommandError(f"rto_bounds {rto_bounds} must be (min, max), 0 < min <= max")
         self.transport = transport
         self.source = source
         self.dest = dest
         self.gct = gct
         self.timeout = timeout
         self.retries = retries
+        self.attempt_timeout = attempt_timeout
+        self.rto_bounds = rto_bounds
+        self.min_linger = min_linger
         self.busy_retries = busy_retries
         self.busy_backoff = busy_backoff
         self.quarantine_factor = quarantine_factor
         self.min_quarantine = min_quarantine
         self.reconnect_backoff = reconnect_backoff
+        self.hooks = hooks
+        self._hooks = None if hooks is None else hooks.or_none()
         limit = transport.max_in_flight
         self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
         #: One request on the line at a time across all destinations (serial links).
         self._shared_slots = limit == 1
         self._pending: dict[int, Pending] = {}
+        #: SID key -> when it may be used again (requests given up on).
         self._quarantine: dict[int, float] = {}
+        #: SID key -> when it may be used again (answered: a duplicate may follow).
+        self._lingering: dict[int, float] = {}
+        #: The linger after a completion the link has shown necessary (late duplicates).
+        self._linger = min_linger
+        self._linger_logged = 0.001  # the linger last logged (logged again once doubled)
         #: Requests go to more than one destination: a SID is then kept unique across them,
         #: as a relay error (from the relay point, not the destination) is matched by SID.
         self._routed = False
-        self._recent: dict[int, None] = {}
+        #: SID key -> when its last request was answered (to count and time duplicates).
+        self._recent: dict[int, float] = {}
         self._dests: dict[FinsAddress, DestState] = {}
         self._slots: dict[Any, SlotQueue] = {}
         self._last_dest: FinsAddress | None = None
@@ -166,16 +243,71 @@ class Session:
         self._background: Background | None = None
         self._asyncio = False
         self._loop: Any = None  # the running asyncio loop, if any
-        self._closed = False
+        self._link = LinkState.CLOSED
+        self._link_since = monotonic()
+        self._lost_at: float | None = None  # when an open link was lost (for "reconnected")
         #: The connection attempt in progress, if any (one at a time, shared by callers).
         self._connecting: _Attempt | None = None
         self._backoff = 0.0
         self._retry_at = 0.0  # no connection attempt before this (monotonic) time
+        self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
+        self._sids_short = False  # all SIDs of a destination were taken (logged once)
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
         self.stats = SessionStats(self._pending)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
+
+    # ----------------------------------------------------------------- link state
+
+    @property
+    def link_state(self) -> LinkState:
+        """Where the link stands (see :class:`LinkState`)."""
+        return self._link
+
+    @property
+    def breaker_state(self) -> BreakerState:
+        """The circuit breaker's state (see :class:`BreakerState`)."""
+        return self._breaker.state
+
+    @property
+    def closed(self) -> bool:
+        return self._link is LinkState.SHUT
+
+    def _set_link_state(self, new: LinkState) -> None:
+        """The one place the link state changes: checked, logged, emitted as a hook."""
+        old = self._link
+        if new is old:
+            return
+        assert new in LINK_TRANSITIONS[old], f"link state {old.name} -> {new.name}"
+        self._link = new
+        now = monotonic()
+        self._link_since = now
+        where = self.transport.description
+        if new is LinkState.OPEN:
+            lost = self._lost_at
+            if lost is None:
+                logger.info("connected to %s", where, extra={"endpoint": where})
+            else:
+                logger.info(
+                    "reconnected to %s after %.1f s",
+                    where,
+                    now - lost,
+                    extra={"endpoint": where},
+                )
+            self._lost_at = None
+        elif new is LinkState.CLOSED and old is LinkState.OPEN:
+            self._lost_at = now
+        elif new is LinkState.SHUT:
+            logger.info("session to %s closed", where, extra={"endpoint": where})
+        if logger.isEnabledFor(_DEBUG):
+            logger.debug("link to %s: %s -> %s", where, old.name, new.name)
+        hooks = self._hooks
+        if hooks is not None and hooks.connection_state_changed:
+            hooks.emit(
+                hooks.connection_state_changed,
+                ConnectionStateChanged(where, old.name, new.name),
+            )
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -211,15 +343,11 @@ class Session:
             await tg.__aexit__(None, None, None)
         return None
 
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
     async def aclose(self) -> None:
         """Fail every request in flight or queued with :class:`ConnectionLost`; close."""
-        if self._closed:
+        if self._link is LinkState.SHUT:
             return
-        self._closed = True
+        self._set_link_state(LinkState.SHUT)
         attempt, self._connecting = self._connecting, None
         if attempt is not None:  # its waiters fail now; cancel_all() ends the attempt itself
             attempt.finish(
@@ -239,78 +367,109 @@ class Session:
         One connection attempt at a time, run in the background (bounded by the transport's
         own connect timeout) and shared by every caller that comes while it runs. A caller
         whose ``timeout`` passes first gets :class:`FinsTimeout` and leaves the attempt
-        running: a later call (or a retry) finds the link open or keeps waiting for the same
-        attempt. ``timeout=None`` waits for the attempt's outcome (``async with session``).
+        running: a later call finds the link open or keeps waiting for the same attempt.
+        During the backoff after a failed attempt calls fail at once. ``timeout=None``
+        waits for the attempt's outcome (``async with session``).
         """
         if self.transport.is_open:
             return
-        if self._closed:
+        link = self._link
+        if link is LinkState.SHUT:
             raise ConnectionLost(f"session to {self.transport.description} is closed")
         background = self._background
         if background is None:
             raise RuntimeError("Session is not running: use 'async with Session(...)'")
-        attempt = self._connecting
-        if attempt is None:
+        if link is LinkState.OPEN:  # the transport ended without telling us
+            self._set_link_state(LinkState.CLOSED)
+        elif link is LinkState.BACKOFF:
             wait = self._retry_at - monotonic()
-            if wait > 0:  # fail fast: no call waits out the backoff beyond its own timeout
-                raise ConnectionLost(
+            if wait > 0:  # fail fast: no call waits out the backoff beyond its own deadline
+                raise _InBackoff(
                     f"cannot connect to {self.transport.description}: the last attempt failed; "
                     f"the next one in {wait:.2f} s (reconnect backoff)"
                 )
+        attempt = self._connecting
+        if attempt is None:
             attempt = self._connecting = _Attempt()
-            background.start_soon(self._connect, attempt, background)
+            self._set_link_state(LinkState.CONNECTING)
+            background.start_soon(self._connect, attempt)
         if timeout is None:
             await attempt.done.wait()
         else:
-            with anyio.move_on_after(timeout):
+            with anyio.move_on_after(max(timeout, 0.0)):
                 await attempt.done.wait()
             if not attempt.done.is_set():
                 raise FinsTimeout(
-                    f"no connection to {self.transport.description} within {timeout} s: "
+                    f"no connection to {self.transport.description} within {timeout:.3g} s: "
                     "a connection attempt is still in progress (a later call uses it once "
                     "it succeeds)"
                 )
         attempt.check()
 
-    async def _connect(self, attempt: _Attempt, background: Background) -> None:
-        """Run one connection attempt (a background task: callers wait for it, bounded)."""
-        error: BaseException | None = None
+    async def _connect(self, attempt: _Attempt) -> None:
+        """Run one connection attempt: a background task ending at a boundary. Whatever goes
+        wrong (a refused connection, a peer assigning a node no FINS header can carry, a bug)
+        is a failed attempt: link closed, a typed error to the waiters, counted, logged,
+        never raised into the task group; success is reported only once all is checked."""
+        error: FinsError | None = None
+        where = self.transport.description
         try:
-            await self.transport.open(self, background)
-        except (OSError, FinsError) as exc:
-            self.stats.connect_failures += 1
-            low, high = self.reconnect_backoff
-            self._backoff = min(high, max(low, self._backoff * 2))
-            self._retry_at = monotonic() + self._backoff
+            assert self._background is not None
+            await self.transport.open(self, self._background)
+            node = self.transport.local_node
+            if node is not None and node != self.source.node:
+                if not 1 <= node <= 254:
+                    raise ConnectionLost(
+                        f"{where} assigned us FINS node {node}: not a node number (1..254)"
+                    )
+                self.source = FinsAddress(self.source.network, node, self.source.unit)
+                for state in self._dests.values():
+                    state.prefix = self._prefix(state.address)
+        except BaseException as exc:
             if isinstance(exc, FinsError):
                 error = exc
-            else:
-                error = ConnectionLost(f"cannot connect to {self.transport.description}: {exc}")
+            elif isinstance(exc, Exception):
+                error = ConnectionLost(f"cannot connect to {where}: {exc or type(exc).__name__}")
                 error.__cause__ = exc
-        except Exception as exc:  # not a connection failure (a bug): its callers see it
-            error = exc
-        except BaseException:  # cancelled: the session is closing
-            error = ConnectionLost(
-                f"session to {self.transport.description} closed while connecting"
-            )
-            raise
-        else:
-            if self._closed:  # closed as the open completed: leave no link behind
-                error = ConnectionLost(f"session to {self.transport.description} is closed")
-                with anyio.CancelScope(shield=True):
-                    await self.transport.aclose()
-            else:
-                self._backoff = 0.0
-                self.stats.connects += 1
-                node = self.transport.local_node
-                if node is not None and node != self.source.node:
-                    self.source = FinsAddress(self.source.network, node, self.source.unit)
-                    for state in self._dests.values():
-                        state.prefix = self._prefix(state.address)
-        finally:
+            else:  # cancelled: the session is closing
+                error = ConnectionLost(f"session to {where} closed while connecting")
+            with anyio.CancelScope(shield=True):
+                await self.transport.aclose()
             if self._connecting is attempt:
                 self._connecting = None
+            if isinstance(exc, Exception) and self._link is not LinkState.SHUT:
+                self.stats.connect_failures += 1
+                low, high = self.reconnect_backoff
+                self._backoff = min(high, max(low, self._backoff * 2))
+                wait = self._backoff * random.uniform(0.5, 1.0)  # no lockstep after an outage
+                self._retry_at = monotonic() + wait
+                self._set_link_state(LinkState.BACKOFF)
+                logger.warning(
+                    "cannot connect to %s: %s; next attempt in %.2f s",
+                    where,
+                    error,
+                    wait,
+                    exc_info=not isinstance(exc, (OSError, FinsError)),
+                    extra={"endpoint": where},
+                )
             attempt.finish(error)
+            if not isinstance(exc, Exception):
+                raise
+            return
+        if self._connecting is attempt:
+            self._connecting = None
+        if self._link is LinkState.SHUT:  # closed as the open completed: leave no link behind
+            with anyio.CancelScope(shield=True):
+                await self.transport.aclose()
+            attempt.finish(ConnectionLost(f"session to {where} is closed"))
+            return
+        self._backoff = 0.0
+        self.stats.connects += 1
+        if self.transport.fresh_sid_space:  # nothing late can reach a new connection
+            self._quarantine.clear()
+            self._lingering.clear()
+        self._set_link_state(LinkState.OPEN)
+        attempt.finish(None)
 
     # ----------------------------------------------------------------- transport sink
 
@@ -330,7 +489,7 @@ class Session:
             if p is None and frame[12] & 0x80 and len(frame) >= 16:
                 p = match_relay_error(pending, frame)
             if p is None:
-                count_unmatched(self.stats, self._quarantine, self._recent, key)
+                self._unmatched(key, frame)
                 return
             key = p.key
         if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
@@ -340,8 +499,28 @@ class Session:
             self.stats.malformed += 1
             return
         del pending[key]
-        self._recent[key] = None
         p.done = True
+        now = monotonic()
+        self._recent[key] = now
+        latency = now - p.sent_at
+        r = p.rtt
+        if r is not None:  # RFC 6298 (2.2, 2.3): one sample per reply to a single send
+            srtt = r.srtt
+            if srtt:
+                err = latency - srtt
+                r.srtt = srtt = srtt + 0.125 * err
+                var = r.rttvar = r.rttvar + 0.25 * ((err if err > 0 else -err) - r.rttvar)
+            else:
+                r.srtt = srtt = latency
+                var = r.rttvar = 0.5 * latency
+            rto = srtt + 4 * var
+            low, high = self.rto_bounds
+            r.rto = low if rto < low else high if rto > high else rto
+            linger = self._linger
+        else:  # sent again: a reply to another transmission may follow (one RTO at least)
+            linger = self._retransmitted_linger(p, now)
+        if linger:  # before the wake-up: a batch sends its next command inside it
+            self._lingering[key] = now + linger
         fut = p.fut
         if fut is None:
             p.wake(frame)
@@ -351,11 +530,12 @@ class Session:
             except asyncio.InvalidStateError:  # cancelled: the caller cleans up as it resumes
                 pass
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
-        latency = monotonic() - p.sent_at
         n = stats._lat_count
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
+        if self._hooks is not None:
+            self._answered(p, frame, latency)
         fifo = self._fifo
         if fifo:
             if fifo[0].done:
@@ -369,11 +549,67 @@ class Session:
         if self._deadlines.heap:
             self._deadlines.prune(len(pending))
 
+    def _retransmitted_linger(self, p: Pending, now: float) -> float:
+        """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
+        one of its other transmissions may still be on its way. At least the largest
+        retransmission timeout (a round trip longer than that counts as lost), twice the
+        time the call took, and the linger the link has shown necessary."""
+        return max(self._linger, self.rto_bounds[1], LINGER_FACTOR * (now - p.sent_at))
+
+    def _unmatched(self, key: int, frame: bytes) -> None:
+        """A reply no request waits for: counted (late, duplicate or unsolicited). A
+        duplicate teaches the linger: SIDs then wait twice its lateness after a reply."""
+        kind = count_unmatched(self.stats, self._quarantine, self._recent, key)
+        if kind == "duplicate":
+            done_at = self._recent.get(key)
+            if done_at is not None:
+                lateness = monotonic() - done_at
+                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
+                if linger > self._linger:
+                    logged = self._linger_logged
+                    self._linger = linger
+                    if linger < 2 * logged:
+                        return
+                    self._linger_logged = linger
+                    logger.warning(
+                        "%s: a duplicate reply came %.3f s after its request was answered; "
+                        "SIDs now linger %.3f s after a reply",
+                        self.transport.description,
+                        lateness,
+                        linger,
+                        extra={"endpoint": self.transport.description, "sid": key & 0xFF},
+                    )
+        elif kind == "late" and logger.isEnabledFor(_DEBUG):
+            logger.debug(
+                "%s: late reply for SID %d (its request was given up on)",
+                self.transport.description,
+                key & 0xFF,
+            )
+
+    def _answered(self, p: Pending, frame: bytes, latency: float) -> None:
+        hooks = self._hooks
+        if hooks is not None and hooks.response_received:
+            key = p.key
+            hooks.emit(
+                hooks.response_received,
+                ResponseReceived(
+                    self.transport.description,
+                    FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                    key & 0xFF,
+                    (p.mrc << 8) | p.src,
+                    (frame[12] << 8) | frame[13],
+                    latency,
+                    p.attempts,
+                ),
+            )
+
     def frame_dropped(self, reason: str) -> None:
         self.stats.malformed += 1
+        if logger.isEnabledFor(_DEBUG):
+            logger.debug("%s: frame dropped: %s", self.transport.description, reason)
 
     def connection_lost(self, exc: BaseException | None) -> None:
-        if self._closed:
+        if self._link is LinkState.SHUT:
             return
         self.stats.disconnects += 1
         if isinstance(exc, FinsError):
@@ -381,22 +617,40 @@ class Session:
         else:
             err = ConnectionLost(f"connection to {self.transport.description} lost: {exc}")
             err.__cause__ = exc
+        if self._link is LinkState.OPEN:
+            logger.info(
+                "connection to %s lost: %s",
+                self.transport.description,
+                err,
+                extra={"endpoint": self.transport.description},
+            )
+            self._set_link_state(LinkState.CLOSED)
         self._fail_all(err)
 
     def _fail_all(self, exc: BaseException) -> None:
         pending = list(self._pending.values())
         self._pending.clear()
+        now = monotonic()
         for p in pending:
             p.done = True
+            p.abandoned = True
+            # The link is gone; should it come back under the same SID space, a late reply
+            # must not reach a newer request.
+            self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
             p.fail(exc)
         self._deadlines.clear()
 
     # ----------------------------------------------------------------- deadlines
 
     async def _deadline_watcher(self) -> None:
-        """The only timer: sleeps until the earliest deadline in the heap, expires what is due."""
+        """The only timer: sleeps until the earliest deadline, retransmits or expires what is
+        due. A boundary: an error here fails the requests in flight, never the task group."""
         while True:
-            self._expire(monotonic())
+            try:
+                self._expire(monotonic())
+            except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
+                logger.exception("%s: deadline watcher failed", self.transport.description)
+                self._fail_all(ConnectionLost(f"session error: {exc!r}"))
             at = self._deadlines.earliest()
             with anyio.CancelScope() as scope:
                 self._timer_scope = scope
@@ -420,11 +674,144 @@ class Session:
 
     def _expire(self, now: float) -> None:
         for p in self._deadlines.due(now):
+            resend = p.resend
+            if resend is not None and resend.left and now < resend.end:
+                self._retransmit(p, resend, now)
+                continue
             self._pending.pop(p.key, None)
             p.done = True
-            self._quarantine[p.key] = self.quarantine_until(now, p.deadline - p.sent_at)
+            p.abandoned = True
+            self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
             self.stats.timeouts += 1
-            p.fail(FinsTimeout("request timed out"))
+            hooks = self._hooks
+            if hooks is not None and hooks.request_timed_out:
+                key = p.key
+                hooks.emit(
+                    hooks.request_timed_out,
+                    RequestTimedOut(
+                        self.transport.description,
+                        FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                        key & 0xFF,
+                        (p.mrc << 8) | p.src,
+                        p.attempts,
+                        now - p.sent_at,
+                    ),
+                )
+            p.fail(_Expired("request timed out"))
+
+    def _retransmit(self, p: Pending, resend: Retransmission, now: float) -> None:
+        """Send ``p`` again: the same frame and SID, still registered, so whichever reply
+        comes first answers it. The wait doubles (RFC 6298 5.5); the last attempt waits
+        until the call's deadline (or the caller's per-attempt cap)."""
+        resend.left -= 1
+        p.attempts += 1
+        p.rtt = None  # Karn: a reply can no longer be timed
+        wait = min(2 * resend.wait, self.rto_bounds[1])
+        cap = resend.cap
+        if cap is not None and wait > cap:
+            wait = cap
+        resend.wait = wait
+        if resend.left:
+            deadline = now + wait
+        else:
+            deadline = resend.end if cap is None else now + cap
+        p.deadline = min(deadline, resend.end)
+        self._deadlines.add(p)
+        self.stats.retries += 1
+        key = p.key
+        if logger.isEnabledFor(_DEBUG):
+            logger.debug(
+                "%s: no reply to SID %d (command %02X%02X) within %.3f s: sent again (attempt %d)",
+                self.transport.description,
+                key & 0xFF,
+                p.mrc,
+                p.src,
+                now - p.sent_at,
+                p.attempts,
+            )
+        hooks = self._hooks
+        if hooks is not None and hooks.request_retried:
+            hooks.emit(
+                hooks.request_retried,
+                RequestRetried(
+                    self.transport.description,
+                    FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                    key & 0xFF,
+                    (p.mrc << 8) | p.src,
+                    p.attempts,
+                    now - p.sent_at,
+                ),
+            )
+        fast_send = self.transport.fast_send
+        if fast_send is not None:
+            try:
+                fast_send(resend.frame)
+            except Exception as exc:
+                self._give_up(p, exc)
+        elif self._background is not None:
+            self._background.start_soon(self._resend, p, resend)
+
+    async def _resend(self, p: Pending, resend: Retransmission) -> None:
+        """A retransmission through an awaited send (trio, FINS/TCP under anyio)."""
+        try:
+            await self.transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
+        except Exception as exc:  # a boundary: the request fails, nothing else
+            self._give_up(p, exc)
+
+    def _give_up(self, p: Pending, exc: BaseException) -> None:
+        """``p`` cannot go on (its retransmission failed): out of the table, SID quarantined,
+        the caller told why."""
+        if p.done:
+            return
+        self._pending.pop(p.key, None)
+        p.done = True
+        p.abandoned = True
+        now = monotonic()
+        self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
+        if not isinstance(exc, FinsError):
+            err = ConnectionLost(f"{self.transport.description}: {exc or type(exc).__name__}")
+            err.__cause__ = exc
+            exc = err
+        p.fail(exc)
+
+    # ----------------------------------------------------------------- circuit breaker
+
+    async def _admit(self, dest: FinsAddress) -> None:
+        """Let a call through an open breaker as the probe, or fail it at once."""
+        wait = self._breaker.admit(monotonic())
+        if wait:
+            self.stats.breaker_rejects += 1
+            if wait == math.inf:
+                how = "a probe is testing whether it answers again"
+                wait = 0.0
+            else:
+                how = f"the next probe in {wait:.2f} s"
+            await raise_after_a_turn(
+                CircuitOpen(
+                    f"{dest} via {self.transport.description} failed "
+                    f"{self._breaker.failures} calls in a row: failing fast ({how})",
+                    retry_after=wait,
+                )
+            )
+
+    def _call_failed(self, timeout: float) -> None:
+        breaker = self._breaker
+        if breaker.failed(monotonic(), timeout):
+            logger.warning(
+                "%s: %d calls in a row got no answer: circuit breaker open, failing fast "
+                "while a probe tests the link",
+                self.transport.description,
+                breaker.failures,
+                extra={"endpoint": self.transport.description},
+            )
+
+    def _call_answered(self) -> None:
+        if self._breaker.succeeded():
+            logger.info(
+                "%s answers again: circuit breaker closed",
+                self.transport.description,
+                extra={"endpoint": self.transport.description},
+            )
 
     # ----------------------------------------------------------------- requests
 
@@ -445,8 +832,8 @@ class Session:
     def _prefix(self, dest: FinsAddress) -> bytes:
         """ICF RSV GCT DNA DA1 DA2 SNA SA1 SA2: the header before the SID."""
         s = self.source
-        return bytes(
-            (0x80, 0, self.gct, dest.network, dest.node, dest.unit, s.network, s.node, s.unit)
+        return header_prefix(
+            self.gct, (dest.network, dest.node, dest.unit), (s.network, s.node, s.unit)
         )
 
     def _sid_taken(self, key: int) -> bool:
@@ -454,25 +841,43 @@ class Session:
         sid = key & 0xFF
         return any(k & 0xFF == sid for k in self._pending)
 
+    def _sid_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
+        """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
+        flight to other destinations, when routing), quarantined or lingering. Ends a
+        quarantine or linger that is over."""
+        if key in self._pending or (key & 0xFF) in taken:
+            return False
+        for table in (self._quarantine, self._lingering):
+            until = table.get(key)
+            if until is not None:
+                if until > now:
+                    return False
+                del table[key]
+        return True
+
     def _allocate_sid(self, state: DestState) -> int | None:
-        pending, quarantine = self._pending, self._quarantine
+        """The next free SID of ``state`` in round-robin order (``None``: all 256 taken)."""
         base, sid = state.base, state.cursor
-        now = 0.0
+        now = monotonic()
+        taken: AbstractSet[int] = {k & 0xFF for k in self._pending} if self._routed else _NONE
         for _ in range(256):
             key = base | sid
             sid = (sid + 1) & 0xFF
-            if key in pending or (self._routed and self._sid_taken(key)):
-                continue
-            if quarantine:
-                until = quarantine.get(key)
-                if until is not None:
-                    now = now or monotonic()
-                    if until > now:
-                        continue
-                    del quarantine[key]
-            state.cursor = sid
-            return key
+            if self._sid_free(key, now, taken):
+                state.cursor = sid
+                return key
         return None
+
+    def make_frame(self, state: DestState, key: int, mrc: int, src: int, params: bytes) -> bytes:
+        """The command frame of ``state``'s destination with ``key``'s SID."""
+        return pack_head(state.prefix, key & 0xFF, mrc, src) + params
+
+    def first_wait(self, state: DestState, retries: int, left: float, cap: float | None) -> float:
+        """The first attempt's wait: the destination's RTO once measured, else the share of
+        the call's time that lets every attempt go out with the wait doubling each time;
+        never more than the caller's cap."""
+        wait = state.rto or left / ((2 << retries) - 1)
+        return wait if cap is None or wait < cap else cap
 
     async def request(
         self,
@@ -484,13 +889,16 @@ class Session:
         timeout: float | None = None,
         idempotent: bool = False,
         retries: int | None = None,
+        attempt_timeout: float | None = None,
     ) -> Response:
         """Send one command and return its normal-completion response.
 
-        Raises the :class:`EndCodeError` subclass for the end code (:class:`RelayError` for
-        bit 15), :class:`FinsTimeout` when every attempt timed out (waiting for a connection
-        still being made included), :class:`ConnectionLost` when the link failed or the
-        session closed.
+        ``timeout`` bounds the whole call (link, slot, SID, every transmission, reply);
+        ``attempt_timeout`` caps each transmission's wait. Raises the
+        :class:`EndCodeError` subclass for the end code (:class:`RelayError` for bit 15),
+        :class:`FinsTimeout` when no reply came in time (saying after how many attempts),
+        :class:`ConnectionLost` when the link failed or the session closed,
+        :class:`CircuitOpen` while the destination's breaker is open.
         """
         if dest is None:
             dest = self.dest
@@ -502,114 +910,159 @@ class Session:
             retries = self.retries if idempotent else 0
         elif retries < 0:
             raise CommandError(f"retries {retries} must not be negative")
+        if attempt_timeout is None:
+            attempt_timeout = self.attempt_timeout
+        elif attempt_timeout <= 0:
+            raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which
-        attempt = busy = 0
-        while True:
-            # One attempt with a fresh SID, inlined (one coroutine per request, not two).
-            try:
-                transport = self.transport
-                if transport.fast_send is None and not transport.is_open:
-                    await self._ensure_open(timeout)
-                state = self._last_state if dest is self._last_dest else self._dest_state(dest)
-                slots = state.slots
-                if slots.in_flight < slots.limit and not slots.waiters:
-                    slots.in_flight += 1
-                else:
-                    await slots.acquire(timeout, f"{dest}")
+        end = monotonic() + timeout
+        if self._breaker.state is not _CLOSED_BREAKER:
+            await self._admit(dest)
+        busy = 0
+        try:
+            while True:
+                p: Pending | None = None
                 try:
-                    pending = self._pending
-                    key = state.base | state.cursor
-                    if (
-                        key in pending
-                        or key in self._quarantine
-                        or (self._routed and self._sid_taken(key))
-                    ):
-                        key = await self._wait_for_sid(state, timeout)
+                    transport = self.transport
+                    if transport.fast_send is None and not transport.is_open:
+                        await self._ensure_open(end - monotonic())
+                    state = self._last_state if dest is self._last_dest else self._dest_state(dest)
+                    slots = state.slots
+                    if slots.in_flight < slots.limit and not slots.waiters:
+                        slots.in_flight += 1
                     else:
-                        state.cursor = (key + 1) & 0xFF
-                    # Built before the request is registered: bad parameters (not bytes) raise
-                    # here and leave nothing behind.
-                    frame = _pack_head(state.prefix, key & 0xFF, mrc, src) + params
-                    now = monotonic()
-                    deadline = now + timeout
-                    fut: asyncio.Future[bytes] | None = None
-                    if self._asyncio:
-                        fut = self._loop.create_future()
-                        p: Pending = AsyncioPending(key, mrc, src, fut, now, deadline)
-                    else:
-                        p = EventPending(key, mrc, src)
-                        p.sent_at = now
-                        p.deadline = deadline
-                    pending[key] = p
-                    fifo = self._fifo
-                    if not fifo or deadline >= fifo[-1].deadline:
-                        fifo.append(p)
-                    else:
-                        self._deadlines.add(p)
-                    if deadline < self._timer_at:
-                        self._arm(deadline)
+                        await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
                     try:
-                        fast_send = transport.fast_send
-                        if fast_send is not None:
-                            fast_send(frame)
+                        pending = self._pending
+                        now = monotonic()
+                        key = state.base | state.cursor
+                        if (
+                            key in pending
+                            or key in self._quarantine
+                            or self._lingering.get(key, 0.0) > now
+                            or (self._routed and self._sid_taken(key))
+                        ):
+                            key = await self._wait_for_sid(state, end, timeout)
+                            now = monotonic()
                         else:
-                            await transport.send(frame, timeout)
-                        # Read-after-send (see _polled): for a request alone in flight.
-                        if len(pending) == 1:
-                            poll = transport.poll_now
-                            if poll is not None:
-                                if self._poll_skip:
-                                    self._poll_skip -= 1
-                                    self._poll_streak = 0
-                                elif self._turn_due:  # fair turn (asyncio only): a bare yield
-                                    self._turn_due = False
-                                    await asyncio.sleep(0)
-                                else:
-                                    poll()
-                                    self._polled(p.done)
-                        else:  # concurrent callers: see _polled
-                            self._poll_skip = _POLL_MAX_BACKOFF
-                        frame = await (p.wait() if fut is None else fut)
-                    except BaseException as exc:
-                        if not p.done:  # cancelled or failed to send: the reply may still come
-                            p.done = True
-                            pending.pop(key, None)
-                            self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
-                            if isinstance(exc, FinsTimeout):  # the send timed out (trio TCP)
-                                self.stats.timeouts += 1
+                            state.cursor = (key + 1) & 0xFF
+                        # Built before the request is registered: bad parameters (not bytes)
+                        # raise here and leave nothing behind.
+                        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
+                        if retries:
+                            wait = self.first_wait(state, retries, end - now, attempt_timeout)
+                            resend: Retransmission | None = Retransmission(
+                                frame, retries, end, attempt_timeout, wait
+                            )
+                            deadline = now + wait
+                            if deadline > end:
+                                deadline = end
+                        else:
+                            resend = None
+                            deadline = end
+                            if attempt_timeout is not None and now + attempt_timeout < end:
+                                deadline = now + attempt_timeout
+                        fut: asyncio.Future[bytes] | None = None
+                        if self._asyncio:
+                            fut = self._loop.create_future()
+                            p = AsyncioPending(key, mrc, src, fut, now, deadline, state, resend)
+                        else:
+                            p = EventPending(key, mrc, src)
+                            p.sent_at = now
+                            p.deadline = deadline
+                            p.rtt = state
+                            p.resend = resend
+                        pending[key] = p
+                        fifo = self._fifo
+                        if not fifo or deadline >= fifo[-1].deadline:
+                            fifo.append(p)
+                        else:
+                            self._deadlines.add(p)
+                        if deadline < self._timer_at:
+                            self._arm(deadline)
+                        if self._hooks is not None:
+                            self._sent(p, dest)
+                        try:
+                            fast_send = transport.fast_send
+                            if fast_send is not None:
+                                fast_send(frame)
                             else:
-                                self.stats.cancelled += 1
-                        elif isinstance(exc, FinsTimeout):  # the deadline passed: say why
-                            raise FinsTimeout(
-                                self._timeout_message(dest, mrc, src, timeout)
-                            ) from None
-                        raise
-                finally:
-                    if slots.waiters:
-                        slots.release()  # hands the slot to the first waiter
-                    else:
-                        slots.in_flight -= 1
-            except FinsTimeout as exc:
-                if attempt >= retries or isinstance(exc, SlotTimeout):
-                    raise
-                attempt += 1
-                self.stats.retries += 1
-                continue
-            except ConnectionLost as exc:
-                await raise_after_a_turn(exc)
-            raw = (frame[12] << 8) | frame[13]
-            if not raw & _ERROR_BITS:
-                self.stats.completed += 1
-                return new_response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
-            end_code = EndCode(raw)
-            if end_code.code in _BUSY_CODES and busy < self.busy_retries:
-                self.stats.busy_retries += 1
-                await anyio.sleep(self.busy_backoff * (2**busy))
-                busy += 1
-                continue
-            self.stats.end_code_errors += 1
-            raise end_code_error(frame, mrc, src)
+                                await transport.send(frame, end - now)
+                            # Read-after-send (see _polled): for a request alone in flight.
+                            if len(pending) == 1:
+                                poll = transport.poll_now
+                                if poll is not None:
+                                    if self._poll_skip:
+                                        self._poll_skip -= 1
+                                        self._poll_streak = 0
+                                    elif self._turn_due:  # fair turn (asyncio only): a yield
+                                        self._turn_due = False
+                                        await asyncio.sleep(0)
+                                    else:
+                                        poll()
+                                        self._polled(p.done)
+                            else:  # concurrent callers: see _polled
+                                self._poll_skip = _POLL_MAX_BACKOFF
+                            frame = await (p.wait() if fut is None else fut)
+                        except BaseException as exc:
+                            if not p.done:  # cancelled or failed to send: a reply may come
+                                p.done = True
+                                p.abandoned = True
+                                pending.pop(key, None)
+                                self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
+                                if isinstance(exc, FinsTimeout):  # the send timed out (trio TCP)
+                                    self.stats.timeouts += 1
+                                else:
+                                    self.stats.cancelled += 1
+                            raise
+                    finally:
+                        if slots.waiters:
+                            slots.release()  # hands the slot to the first waiter
+                        else:
+                            slots.in_flight -= 1
+                except _Expired:
+                    assert p is not None
+                    raise FinsTimeout(
+                        self._timeout_message(dest, mrc, src, timeout, p.attempts)
+                    ) from None
+                except ConnectionLost as exc:
+                    await raise_after_a_turn(exc)
+                raw = (frame[12] << 8) | frame[13]
+                if not raw & ERROR_BITS:
+                    self.stats.completed += 1
+                    if self._breaker.failures:
+                        self._call_answered()
+                    return new_response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
+                left = end - monotonic()
+                if (raw & 0x7F3F) in BUSY_CODES and busy < self.busy_retries:
+                    pause = self.busy_backoff * (2**busy)
+                    if pause < left:
+                        self.stats.busy_retries += 1
+                        await anyio.sleep(pause)
+                        busy += 1
+                        continue
+                self.stats.end_code_errors += 1
+                if self._breaker.failures:
+                    self._call_answered()
+                raise end_code_error(frame, mrc, src)
+        except (FinsTimeout, ConnectionLost) as exc:
+            if not isinstance(exc, (SlotTimeout, CircuitOpen, _InBackoff)):
+                self._call_failed(timeout)
+            else:
+                self._breaker.released()
+            raise
+        except BaseException:
+            self._breaker.released()
+            raise
+
+    def _sent(self, p: Pending, dest: FinsAddress) -> None:
+        hooks = self._hooks
+        if hooks is not None and hooks.request_sent:
+            hooks.emit(
+                hooks.request_sent,
+                RequestSent(self.transport.description, dest, p.key & 0xFF, (p.mrc << 8) | p.src),
+            )
 
     def _polled(self, answered: bool) -> None:
         """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
@@ -661,38 +1114,95 @@ class Session:
         Up to ``window`` (default and at most: the destination's in-flight cap) are on the
         wire at once. Under asyncio the replies are handled in the receive callback, which
         sends the next command, so the caller wakes once for the whole batch. Each command
-        keeps the guarantees of :meth:`request` (timeouts per attempt, retries, busy end
-        codes); the first error is raised after the rest are abandoned (SIDs quarantined).
+        keeps the guarantees of :meth:`request` (``timeout`` bounds each command's exchange,
+        retransmission, busy end codes); the first error is raised after the rest are
+        abandoned (SIDs quarantined).
         """
-        return await request_many(
-            self,
-            requests,
-            dest=dest,
-            timeout=timeout,
-            idempotent=idempotent,
-            retries=retries,
-            window=window,
-        )
+        if self._breaker.state is not _CLOSED_BREAKER:
+            await self._admit(dest or self.dest)
+        try:
+            responses = await request_many(
+                self,
+                requests,
+                dest=dest,
+                timeout=timeout,
+                idempotent=idempotent,
+                retries=retries,
+                window=window,
+            )
+        except (FinsTimeout, ConnectionLost) as exc:
+            if not isinstance(exc, (SlotTimeout, CircuitOpen, _InBackoff)):
+                self._call_failed(self.timeout if timeout is None else timeout)
+            else:
+                self._breaker.released()
+            raise
+        except EndCodeError:
+            self._call_answered()
+            raise
+        except BaseException:
+            self._breaker.released()
+            raise
+        if self._breaker.failures:
+            self._call_answered()
+        return responses
 
-    async def _wait_for_sid(self, state: DestState, timeout: float) -> int:
-        """A free SID; while all 256 are busy or quarantined, wait for the first release, up
-        to ``timeout`` (then :class:`SlotTimeout`)."""
+    async def _wait_for_sid(self, state: DestState, end: float, timeout: float) -> int:
+        """A free SID; while all 256 are in flight, quarantined or lingering, wait for the
+        first to come free, up to the call's deadline ``end`` (then :class:`SlotTimeout`).
+        Running out is counted and logged (once until SIDs are free again)."""
         key = self._allocate_sid(state)
-        give_up = monotonic() + timeout
+        if key is not None:
+            self._sids_short = False
+            return key
+        self.stats.sid_exhausted += 1
+        if not self._sids_short:
+            self._sids_short = True
+            logger.warning(
+                "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, %d lingering): "
+                "requests wait for one; lower the rate or the linger",
+                self.transport.description,
+                state.address,
+                len(self._pending),
+                len(self._quarantine),
+                len(self._lingering),
+                extra={"endpoint": self.transport.description, "dest": str(state.address)},
+            )
         while key is None:
-            left = give_up - monotonic()
+            now = monotonic()
+            left = end - now
             if left <= 0:
-                raise SlotTimeout(no_free_sid_message(state.address, timeout, self._quarantine))
-            await anyio.sleep(min(_SID_WAIT, left))
+                raise SlotTimeout(
+                    no_free_sid_message(
+                        state.address,
+                        timeout,
+                        self._quarantine,
+                        len(self._lingering),
+                    )
+                )
+            await anyio.sleep(min(_SID_WAIT, left, self._sid_free_in(state, now)))
             key = self._allocate_sid(state)
         return key
 
-    def _timeout_message(self, dest: FinsAddress, mrc: int, src: int, timeout: float) -> str:
+    def _sid_free_in(self, state: DestState, now: float) -> float:
+        """Seconds until the next quarantine or linger of ``state``'s SIDs ends (at least
+        1 ms; at most :data:`_SID_WAIT`, e.g. when all 256 are in flight)."""
+        base = state.base
+        soonest = now + _SID_WAIT
+        for table in (self._quarantine, self._lingering):
+            for key, until in table.items():
+                if now < until < soonest and key & ~0xFF == base:
+                    soonest = until
+        return max(soonest - now, 0.001)
+
+    def _timeout_message(
+        self, dest: FinsAddress, mrc: int, src: int, timeout: float, attempts: int = 1
+    ) -> str:
         s = self.source
+        tries = "1 attempt" if attempts == 1 else f"{attempts} attempts"
         return (
-            f"no response to command {mrc:02X}{src:02X} from {dest} within {timeout} s "
-            f"via {self.transport.description}. Check the destination node (DA1={dest.node}) "
-            f"and unit (DA2={dest.unit}) match the PLC, that our source node (SA1={s.node}) "
-            f"is not used by another client and is allowed by the PLC's node settings, "
-            f"the port, and that the PLC is reachable"
+            f"no response to command {mrc:02X}{src:02X} from {dest} in {tries} within "
+            f"{timeout} s via {self.transport.description}. Check the destination node "
+            f"(DA1={dest.node}) and unit (DA2={dest.unit}) match the PLC, that our source node "
+            f"(SA1={s.node}) is not used by another client and is allowed by the PLC's node "
+            f"settings, the port, and that the PLC is reachable"
         )

@@ -38,13 +38,14 @@ LATE_REPLY_GRACE = 0.5
 def count_unmatched(
     stats: SessionStats,
     quarantine: dict[int, float],
-    recent: dict[int, None],
+    recent: dict[int, float],
     key: int,
-) -> None:
+) -> str:
     """Count a reply no request waits for: late (timed out), duplicate, or unsolicited.
 
     A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE`): the reply
-    the quarantine waited for has come.
+    the quarantine waited for has come. Returns which: ``"late"``, ``"duplicate"`` or
+    ``"unsolicited"``.
     """
     keys = (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF)
     for k in keys:
@@ -52,9 +53,10 @@ def count_unmatched(
         if until is not None:
             stats.late_replies += 1
             quarantine[k] = min(until, monotonic() + LATE_REPLY_GRACE)
-            return
+            return "late"
     for k in keys:
         if k in recent:
             stats.duplicates += 1
-            return
+            return "duplicate"
     stats.unsolicited += 1
+    return "unsolicited"

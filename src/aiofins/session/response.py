@@ -87,6 +87,7 @@ class SessionStats:
         "_lat_ring",
         "_lat_sum",
         "_pending",
+        "breaker_rejects",
         "busy_retries",
         "cancelled",
         "completed",
@@ -99,6 +100,7 @@ class SessionStats:
         "malformed",
         "mismatched",
         "retries",
+        "sid_exhausted",
         "timeouts",
         "unsolicited",
     )
@@ -113,7 +115,9 @@ class SessionStats:
         self.unsolicited = 0
         self.mismatched = 0
         self.malformed = 0
-        self.retries = 0
+        self.retries = 0  # retransmissions (same frame and SID)
+        self.sid_exhausted = 0  # times a request found all 256 SIDs of its destination taken
+        self.breaker_rejects = 0  # calls failed at once by an open circuit breaker
         self.busy_retries = 0
         self.end_code_errors = 0
         self.connects = 0

@@ -11,16 +11,51 @@ import anyio
 
 from ..protocol.errors import FinsTimeout
 from ..protocol.header import FinsAddress
+from .states import RequestState
+
+
+class Retransmission:
+    """What the session needs to send a request again (only requests that may be retried
+    carry one): the frame, how many more times, until when, and the current wait."""
+
+    __slots__ = ("cap", "end", "frame", "left", "wait")
+
+    def __init__(self, frame: bytes, left: int, end: float, cap: float | None, wait: float) -> None:
+        #: The command frame, sent again as it is (same SID).
+        self.frame = frame
+        #: Retransmissions left.
+        self.left = left
+        #: The call's deadline (monotonic): no retransmission after it.
+        self.end = end
+        #: The per-attempt cap the caller asked for, if any.
+        self.cap = cap
+        #: The wait of the current attempt (doubled at each retransmission, RFC 6298 5.5).
+        self.wait = wait
 
 
 class Pending:
     """One request on the wire: what its reply must carry and how to wake its caller.
 
     ``fut`` is the asyncio future the caller awaits (the session resolves it inline), or
-    ``None`` for subclasses that wake their caller through :meth:`wake`.
+    ``None`` for subclasses that wake their caller through :meth:`wake`. ``deadline`` is
+    when the current attempt ends (a retransmission or, for the last, the call's end);
+    ``rtt`` the destination whose round-trip estimate a reply updates (``None`` once sent
+    again: Karn's rule, an ambiguous sample is not taken).
     """
 
-    __slots__ = ("deadline", "done", "fut", "key", "mrc", "sent_at", "src")
+    __slots__ = (
+        "abandoned",
+        "attempts",
+        "deadline",
+        "done",
+        "fut",
+        "key",
+        "mrc",
+        "resend",
+        "rtt",
+        "sent_at",
+        "src",
+    )
 
     def __init__(self, key: int, mrc: int, src: int) -> None:
         self.key = key
@@ -30,6 +65,17 @@ class Pending:
         self.deadline = 0.0
         self.sent_at = 0.0
         self.fut: asyncio.Future[bytes] | None = None
+        self.attempts = 1
+        self.resend: Retransmission | None = None
+        self.rtt: DestState | None = None
+        self.abandoned = False
+
+    @property
+    def state(self) -> RequestState:
+        """Where this request stands (in flight, or how it ended)."""
+        if not self.done:
+            return RequestState.SENT if self.attempts == 1 else RequestState.RETRANSMITTED
+        return RequestState.ABANDONED if self.abandoned else RequestState.ANSWERED
 
     def wake(self, frame: bytes) -> None:
         raise NotImplementedError
@@ -56,6 +102,8 @@ class AsyncioPending(Pending):
         fut: asyncio.Future[bytes],
         sent_at: float = 0.0,
         deadline: float = 0.0,
+        rtt: DestState | None = None,
+        resend: Retransmission | None = None,
     ) -> None:
         self.key = key
         self.mrc = mrc
@@ -64,6 +112,10 @@ class AsyncioPending(Pending):
         self.fut = fut
         self.sent_at = sent_at
         self.deadline = deadline
+        self.rtt = rtt
+        self.resend = resend
+        self.attempts = 1
+        self.abandoned = False
 
     def wake(self, frame: bytes) -> None:
         if not self.fut.done():
@@ -113,18 +165,21 @@ class EventPending(Pending):
 
 class SlotTimeout(FinsTimeout):
     """No request slot (or no free SID) became free in time: the destination's queue did not
-    drain, or all 256 of its SIDs are in flight or quarantined.
+    drain, or all 256 of its SIDs are in flight, quarantined or lingering.
 
     Not retried: a retry would only queue again behind the same requests.
     """
 
 
-def no_free_sid_message(dest: object, timeout: float, quarantine: dict[int, float]) -> str:
+def no_free_sid_message(
+    dest: object, timeout: float, quarantine: dict[int, float], lingering: int = 0
+) -> str:
     return (
-        f"no free SID for {dest} within {timeout} s: all 256 are in flight or quarantined "
-        f"({len(quarantine)} SIDs of this session wait for late replies to requests that timed "
-        "out or were cancelled; a SID is free again when its late reply arrives or its "
-        "quarantine ends)"
+        f"no free SID for {dest} within {timeout} s: all 256 are in flight, quarantined or "
+        f"lingering ({len(quarantine)} SIDs of this session wait for late replies to requests "
+        f"that timed out or were cancelled, {lingering} linger after their reply in case a "
+        "duplicate follows; a SID is free again when its late reply arrives or its "
+        "quarantine or linger ends)"
     )
 
 
@@ -199,9 +254,11 @@ class SlotQueue:
 
 
 class DestState:
-    """Per-destination state: header prefix, SID cursor and in-flight slots."""
+    """Per-destination state: header prefix, SID cursor, in-flight slots and the round-trip
+    estimate (RFC 6298: ``srtt``, ``rttvar``, and ``rto`` clamped to the session's bounds;
+    ``srtt == 0.0`` until the first sample)."""
 
-    __slots__ = ("address", "base", "cursor", "prefix", "slots")
+    __slots__ = ("address", "base", "cursor", "prefix", "rto", "rttvar", "slots", "srtt")
 
     def __init__(self, address: FinsAddress, prefix: bytes, slots: SlotQueue) -> None:
         self.address = address
@@ -209,3 +266,6 @@ class DestState:
         self.cursor = 0
         self.prefix = prefix
         self.slots = slots
+        self.srtt = 0.0
+        self.rttvar = 0.0
+        self.rto = 0.0

@@ -55,6 +55,9 @@ class Transport(ABC):
     remote_node: int | None = None
     #: Whether the transport can be opened again after the link was lost.
     reconnectable: bool = False
+    #: Whether each :meth:`open` starts a link no reply to an earlier one can reach (a new
+    #: FINS/TCP connection): the session then forgets its quarantined and lingering SIDs.
+    fresh_sid_space: bool = False
     #: A synchronous send the session may call instead of ``await send()`` (set while open
     #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
     fast_send: Callable[[bytes], None] | None = None

@@ -247,6 +247,7 @@ class TcpTransport(Transport):
     """FINS/TCP to ``host:port``; ``node`` 0 lets the PLC allocate our node."""
 
     reconnectable = True
+    fresh_sid_space = True
 
     def __init__(
         self,
