@@ -22,6 +22,7 @@ import anyio
 
 from .client import Client
 from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, option_value, parse_endpoint
+from .hooks import EventHooks
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
@@ -168,7 +169,14 @@ _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "max_in_flight": lambda v: whole_number("max_in_flight", v, 1, 255),
     "gct": lambda v: whole_number("gct", v, 0, 255),
     "read_only": lambda v: _flag("read_only", v),
+    "hooks": lambda v: _hooks(v),
 }
+
+
+def _hooks(value: object) -> EventHooks:
+    if not isinstance(value, EventHooks):
+        raise CommandError(f"hooks must be an aiofins.EventHooks; got {shown(value)}")
+    return value
 
 
 def _flag(name: str, value: object) -> bool:
@@ -191,6 +199,7 @@ async def connect(
     limits: RouteLimits | None = None,
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
     read_only: bool = False,
+    hooks: EventHooks | None = None,
     **transport_options: Any,
 ) -> AsyncIterator[Client]:
     """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
@@ -209,7 +218,8 @@ async def connect(
     that refuses every command changing the PLC — memory, parameters, program, mode, clock,
     messages, errors and logs, files, forced bits, access right — with
     :class:`~aiofins.ReadOnlyError` before anything is sent (see
-    :mod:`aiofins.protocol.guard`).
+    :mod:`aiofins.protocol.guard`). ``hooks`` (:class:`~aiofins.EventHooks`) receive the
+    session's request and link events (see docs/observability.md).
     """
     endpoint = parse_endpoint(url)
     check_options(
@@ -236,6 +246,7 @@ async def connect(
         max_in_flight=5 if max_in_flight is None else max_in_flight,
         timeout=request_timeout(endpoint, timeout),
         retries=retries,
+        hooks=hooks,
     )
     async with session:
         if (

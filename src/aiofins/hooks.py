@@ -111,8 +111,35 @@ class ScanDone:
     scan: int
     #: Seconds the scan took.
     duration: float
-    #: Scans skipped since the previous one because this one ran late.
+    #: Scans skipped after this one because it ran late (or the consumer was slow).
     missed: int
+    #: Why the scan failed (its tags then keep their last values as stale), else ``None``.
+    error: str | None = None
+
+
+#: Command families by MRC (FINS manual section 5), as metrics and spans name them.
+FAMILIES = {
+    0x01: "memory",
+    0x02: "parameter",
+    0x03: "program",
+    0x04: "mode",
+    0x05: "machine",
+    0x06: "status",
+    0x07: "clock",
+    0x09: "message",
+    0x0C: "access",
+    0x21: "errorlog",
+    0x22: "file",
+    0x23: "debug",
+    0x28: "gateway",
+}
+#: The family of a command code no family above has.
+OTHER_FAMILY = "other"
+
+
+def command_family(command_code: int) -> str:
+    """The family of a command code, named after its MRC (``0x0101`` -> ``memory``)."""
+    return FAMILIES.get(command_code >> 8, OTHER_FAMILY)
 
 
 E = TypeVar("E")

@@ -23,6 +23,7 @@ address is refused).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
@@ -36,6 +37,7 @@ from anyio.abc import TaskGroup
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from .endpoint import parse_endpoint
+from .hooks import EventHooks, ScanDone
 from .pool import backend_sleep, event_loop_clock
 from .protocol.errors import CommandError, FinsError
 from .protocol.values import Value
@@ -43,6 +45,11 @@ from .tags import ReadPlan, parse_tag
 
 if TYPE_CHECKING:
     from .pool import Pool
+
+logger = logging.getLogger("aiofins.poller")
+
+#: Seconds between two warnings about one group's missed scans (the count says how many).
+MISSED_WARNING_INTERVAL = 60.0
 
 
 class Quality(Enum):
@@ -97,6 +104,11 @@ class ScanGroup:
     last_duration: float = 0.0
     plan: ReadPlan | None = None
     _last: dict[str, TagReading] = field(default_factory=dict)
+    #: The error of the last failed scan while scans fail (logged once per outage).
+    _failing: str | None = None
+    #: Missed scans not yet warned about, and when the last warning was logged.
+    _missed_unlogged: int = 0
+    _missed_logged_at: float = -math.inf
 
 
 class Poller:
@@ -104,10 +116,23 @@ class Poller:
 
     ``changes_only`` delivers only the tags whose value or quality changed (and skips
     snapshots with no change); ``buffer`` is how many snapshots may wait for the consumer.
+    ``hooks`` receive a :class:`~aiofins.ScanDone` per scan (default: the pool's ``hooks``,
+    which also get the requests' events).
     """
 
-    def __init__(self, pool: Pool, *, buffer: int = 64, changes_only: bool = False) -> None:
+    def __init__(
+        self,
+        pool: Pool,
+        *,
+        buffer: int = 64,
+        changes_only: bool = False,
+        hooks: EventHooks | None = None,
+    ) -> None:
         self.pool = pool
+        if hooks is None:
+            hooks = pool.connect_options.get("hooks")
+        self.hooks = hooks
+        self._hooks = None if hooks is None else hooks.or_none()
         self.changes_only = changes_only
         self.groups: dict[str, ScanGroup] = {}
         send, receive = anyio.create_memory_object_stream[Snapshot](buffer)
@@ -178,22 +203,67 @@ class Poller:
     async def _run_group(self, group: ScanGroup) -> None:
         clock, sleep = self._now, self._sleep
         next_at = clock()
-        while True:
-            now = clock()
-            if now < next_at:
-                await sleep(next_at - now)
-            snapshot = await self.scan_once(group)
-            if snapshot is not None:
-                try:  # room in the buffer: no extra trip through the event loop
-                    self._send.send_nowait(snapshot)
-                except anyio.WouldBlock:  # full: wait for the consumer (backpressure)
-                    await self._send.send(snapshot)
-            next_at += group.interval
-            now = clock()
-            if now > next_at:
-                skipped = math.floor((now - next_at) / group.interval) + 1
-                group.missed += skipped
-                next_at += skipped * group.interval
+        logger.info(
+            "scan group %s started: %d tags from %s every %.3g s",
+            group.name,
+            len(group.tags),
+            group.url,
+            group.interval,
+            extra={"group": group.name, "endpoint": group.url},
+        )
+        try:
+            while True:
+                now = clock()
+                if now < next_at:
+                    await sleep(next_at - now)
+                snapshot = await self.scan_once(group)
+                if snapshot is not None:
+                    try:  # room in the buffer: no extra trip through the event loop
+                        self._send.send_nowait(snapshot)
+                    except anyio.WouldBlock:  # full: wait for the consumer (backpressure)
+                        await self._send.send(snapshot)
+                next_at += group.interval
+                now = clock()
+                skipped = 0
+                if now > next_at:
+                    skipped = math.floor((now - next_at) / group.interval) + 1
+                    group.missed += skipped
+                    next_at += skipped * group.interval
+                    self._missed(group, skipped, now)
+                hooks = self._hooks
+                if hooks is not None and hooks.scan_done:
+                    hooks.emit(
+                        hooks.scan_done,
+                        ScanDone(
+                            group.name, group.scans, group.last_duration, skipped, group._failing
+                        ),
+                    )
+        finally:
+            logger.info(
+                "scan group %s stopped after %d scans (%d failed, %d missed)",
+                group.name,
+                group.scans,
+                group.errors,
+                group.missed,
+                extra={"group": group.name, "endpoint": group.url},
+            )
+
+    def _missed(self, group: ScanGroup, skipped: int, now: float) -> None:
+        """Count missed scans; warn at the first and then at most once a minute per group."""
+        group._missed_unlogged += skipped
+        if now - group._missed_logged_at < MISSED_WARNING_INTERVAL:
+            return
+        logger.warning(
+            "scan group %s missed %d scans (last scan took %.3f s, interval %.3g s): "
+            "the PLC, the pool or the consumer cannot keep up",
+            group.name,
+            group._missed_unlogged,
+            group.last_duration,
+            group.interval,
+            extra={"group": group.name, "endpoint": group.url},
+        )
+        group._missed_unlogged = 0
+        group._missed_logged_at = now
 
     async def scan_once(self, group: ScanGroup) -> Snapshot | None:
         """Run one scan of ``group`` now; the snapshot (``None`` if nothing to deliver)."""
@@ -218,6 +288,24 @@ class Poller:
         except FinsError as exc:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
+            if group._failing is None:
+                logger.warning(
+                    "scan group %s: scans of %s fail: %s",
+                    group.name,
+                    group.url,
+                    error,
+                    extra={"group": group.name, "endpoint": group.url},
+                )
+            group._failing = error
+        else:
+            if group._failing is not None:
+                group._failing = None
+                logger.info(
+                    "scan group %s: scans of %s succeed again",
+                    group.name,
+                    group.url,
+                    extra={"group": group.name, "endpoint": group.url},
+                )
         group.last_duration = now() - started
         readings: dict[str, TagReading] = {}
         changed: set[str] = set()

@@ -722,7 +722,12 @@ class Pool:
                 if entry.users or entry.state not in _LENDABLE:
                     continue
                 if now - entry.last_used >= self.idle_timeout:
-                    logger.debug("%s: closed after %.1f s unused", entry.key, now - entry.last_used)
+                    logger.info(
+                        "%s: closed after %.1f s unused",
+                        entry.key,
+                        now - entry.last_used,
+                        extra={"endpoint": entry.key},
+                    )
                     entry.move(EntryState.CLOSING)
                 elif (
                     entry.state is EntryState.READY

@@ -17,6 +17,7 @@ exceptions. The first error cancels the rest: their SIDs are quarantined, their 
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Sequence
 from time import monotonic
 from typing import TYPE_CHECKING, NoReturn
@@ -24,7 +25,7 @@ from typing import TYPE_CHECKING, NoReturn
 import anyio
 import anyio.lowlevel
 
-from ..protocol.endcodes import END_CODE_MASK, EndCode
+from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
     CommandError,
     ConnectionLost,
@@ -39,6 +40,8 @@ if TYPE_CHECKING:
     from .core import Session
 
 _NORMAL = EndCode(0)
+_DEBUG = logging.DEBUG
+logger = logging.getLogger("aiofins.session")
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
 _SID_WAIT = 0.01
 
@@ -98,7 +101,11 @@ class BatchPending(Pending):
         if not raw & ERROR_BITS:
             session.stats.completed += 1
             response = _new(Response)  # new_response(), inlined
-            _set_end_code(response, _NORMAL if not raw else EndCode(raw))
+            if raw:
+                session.cpu_flags_seen(raw)
+                _set_end_code(response, EndCode(raw))
+            else:
+                _set_end_code(response, _NORMAL)
             _set_data(response, frame[14:])
             _set_frame(response, frame)
             batch.results[self.index] = response
@@ -124,6 +131,8 @@ class BatchPending(Pending):
             )
             return
         session.stats.end_code_errors += 1
+        if raw & CPU_ERROR_FLAGS:
+            session.cpu_flags_seen(raw)
         batch.finish(end_code_error(frame, self.mrc, self.src))
 
     def fail(self, exc: BaseException) -> None:
@@ -237,6 +246,10 @@ class Batch:
             session._deadlines.add(p)
         if deadline < session._timer_at:
             session._arm(deadline)
+        if session._hooks is not None:
+            session._sent(p, state.address)
+        if logger.isEnabledFor(_DEBUG):
+            session._log_frame("sent", frame)
         # Sent at the end of this event-loop step, together with the other frames queued in
         # it: the peer then gets a burst instead of a wake-up per frame.
         self.outbox.append((p, frame))

@@ -32,7 +32,7 @@ from ..hooks import (
     RequestTimedOut,
     ResponseReceived,
 )
-from ..protocol.endcodes import EndCode
+from ..protocol.endcodes import CPU_ERROR_FLAGS, EndCode
 from ..protocol.errors import (
     CircuitOpen,
     CommandError,
@@ -252,6 +252,7 @@ class Session:
         self._retry_at = 0.0  # no connection attempt before this (monotonic) time
         self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
         self._sids_short = False  # all SIDs of a destination were taken (logged once)
+        self._flags_logged = 0  # CPU error flags (0040/0080) already logged
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
         self.stats = SessionStats(self._pending)
@@ -465,6 +466,14 @@ class Session:
             return
         self._backoff = 0.0
         self.stats.connects += 1
+        if self.transport.local_node is not None:
+            logger.info(
+                "%s allocated us FINS node %d (its own node: %s)",
+                where,
+                self.transport.local_node,
+                self.transport.remote_node,
+                extra={"endpoint": where, "node": self.transport.local_node},
+            )
         if self.transport.fresh_sid_space:  # nothing late can reach a new connection
             self._quarantine.clear()
             self._lingering.clear()
@@ -478,6 +487,8 @@ class Session:
 
         (The unused second argument lets asyncio call this as ``datagram_received``.)
         """
+        if logger.isEnabledFor(_DEBUG):
+            self._log_frame("received", frame)
         if len(frame) < 14:
             self.stats.malformed += 1
             return
@@ -579,12 +590,63 @@ class Session:
                         linger,
                         extra={"endpoint": self.transport.description, "sid": key & 0xFF},
                     )
-        elif kind == "late" and logger.isEnabledFor(_DEBUG):
-            logger.debug(
-                "%s: late reply for SID %d (its request was given up on)",
-                self.transport.description,
-                key & 0xFF,
-            )
+        elif kind == "late":
+            late = self.stats.late_replies
+            if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
+                logger.warning(
+                    "%s: %d late replies so far (each came after its request was given up "
+                    "on): the timeout is too short for this PLC or route",
+                    self.transport.description,
+                    late,
+                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
+                )
+            elif logger.isEnabledFor(_DEBUG):
+                logger.debug(
+                    "%s: late reply for SID %d (its request was given up on)",
+                    self.transport.description,
+                    key & 0xFF,
+                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
+                )
+
+    def _log_frame(self, direction: str, frame: bytes) -> None:
+        """DEBUG: one frame sent or received, with its SID, command and bytes in hex."""
+        where = self.transport.description
+        if len(frame) < 12:
+            logger.debug("%s: %s %s", where, direction, frame.hex(" "), extra={"endpoint": where})
+            return
+        logger.debug(
+            "%s: %s SID %d command %02X%02X: %s",
+            where,
+            direction,
+            frame[9],
+            frame[10],
+            frame[11],
+            frame.hex(" "),
+            extra={
+                "endpoint": where,
+                "sid": frame[9],
+                "command": f"{frame[10]:02X}{frame[11]:02X}",
+            },
+        )
+
+    def cpu_flags_seen(self, end_code: int) -> None:
+        """A reply's end code carries CPU error flags (0040 non-fatal, 0080 fatal error):
+        not an error of the call, but logged as a WARNING, once per flag and session."""
+        new = end_code & CPU_ERROR_FLAGS & ~self._flags_logged
+        if not new:
+            return
+        self._flags_logged |= new
+        where = self.transport.description
+        for bit, what in ((0x80, "a fatal CPU error"), (0x40, "a non-fatal CPU error")):
+            if new & bit:
+                logger.warning(
+                    "%s reports %s (end code %04X flag %04X); see the CPU's error log",
+                    where,
+                    what,
+                    end_code,
+                    bit,
+                    extra={"endpoint": where, "end_code": f"{end_code:04X}"},
+                )
 
     def _answered(self, p: Pending, frame: bytes, latency: float) -> None:
         hooks = self._hooks
@@ -683,6 +745,7 @@ class Session:
             p.abandoned = True
             self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
             self.stats.timeouts += 1
+            self._log_timeout(p, now)
             hooks = self._hooks
             if hooks is not None and hooks.request_timed_out:
                 key = p.key
@@ -698,6 +761,34 @@ class Session:
                     ),
                 )
             p.fail(_Expired("request timed out"))
+
+    def _log_timeout(self, p: Pending, now: float) -> None:
+        """A request got no reply after its last transmission: a WARNING for the first
+        such call after an answered one (a dead PLC warns once, not per request), DEBUG for
+        the next ones."""
+        first = not self._breaker.failures
+        if not first and not logger.isEnabledFor(_DEBUG):
+            return
+        where = self.transport.description
+        key = p.key
+        dest = FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF)
+        logger.log(
+            logging.WARNING if first else _DEBUG,
+            "%s: no reply from %s to SID %d (command %02X%02X) after %d transmission(s) in %.3f s",
+            where,
+            dest,
+            key & 0xFF,
+            p.mrc,
+            p.src,
+            p.attempts,
+            now - p.sent_at,
+            extra={
+                "endpoint": where,
+                "node": dest.node,
+                "sid": key & 0xFF,
+                "command": f"{p.mrc:02X}{p.src:02X}",
+            },
+        )
 
     def _retransmit(self, p: Pending, resend: Retransmission, now: float) -> None:
         """Send ``p`` again: the same frame and SID, still registered, so whichever reply
@@ -983,6 +1074,8 @@ class Session:
                             self._arm(deadline)
                         if self._hooks is not None:
                             self._sent(p, dest)
+                        if logger.isEnabledFor(_DEBUG):
+                            self._log_frame("sent", frame)
                         try:
                             fast_send = transport.fast_send
                             if fast_send is not None:
@@ -1033,7 +1126,12 @@ class Session:
                     self.stats.completed += 1
                     if self._breaker.failures:
                         self._call_answered()
-                    return new_response(_NORMAL if not raw else EndCode(raw), frame[14:], frame)
+                    if not raw:
+                        return new_response(_NORMAL, frame[14:], frame)
+                    self.cpu_flags_seen(raw)
+                    return new_response(EndCode(raw), frame[14:], frame)
+                if raw & CPU_ERROR_FLAGS:
+                    self.cpu_flags_seen(raw)
                 left = end - monotonic()
                 if (raw & 0x7F3F) in BUSY_CODES and busy < self.busy_retries:
                     pause = self.busy_backoff * (2**busy)

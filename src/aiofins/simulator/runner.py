@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import AsyncIterator, Iterator, Sequence
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
@@ -14,6 +15,8 @@ from .faults import Dispatcher, FaultCounters, FaultPlan, FrameHandler
 from .serial import SerialServer, SerialSettings
 from .tcp import DEFAULT_MAX_CONNECTIONS, DEFAULT_NODE_POOL, MAX_PENDING_HANDSHAKES, TcpServer
 from .udp import UdpServer
+
+_logger = logging.getLogger(__name__)
 
 
 @dataclass(eq=False, slots=True)
@@ -133,7 +136,10 @@ async def run_simulator(
                 dispatcher, serial, unit=serial_unit, settings=serial_settings
             )
             await tg.start(sim.serial.serve)
+        where = ", ".join(sim.urls())
+        _logger.info("virtual PLC serving on %s", where)
         try:
             yield sim
         finally:
+            _logger.info("virtual PLC on %s stopped", where)
             tg.cancel_scope.cancel()

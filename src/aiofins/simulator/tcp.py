@@ -189,12 +189,26 @@ class TcpServer:
             assert node is not None and conn.state is ConnectionState.PENDING
             conn.node = node
             self._nodes[node] = conn
+            _logger.info(
+                "FINS/TCP client %s:%s connected as node %d",
+                conn.host,
+                conn.port,
+                node,
+                extra={"node": node},
+            )
         elif (
             state is ConnectionState.CLOSED
             and conn.node is not None
             and self._nodes.get(conn.node) is conn
         ):
             del self._nodes[conn.node]
+            _logger.info(
+                "FINS/TCP client %s:%s (node %d) disconnected",
+                conn.host,
+                conn.port,
+                conn.node,
+                extra={"node": conn.node},
+            )
         conn.state = state
 
     async def _connection(self, conn: _Connection) -> None:
@@ -295,5 +309,12 @@ class TcpServer:
         await conn.send(encode_node_response(node, self.server_node, error))
         if error:
             self.handshake_refusals += 1
+            _logger.info(
+                "FINS/TCP handshake from %s:%s refused with error %#x",
+                conn.host,
+                conn.port,
+                error,
+                extra={"node": requested},
+            )
             return False
         return True
