@@ -1,6 +1,6 @@
 """A FastAPI backend sharing one aiofins.Pool across requests.
 
-    pip install fastapi uvicorn
+    pip install fastapi uvicorn 'aiofins[prometheus]'
     AIOFINS_PLC=udp://192.168.250.1 uvicorn examples.fastapi_app:app
 
 Without ``AIOFINS_PLC`` the app starts an embedded virtual PLC in its lifespan. The PLCs a
@@ -16,6 +16,7 @@ choosing.
     PUT  /plc/D100  [1, 2, 3]          -> {"written": 3}
     GET  /status                       -> mode, error code, message
     GET  /stats                        -> the pool's per-endpoint counters
+    GET  /metrics                      -> the same and request latencies, for Prometheus
 """
 
 from __future__ import annotations
@@ -26,10 +27,12 @@ from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import asdict
 from typing import Any
 
-from fastapi import FastAPI, HTTPException
+from fastapi import FastAPI, HTTPException, Response
+from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
 import aiofins
 from aiofins.endpoint import parse_endpoint
+from aiofins.metrics import FinsMetrics
 from aiofins.simulator import VirtualPLC, run_simulator
 
 STATE: dict[str, Any] = {}
@@ -47,7 +50,14 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         # The allowlist: host (or serial device) -> URL, from the configuration only.
         endpoints = {u: parse_endpoint(u) for u in [url, *extra]}
         STATE["plcs"] = {e.host or e.device: u for u, e in endpoints.items()}
-        STATE["pool"] = await stack.enter_async_context(aiofins.Pool(timeout=1.0))
+        # Metrics: the pool's counters at each scrape, latencies from its hooks. A registry
+        # of the app's own (prometheus_client.REGISTRY also works, once per process).
+        metrics = FinsMetrics(registry=None)
+        STATE["registry"] = CollectorRegistry()
+        STATE["registry"].register(metrics)
+        pool = aiofins.Pool(timeout=1.0, hooks=metrics.hooks)
+        STATE["pool"] = await stack.enter_async_context(pool)
+        metrics.watch_pool(pool)
         yield
 
 
@@ -113,3 +123,8 @@ async def status(plc: str | None = None) -> dict[str, Any]:
 @app.get("/stats")
 async def stats() -> dict[str, Any]:
     return {key: asdict(value) for key, value in STATE["pool"].stats().items()}
+
+
+@app.get("/metrics")
+async def metrics() -> Response:
+    return Response(generate_latest(STATE["registry"]), media_type=CONTENT_TYPE_LATEST)

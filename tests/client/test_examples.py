@@ -54,6 +54,24 @@ def test_fastapi_app_serves_reads_and_writes() -> None:
         assert http.get("/plc/D100/value", params={"type": "uint32"}).json()["value"] == 0x20001
 
 
+def test_fastapi_app_exposes_metrics() -> None:
+    pytest.importorskip("prometheus_client")
+    with fastapi_client() as http:
+        http.put("/plc/D100", json=[7])
+        http.get("/plc/D100")
+        reply = http.get("/metrics")
+        assert reply.status_code == 200 and reply.headers["content-type"].startswith("text/plain")
+        lines = reply.text.splitlines()
+        endpoint = next(
+            line.split('endpoint="')[1].split('"')[0]
+            for line in lines
+            if line.startswith("aiofins_pool_completed_total{")
+        )
+        assert f'aiofins_pool_completed_total{{endpoint="{endpoint}"}} 2.0' in lines
+        memory = f'endpoint="{endpoint.split("?")[0]}",family="memory"'
+        assert f"aiofins_request_duration_seconds_count{{{memory}}} 2.0" in lines
+
+
 def test_fastapi_app_answers_504_when_the_plc_is_silent(monkeypatch: pytest.MonkeyPatch) -> None:
     """/status went through the pool without the app's error mapping: a 500 and a traceback."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:

@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Callable, Sequence
 
 from .. import __version__
 from ..protocol.errors import FinsError, leaf_errors
+from . import logs
 from .examples import EXAMPLES, MAIN_EXAMPLES, HelpFormatter, epilog
 from .text import escape
 
@@ -37,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"aiofins {__version__}")
+    logs.add_arguments(parser, top=True)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in SUBCOMMANDS:
         module = importlib.import_module(f".{name}", __name__)
@@ -47,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
                 break
         else:  # pragma: no cover - a programming error
             raise RuntimeError(f"aiofins.cli.{name} has no register/add_parser(s)")
+    for subparser in subparsers.choices.values():
+        logs.add_arguments(subparser, top=False)
     _add_examples(subparsers)
     return parser
 
@@ -84,6 +89,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (errors go to stderr)."""
     args = build_parser().parse_args(argv)
     handler: Handler = args.func
+    logger = logging.getLogger("aiofins")
+    level = logger.level
+    log_handler = logs.configure(args.verbose, args.log_format)
     try:
         return handler(args)
     except KeyboardInterrupt:
@@ -92,6 +100,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if report("aiofins", exc, (FinsError, OSError)):
             return 1
         raise
+    finally:
+        logger.removeHandler(log_handler)
+        logger.setLevel(level)
 
 
 if __name__ == "__main__":  # pragma: no cover
