@@ -108,6 +108,7 @@ async def test_a_request_logs_its_frames_and_emits_sent_and_received(
     assert frames[1].getMessage().endswith(f"{sid:02x} 01 01 00 00 12 34")
     info = messages(caplog, "aiofins.session", logging.INFO)
     assert f"connected to {url}" in info and f"session to {url} closed" in info
+    assert all(r.endpoint == url for r in records(caplog, "aiofins.session"))  # type: ignore[attr-defined]
     simulator_info = messages(caplog, "aiofins.simulator.runner", logging.INFO)
     assert simulator_info[0].startswith("virtual PLC serving on udp://127.0.0.1:")
 

@@ -531,7 +531,12 @@ class Pool:
                 ]
                 if idle:
                     victim = min(idle, key=_last_used)
-                    logger.debug("%s: evicted (idle) to make room for %s", victim.key, key)
+                    logger.debug(
+                        "%s: evicted (idle) to make room for %s",
+                        victim.key,
+                        key,
+                        extra={"endpoint": victim.key},
+                    )
                     self._stats[victim.key].evictions += 1
                     victim.move(EntryState.CLOSING)
                 closing = [
@@ -541,7 +546,12 @@ class Pool:
                     if e.state is EntryState.CLOSING
                 ]
                 if not closing:
-                    logger.warning("%s: refused, all %d sessions are busy", key, self.max_sessions)
+                    logger.warning(
+                        "%s: refused, all %d sessions are busy",
+                        key,
+                        self.max_sessions,
+                        extra={"endpoint": key},
+                    )
                     raise PoolFull(
                         f"{key}: all {self.max_sessions} sessions of the pool are in use or "
                         "being opened (max_sessions); try again later"
@@ -624,7 +634,12 @@ class Pool:
             self._fail(entry, exc)
         except Exception as exc:  # the boundary: nothing of one endpoint escapes the pool
             self._stats[entry.key].errors += 1
-            logger.error("%s: unexpected error in its session", entry.key, exc_info=True)
+            logger.error(
+                "%s: unexpected error in its session",
+                entry.key,
+                exc_info=True,
+                extra={"endpoint": entry.key},
+            )
             leaves = leaf_errors(exc)
             error = ConnectionLost(f"{entry.key}: {', '.join(repr(e) for e in leaves)}")
             error.__cause__ = exc
@@ -639,7 +654,7 @@ class Pool:
         if not entry.proven:  # no reply yet: the connection failed, even if it had opened
             self._stats[entry.key].connect_failures += 1
         self._back_off(entry.key)
-        logger.info("%s: connection failed: %s", entry.key, exc)
+        logger.info("%s: connection failed: %s", entry.key, exc, extra={"endpoint": entry.key})
 
     def _back_off(self, key: str) -> None:
         """Next attempt for ``key`` after a jittered delay: a ceiling doubling from
@@ -690,7 +705,11 @@ class Pool:
             return
         failed = stats.timeouts or stats.disconnects or stats.connect_failures
         if failed and not entry.users and entry.state in _LENDABLE:
-            logger.info("%s: no reply to its first use; closing it", entry.key)
+            logger.info(
+                "%s: no reply to its first use; closing it",
+                entry.key,
+                extra={"endpoint": entry.key},
+            )
             self._stats[entry.key].connect_failures += 1
             self._back_off(entry.key)
             entry.move(EntryState.CLOSING)
@@ -748,10 +767,17 @@ class Pool:
                 await client.cpu_unit_status_read(timeout=timeout)
                 ok = True
         except FinsError as exc:
-            logger.info("%s: health check failed: %s", entry.key, exc)
+            logger.info(
+                "%s: health check failed: %s", entry.key, exc, extra={"endpoint": entry.key}
+            )
         except Exception:
             self._stats[entry.key].errors += 1
-            logger.error("%s: unexpected error in its health check", entry.key, exc_info=True)
+            logger.error(
+                "%s: unexpected error in its health check",
+                entry.key,
+                exc_info=True,
+                extra={"endpoint": entry.key},
+            )
         if entry.state is not EntryState.CHECKING:
             return  # closed meanwhile
         if ok:

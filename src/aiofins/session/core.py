@@ -302,7 +302,9 @@ class Session:
         elif new is LinkState.SHUT:
             logger.info("session to %s closed", where, extra={"endpoint": where})
         if logger.isEnabledFor(_DEBUG):
-            logger.debug("link to %s: %s -> %s", where, old.name, new.name)
+            logger.debug(
+                "link to %s: %s -> %s", where, old.name, new.name, extra={"endpoint": where}
+            )
         hooks = self._hooks
         if hooks is not None and hooks.connection_state_changed:
             hooks.emit(
@@ -668,7 +670,8 @@ class Session:
     def frame_dropped(self, reason: str) -> None:
         self.stats.malformed += 1
         if logger.isEnabledFor(_DEBUG):
-            logger.debug("%s: frame dropped: %s", self.transport.description, reason)
+            where = self.transport.description
+            logger.debug("%s: frame dropped: %s", where, reason, extra={"endpoint": where})
 
     def connection_lost(self, exc: BaseException | None) -> None:
         if self._link is LinkState.SHUT:
@@ -711,7 +714,8 @@ class Session:
             try:
                 self._expire(monotonic())
             except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
-                logger.exception("%s: deadline watcher failed", self.transport.description)
+                where = self.transport.description
+                logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
                 self._fail_all(ConnectionLost(f"session error: {exc!r}"))
             at = self._deadlines.earliest()
             with anyio.CancelScope() as scope:
@@ -819,6 +823,11 @@ class Session:
                 p.src,
                 now - p.sent_at,
                 p.attempts,
+                extra={
+                    "endpoint": self.transport.description,
+                    "sid": key & 0xFF,
+                    "command": f"{p.mrc:02X}{p.src:02X}",
+                },
             )
         hooks = self._hooks
         if hooks is not None and hooks.request_retried:
