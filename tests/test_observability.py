@@ -8,6 +8,7 @@ real ``logging`` loggers captured with ``caplog``, hooks given to ``connect()``,
 from __future__ import annotations
 
 import logging
+import socket
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import Any
@@ -28,9 +29,11 @@ from aiofins.hooks import (
 )
 from aiofins.poller import Poller
 from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
 from aiofins.simulator.faults import Delay, FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
+from aiofins.transport import UdpTransport
 
 pytestmark = pytest.mark.anyio
 
@@ -333,3 +336,86 @@ async def test_a_raising_hook_breaks_nothing(caplog: pytest.LogCaptureFixture) -
         assert await plc.read("D0", 1) == [0]
     assert hooks.errors == 2
     assert len(records(caplog, "aiofins.hooks", logging.ERROR)) == 2
+
+
+def session_to(sim: Simulator, **options: Any) -> Session:
+    return Session(
+        UdpTransport("127.0.0.1", sim.udp_port),
+        source=FinsAddress(0, 254, 0),
+        dest=PLC,
+        **options,
+    )
+
+
+async def test_sid_space_exhausted_is_warned_about_once(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, logger="aiofins.session")
+    async with simulator() as sim:
+        sim.plan.rule = FaultRule(drop_request=1.0)
+        session = session_to(
+            sim, timeout=0.05, retries=0, max_in_flight=255, min_quarantine=60, breaker_threshold=0
+        )
+        async with session:
+
+            async def read() -> None:
+                with pytest.raises(aiofins.FinsTimeout):
+                    await session.request(0x01, 0x01, bytes.fromhex("820000000001"))
+
+            async with anyio.create_task_group() as tg:
+                for _ in range(256):
+                    tg.start_soon(read)
+            for _ in range(2):  # all 256 SIDs quarantined: these wait for one, in vain
+                await read()
+            assert session.stats.sid_exhausted >= 1
+    exhausted = [m for m in messages(caplog, "aiofins.session", logging.WARNING) if "SIDs" in m]
+    assert exhausted == [
+        f"udp://127.0.0.1:{sim.udp_port}: all 256 SIDs of 0.1.0 are taken (0 in flight, 256 "
+        "quarantined, 0 lingering): requests wait for one; lower the rate or the linger"
+    ]
+
+
+async def test_the_circuit_breaker_opening_and_closing_is_logged(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO, logger="aiofins.session")
+    async with simulator() as sim:
+        url = f"udp://127.0.0.1:{sim.udp_port}"
+        session = session_to(sim, timeout=0.05, retries=0, breaker_threshold=3)
+        async with session:
+            sim.plan.rule = FaultRule(drop_request=1.0)
+            for _ in range(3):
+                with pytest.raises(aiofins.FinsTimeout):
+                    await session.request(0x01, 0x01, bytes.fromhex("820000000001"))
+            with pytest.raises(aiofins.CircuitOpen):
+                await session.request(0x01, 0x01, bytes.fromhex("820000000001"))
+            sim.plan.rule = FaultRule()
+            with anyio.fail_after(5):
+                while True:  # until the probe may go (the breaker's cooldown)
+                    try:
+                        await session.request(0x01, 0x01, bytes.fromhex("820000000001"))
+                        break
+                    except aiofins.CircuitOpen:
+                        await anyio.sleep(0.01)
+    warnings = messages(caplog, "aiofins.session", logging.WARNING)
+    assert (
+        f"{url}: 3 calls in a row got no answer: circuit breaker open, failing fast while "
+        "a probe tests the link"
+    ) in warnings
+    assert f"{url} answers again: circuit breaker closed" in messages(
+        caplog, "aiofins.session", logging.INFO
+    )
+
+
+async def test_a_refused_connection_is_warned_about(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, logger="aiofins.session")
+    with socket.socket() as unused:  # a port nobody listens on
+        unused.bind(("127.0.0.1", 0))
+        port = unused.getsockname()[1]
+    url = f"tcp://127.0.0.1:{port}"
+    with pytest.raises(aiofins.ConnectionLost):
+        async with aiofins.connect(url, timeout=1) as plc:
+            await plc.read("D0", 1)
+    (warning,) = records(caplog, "aiofins.session", logging.WARNING)
+    assert warning.getMessage().startswith(f"cannot connect to {url}: ")
+    assert warning.getMessage().count(url) == 1
+    assert "; next attempt in " in warning.getMessage()
+    assert warning.endpoint == url  # type: ignore[attr-defined]

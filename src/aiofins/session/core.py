@@ -448,9 +448,9 @@ class Session:
                 self._retry_at = monotonic() + wait
                 self._set_link_state(LinkState.BACKOFF)
                 logger.warning(
-                    "cannot connect to %s: %s; next attempt in %.2f s",
-                    where,
-                    error,
+                    "%s; next attempt in %.2f s",
+                    # The error names the endpoint already, or is prefixed with it.
+                    error if where in str(error) else f"cannot connect to {where}: {error}",
                     wait,
                     exc_info=not isinstance(exc, (OSError, FinsError)),
                     extra={"endpoint": where},
