@@ -95,3 +95,16 @@ def test_every_event_type_has_its_list() -> None:
         assert hooks
         hooks.emit(callbacks, event)  # type: ignore[arg-type]
         assert seen == [event]
+
+
+def test_combined_hooks_call_each_set_in_turn() -> None:
+    calls: list[str] = []
+    first = EventHooks(request_sent=[lambda e: calls.append("first")])
+    second = EventHooks(
+        request_sent=[lambda e: calls.append("second")], scan_done=[lambda e: calls.append("scan")]
+    )
+    both = EventHooks.combine(first, second)
+    both.emit(both.request_sent, RequestSent("udp://h:9600", DEST, 1, 0x0101))
+    both.emit(both.scan_done, ScanDone("g", 1, 0.01, 0))
+    assert calls == ["first", "second", "scan"]
+    assert not EventHooks.combine(EventHooks(), EventHooks())

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from .protocol.header import FinsAddress
 
@@ -177,6 +177,17 @@ class EventHooks:
             or self.scan_done
         )
 
+    @classmethod
+    def combine(cls, *hooks: EventHooks) -> EventHooks:
+        """One set of hooks calling those of each of ``hooks`` in turn (e.g. metrics and
+        tracing for one pool)."""
+        combined = cls()
+        for name in _EVENT_LISTS:
+            callbacks: list[Callable[[Any], object]] = getattr(combined, name)
+            for h in hooks:
+                callbacks.extend(getattr(h, name))
+        return combined
+
     def or_none(self) -> EventHooks | None:
         """``self`` if any callback is registered, else ``None`` (what emitters keep)."""
         return self if self else None
@@ -190,3 +201,14 @@ class EventHooks:
             except Exception:
                 self.errors += 1
                 logger.exception("event hook %r raised on %s", callback, type(event).__name__)
+
+
+#: The callback lists of :class:`EventHooks`, one per event type.
+_EVENT_LISTS = (
+    "request_sent",
+    "response_received",
+    "request_retried",
+    "request_timed_out",
+    "connection_state_changed",
+    "scan_done",
+)
