@@ -34,6 +34,27 @@ def test_quiet_by_default(url: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert "D0" in out and err == []
 
 
+def test_cpu_error_flags_are_said_once_without_v(capsys: pytest.CaptureFixture[str]) -> None:
+    """The command warns about them itself; the session's log warning shows with -v."""
+    proc = simulate("--flags", "40")
+    try:
+        url = udp_url_of(proc)
+        _, err = run(capsys, "read", url, "D0")
+        (warning,) = err
+        assert "warning: the PLC reports a non-fatal CPU error (end code 0040)" in warning
+        _, err = run(capsys, "-v", "read", url, "D0")
+        assert any(
+            line.endswith(
+                f"WARNING aiofins.session: {url} reports a non-fatal CPU error "
+                "(end code 0040 flag 0040); see the CPU's error log"
+            )
+            for line in err
+        )
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
 def test_v_logs_the_lifecycle(url: str, capsys: pytest.CaptureFixture[str]) -> None:
     _, err = run(capsys, "-v", "read", url, "D0")
     assert any(line.endswith(f"INFO aiofins.session: connected to {url}") for line in err)

@@ -1,7 +1,8 @@
 """``-v``/``-vv`` and ``--log-format text|json``: where the command line sends aiofins' logs.
 
 The library installs no handler (stdlib convention); the command line installs one on
-stderr for the ``aiofins`` logger: WARNING by default, INFO with ``-v``, DEBUG (every frame)
+stderr for the ``aiofins`` logger: ERROR by default (the commands say what went wrong, and
+warn about CPU error flags, themselves), INFO and WARNING with ``-v``, DEBUG (every frame)
 with ``-vv``. ``--log-format json`` writes one JSON object a line with the record's
 ``extra`` fields (endpoint, node, sid, command, group, ...) as keys.
 """
@@ -21,7 +22,7 @@ _STANDARD = frozenset(vars(logging.LogRecord("", 0, "", 0, "", (), None))) | {
     "taskName",
 }
 
-LEVELS = (logging.WARNING, logging.INFO, logging.DEBUG)
+LEVELS = (logging.ERROR, logging.INFO, logging.DEBUG)
 
 
 class JsonFormatter(logging.Formatter):
@@ -51,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser, *, top: bool) -> None:
         "-v",
         "--verbose",
         action="count",
-        help="log to stderr: -v lifecycle (INFO), -vv every frame (DEBUG)",
+        help="log to stderr: -v lifecycle and warnings (INFO), -vv every frame (DEBUG)",
         **({"default": 0} if top else default),
     )
     parser.add_argument(
