@@ -75,6 +75,10 @@ class FinsMetrics(Collector):
 
     ``registry`` is where it registers (default: ``prometheus_client.REGISTRY``; ``None``:
     nowhere, register it yourself). ``namespace`` prefixes every metric name.
+
+    A scrape reads the watched pools' and pollers' state: scrape from the event loop's
+    thread (an async web route, as in the FastAPI recipe), not from the thread of
+    ``prometheus_client.start_http_server``, while they run.
     """
 
     def __init__(
