@@ -422,3 +422,11 @@ async def test_a_refused_connection_is_warned_about(caplog: pytest.LogCaptureFix
     assert warning.getMessage().count(url) == 1
     assert "; next attempt in " in warning.getMessage()
     assert warning.endpoint == url  # type: ignore[attr-defined]
+
+
+async def test_hooks_of_another_type_are_refused_before_anything_opens() -> None:
+    with pytest.raises(aiofins.CommandError, match=r"hooks must be an aiofins\.EventHooks; got"):
+        async with aiofins.connect("udp://127.0.0.1:9", hooks=[print]):  # type: ignore[arg-type]
+            pass
+    with pytest.raises(aiofins.CommandError, match=r"hooks must be an aiofins\.EventHooks"):
+        aiofins.Pool(hooks=print)

@@ -229,6 +229,7 @@ async def connect(
             "max_in_flight": max_in_flight,
             "gct": gct,
             "read_only": read_only,
+            "hooks": hooks,
         }
     )
     check_options(transport_options)
