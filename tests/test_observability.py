@@ -193,7 +193,7 @@ async def test_late_replies_are_warned_about_when_they_repeat(
         # The late replies all came before this one (the simulator answers in order).
         with anyio.fail_after(5):
             while plc.session.stats.late_replies < 4:
-                await plc.read("D0", 1)
+                await plc.read("D0", 1, timeout=2)  # (answered, however loaded the machine)
     debug = messages(caplog, "aiofins.session", logging.DEBUG)
     assert sum("late reply for SID" in m for m in debug) == 2  # the 1st and the 3rd
     late = [m for m in messages(caplog, "aiofins.session", logging.WARNING) if "late" in m]
