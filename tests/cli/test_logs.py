@@ -10,7 +10,7 @@ import pytest
 
 from aiofins.cli import main
 
-from .test_cli import simulate, udp_url_of
+from ..client.test_cli import simulate, udp_url_of
 
 
 @pytest.fixture(scope="module")
