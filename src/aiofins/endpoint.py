@@ -12,6 +12,7 @@ sets the seconds per attempt and ``?read_only=1`` makes a read-only client.
 
 from __future__ import annotations
 
+import ipaddress
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
 
@@ -154,7 +155,7 @@ def parse_endpoint(url: str) -> Endpoint:
         return Endpoint("serial", device=device, options=options)
     if scheme not in ("udp", "tcp"):
         raise CommandError(f"{url!r}: unknown scheme {scheme!r}; use udp, tcp or serial")
-    host = parts.hostname or ""
+    host = _canonical_host(parts.hostname or "")
     if not host:
         raise CommandError(f"{url!r}: missing host")
     try:
@@ -170,6 +171,14 @@ def parse_endpoint(url: str) -> Endpoint:
             FinsAddress.parse(value)
         _check(url, key, value)
     return Endpoint(scheme, host=host, port=port, options=options)
+
+
+def _canonical_host(host: str) -> str:
+    """An IP address in one spelling (``[0:0::1]`` is ``::1``); a name as it is."""
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        return host
 
 
 def _canonical(name: str, value: str) -> str:

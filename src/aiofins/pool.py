@@ -7,7 +7,8 @@ their own session, what ``connect()`` with that URL gives). One session multiple
 of concurrent tasks, so the default is one session per endpoint (``max_per_endpoint=1``); with
 more, each extra session is opened when all existing ones are busy. Every UDP session to one
 host:port gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port
-it saw for a node, so two sockets sharing SA1 would steal each other's replies. FINS/TCP PLCs
+it saw for a node, so two sockets sharing SA1 would steal each other's replies (a host name
+counts as the address it resolves to). FINS/TCP PLCs
 accept few connections (each holds one of the unit's node slots): keep ``max_per_endpoint``
 within that.
 
@@ -46,6 +47,7 @@ import dataclasses
 import enum
 import logging
 import random
+import socket
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
@@ -69,7 +71,7 @@ from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeou
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, whole_number
 from .session import SessionStats
-from .transport.base import is_asyncio
+from .transport.base import is_asyncio, url_host
 
 
 def event_loop_clock() -> Callable[[], float]:
@@ -224,6 +226,23 @@ _SUMMED = (
 def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
     for name in _SUMMED:
         setattr(into, name, getattr(into, name) + getattr(stats, name))
+
+
+async def _peer_link(endpoint: Endpoint) -> str:
+    """Where a session to ``endpoint`` sends its frames, as the pool tells links apart: a
+    UDP host name is resolved as the transport resolves it (``localhost`` and ``127.0.0.1``
+    are one Ethernet unit, which keeps one reply port per source node); otherwise, and if
+    the name does not resolve (the connect fails on its own), the link as written."""
+    if endpoint.scheme != "udp":
+        return endpoint.link
+    try:
+        infos = await anyio.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_DGRAM)
+    except OSError:
+        return endpoint.link
+    if not infos:
+        return endpoint.link
+    address = infos[0][4]
+    return f"udp://{url_host(str(address[0]))}:{address[1]}"
 
 
 def _users(entry: _Entry) -> int:
@@ -499,9 +518,10 @@ class Pool:
         """A new entry for ``endpoint`` (its session is opened by a task of its own), once
         the pool has room for it (called with the lock held)."""
         await self._make_room(endpoint.key, timeout)
-        dest, src = await self._addresses_for(endpoint, extra=extra)
+        link = await _peer_link(endpoint)
+        dest, src = await self._addresses_for(endpoint, link, extra=extra)
         key = endpoint.key
-        entry = _Entry(key, endpoint.link, url, src, dest)
+        entry = _Entry(key, link, url, src, dest)
         entries = self._entries.setdefault(key, [])
         entries.append(entry)
         urls = self._urls.setdefault(key, [])
@@ -567,7 +587,7 @@ class Pool:
         ]
 
     async def _addresses_for(
-        self, endpoint: Endpoint, *, extra: bool
+        self, endpoint: Endpoint, link: str, *, extra: bool
     ) -> tuple[FinsAddress | None, FinsAddress | None]:
         """(dest, source) of a new session to ``endpoint``; ``None``: left to connect().
 
@@ -579,7 +599,7 @@ class Pool:
         (:class:`CommandError`). A serial line carries one session: another key for the
         same device is refused while it is open.
         """
-        others = self._on_link(endpoint.link)
+        others = self._on_link(link)
         if endpoint.scheme == "serial":
             open_ = [e for e in others if e.state is not EntryState.CLOSING]
             if any(e.key != endpoint.key for e in open_):
@@ -600,7 +620,7 @@ class Pool:
             if src.node in used:
                 raise CommandError(
                     f"{endpoint.key}: source node {src.node} is used by another session to "
-                    f"{endpoint.link} in this pool; the PLC would send each one's replies to "
+                    f"{link} in this pool; the PLC would send each one's replies to "
                     "the other. Name another src, or leave it out"
                 )
             return dest, src
@@ -609,7 +629,7 @@ class Pool:
         avoid = taken | {dest.node}
         node = next((n for n in range(254, 0, -1) if n not in avoid), None)
         if node is None:
-            raise CommandError(f"{endpoint.link}: no free FINS source node for another session")
+            raise CommandError(f"{link}: no free FINS source node for another session")
         return dest, FinsAddress(src.network, node, src.unit)
 
     # -- each session's task: its boundary --------------------------------------------------

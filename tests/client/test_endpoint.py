@@ -92,6 +92,9 @@ def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
         ("udp://127.0.0.1?timeout=.3&node=7", "udp://127.0.0.1:9600?node=7&timeout=0.3"),
         ("udp://127.0.0.1?dest=3.5&node=1&node=7", "udp://127.0.0.1:9600?dest=3.5.0&node=1"),
         ("tcp://h?src=0.10", "tcp://h:9600?src=0.10.0"),
+        ("udp://[0:0:0:0:0:0:0:1]:9601?node=1", "udp://[::1]:9601?node=1"),
+        ("tcp://[FE80:0::1%eth0]", "tcp://[fe80::1%eth0]:9600"),
+        ("udp://PLC.Example", "udp://plc.example:9600"),
         (
             "serial:///dev/ttyS0?parity=e&baudrate=19200",
             "serial:///dev/ttyS0?baudrate=19200&parity=E",

@@ -159,13 +159,17 @@ async def test_poller_groups_for_a_gateway_and_the_plcs_behind_it(
 
 
 async def _serve_like_an_ethernet_unit(
-    site: Site, ready: Callable[[int], None], *, task_status: anyio.abc.TaskStatus[None]
+    site: Site,
+    ready: Callable[[int], None],
+    host: str = "127.0.0.1",
+    *,
+    task_status: anyio.abc.TaskStatus[None],
 ) -> None:
     """FINS/UDP as an Ethernet unit does it: a reply, ready a few milliseconds later (the
     CPU's turn), goes to the last UDP port that a command came from *for its source node*
     (SA1), not to the port of the command."""
     async with (
-        await anyio.create_udp_socket(local_host="127.0.0.1") as sock,
+        await anyio.create_udp_socket(local_host=host) as sock,
         anyio.create_task_group() as tg,
     ):
         ready(sock.extra(anyio.abc.SocketAttribute.local_port))
@@ -211,4 +215,49 @@ async def test_sessions_to_one_ethernet_unit_do_not_steal_each_others_replies(
                     for query, d0, _ in BORROWERS:
                         readers.start_soon(reads, query, d0)
             assert all(s.timeouts == 0 for s in pool.stats().values())
+        tg.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize(
+    ("host", "spellings"),
+    [
+        ("127.0.0.1", ["127.0.0.1", "localhost"]),
+        ("::1", ["[::1]", "[0:0:0:0:0:0:0:1]", "[0::1]"]),
+    ],
+    ids=["name-and-address", "ipv6-spellings"],
+)
+async def test_one_ethernet_unit_under_several_names_gets_a_source_node_per_session(
+    anyio_backend: object, host: str, spellings: list[str]
+) -> None:
+    """Sessions to one unit were told apart by the host as written: ``localhost`` and
+    ``127.0.0.1`` (or two spellings of an IPv6 address) got the same source node, and the
+    unit sent one session's replies to the other's socket."""
+    plcs = Site(_plc(0, 1, 100), _plc(0, 7, 700), _plc(3, 5, 350))
+    ports: list[int] = []
+    async with anyio.create_task_group() as tg:
+        await tg.start(_serve_like_an_ethernet_unit, plcs, ports.append, host)
+        urls = [f"udp://{name}:{ports[0]}?timeout=0.{i + 3}" for i, name in enumerate(spellings)]
+        async with Pool(retries=0) as pool:
+            sources = set()
+            for url in urls:
+                async with pool.client(url) as plc:
+                    sources.add(plc.session.source.node)
+            assert len(sources) == len(urls)
+
+            async def reads(url: str) -> None:
+                for _ in range(30):
+                    async with pool.client(url) as plc:
+                        assert await plc.read("D0") == [100], url
+
+            with anyio.fail_after(10):
+                async with anyio.create_task_group() as readers:
+                    for url in urls:
+                        readers.start_soon(reads, url)
+            stats = pool.stats().values()
+            assert all(s.timeouts == s.late_replies == 0 for s in stats)
+            # A source node named in the URL is refused under another name of the unit too.
+            async with pool.client(f"{urls[0]}&src=0.200.0"):
+                with pytest.raises(CommandError, match="source node 200 is used"):
+                    async with pool.client(f"{urls[1]}&src=0.200.0"):
+                        pass
         tg.cancel_scope.cancel()
