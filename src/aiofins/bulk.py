@@ -54,8 +54,9 @@ async def backup_program(
 ) -> bytes:
     """Read the whole user program (0306 in blocks up to the last-block bit 15).
 
-    Each response must echo the address asked and carry at most the bytes asked, in whole
-    4-byte units; more than ``max_size`` bytes without the last-block bit is refused.
+    Each response must echo the address asked and carry the bytes asked, in whole 4-byte
+    units (fewer only with the last-block bit); more than ``max_size`` bytes without the
+    last-block bit is refused.
     :class:`~aiofins.DecodeError` in every case.
     """
     limit = client.limits.program_read_bytes - client.limits.program_read_bytes % PROGRAM_BLOCK_UNIT
@@ -80,8 +81,11 @@ async def backup_program(
                 f"program area read at {address:08X}: asked for {size} bytes, "
                 f"the PLC answered {got}"
             )
-        if not got and not result.last:
-            raise DecodeError("program area read returned no data and no last-block bit")
+        if got < size and not result.last:  # a PLC answers less only with the last block
+            raise DecodeError(
+                f"program area read at {address:08X}: asked for {size} bytes, the PLC "
+                f"answered {got} without the last-block bit"
+            )
         out += result.data
         _report(progress, len(out), len(out) if result.last else None)
         if result.last:
@@ -217,9 +221,10 @@ FILE_NOT_FOUND = 0x2006
 async def list_files(client: Client, disk: Disk, directory: str = "") -> list[FileEntry]:
     """Every file entry of a directory (2201, 20 names a frame).
 
-    Reading stops at the number of files the first response announces (``total_files``), at
-    the last-file bit or at an empty page, whichever comes first; a page with more entries
-    than asked or than announced is refused (:class:`~aiofins.DecodeError`).
+    Reading stops at the number of files the first response announces (``total_files``) or
+    at the last-file bit, whichever comes first; a page with more entries than asked or than
+    announced, or with fewer than asked but no last-file bit, is refused
+    (:class:`~aiofins.DecodeError`).
     """
     entries: list[FileEntry] = []
     total: int | None = None
@@ -228,13 +233,19 @@ async def list_files(client: Client, disk: Disk, directory: str = "") -> list[Fi
         result = await client.file_name_read(disk, len(entries), count, directory)
         if total is None:
             total = result.disk_data.total_files
-        if len(result.files) > count or len(entries) + len(result.files) > total:
+        got = len(result.files)
+        if got > count or len(entries) + got > total:
             raise DecodeError(
                 f"file name read: asked for {count} of {total} files from file {len(entries)}, "
-                f"the PLC answered {len(result.files)}"
+                f"the PLC answered {got}"
+            )
+        if got < count and not result.last:  # a PLC answers fewer only with the last page
+            raise DecodeError(
+                f"file name read: asked for {count} of {total} files from file {len(entries)}, "
+                f"the PLC answered {got} without the last-file bit"
             )
         entries.extend(result.files)
-        if result.last or not result.files:
+        if result.last:
             break
     return entries
 
@@ -252,8 +263,8 @@ async def download_file(
 
     The first response announces the file's size (file capacity): a size over ``max_size``
     is refused before more is read, and reading stops there. Every response must echo the
-    position asked, the same file capacity, and carry at least one and at most the bytes
-    asked, with the last-byte bit exactly at the end (:class:`~aiofins.DecodeError`).
+    position asked, the same file capacity, and carry exactly the bytes asked (the rest of
+    the file, if less), with the last-byte bit only at the end (:class:`~aiofins.DecodeError`).
     """
     limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - FILE_READ_OVERHEAD)
     out = bytearray()
@@ -276,7 +287,7 @@ async def download_file(
                 f"{name}: asked for position {position} of a {capacity}-byte file, the PLC "
                 f"answered position {result.position} of {result.file_capacity} bytes"
             )
-        if got > size or end > capacity or (not got and end < capacity):
+        if got != min(size, capacity - position):
             raise DecodeError(
                 f"{name}: asked for {size} bytes at position {position} of a {capacity}-byte "
                 f"file, the PLC answered {got}"

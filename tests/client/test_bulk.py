@@ -336,3 +336,78 @@ async def test_a_listing_refuses_more_files_than_announced(anyio_scheme: str) ->
     async with lying(anyio_scheme, FileNameRead, _pages_for_ever(3), invent=True) as (plc, _):
         with pytest.raises(DecodeError, match=r"asked for 20 of 3 files from file 0, .* 20"):
             await list_files(plc, Disk.MEMORY_CARD)
+
+
+# -- a PLC that answers a little at a time: every short answer must be the end -----------------
+
+
+async def test_a_program_backup_refuses_a_short_block_without_the_last_bit(
+    anyio_scheme: str,
+) -> None:
+    """4 bytes an answer, never the last: 1,048,576 requests before max_size stopped it."""
+
+    def lie(request: ProgramAreaRead, result: Any) -> Any:
+        return dataclasses.replace(result, data=result.data[:4], last=False)
+
+    async with lying(anyio_scheme, ProgramAreaRead, lie) as (plc, peer):
+        with (
+            anyio.fail_after(5),
+            pytest.raises(
+                DecodeError, match=r"at 00000000: asked for 992 bytes, the PLC answered 4 .* last"
+            ),
+        ):
+            await backup_program(plc)
+        assert peer.asked == 1
+
+
+async def test_a_download_refuses_a_short_answer_before_the_end(anyio_scheme: str) -> None:
+    """One byte an answer: a 64 MiB file announced took 64 million requests."""
+
+    def lie(request: SingleFileRead, result: Any) -> Any:
+        return dataclasses.replace(result, data=result.data[:1], last=False)
+
+    async with lying(anyio_scheme, SingleFileRead, lie) as (plc, peer):
+        await upload_file(plc, Disk.MEMORY_CARD, "A.BIN", bytes(5000), overwrite=False)
+        with (
+            anyio.fail_after(5),
+            pytest.raises(
+                DecodeError,
+                match="asked for 1988 bytes at position 0 of a 5000-byte file, the PLC answered 1",
+            ),
+        ):
+            await download_file(plc, Disk.MEMORY_CARD, "A.BIN")
+        assert peer.asked == 1
+
+
+async def test_a_listing_refuses_a_short_page_that_is_not_the_last(anyio_scheme: str) -> None:
+    """One entry a page, never the last: a directory announcing 65,535 files took 65,535
+    requests."""
+    pages = _pages_for_ever(65_535)
+
+    def lie(request: FileNameRead, result: None) -> FileNameReadResult:
+        page = pages(request, result)
+        return dataclasses.replace(page, files=page.files[:1])
+
+    async with lying(anyio_scheme, FileNameRead, lie, invent=True) as (plc, peer):
+        with (
+            anyio.fail_after(5),
+            pytest.raises(
+                DecodeError, match=r"asked for 20 of 65535 files from file 0, the PLC answered 1 "
+            ),
+        ):
+            await list_files(plc, Disk.MEMORY_CARD)
+        assert peer.asked == 1
+
+
+async def test_short_answers_at_the_end_are_what_a_plc_sends(anyio_scheme: str) -> None:
+    """The checks above leave the usual ends alone: a program, a file and a directory whose
+    size is not a whole number of frames."""
+    async with lying(anyio_scheme, ProgramAreaRead, lambda q, r: r) as (plc, _):
+        await plc.stop()
+        await restore_program(plc, bytes(range(256)) * 5)
+        assert (await backup_program(plc))[:1280] == bytes(range(256)) * 5
+        for size in (0, 1, 1987, 1988, 1989, 5000):
+            await upload_file(plc, Disk.MEMORY_CARD, f"F{size}.BIN", bytes(size))
+            assert await download_file(plc, Disk.MEMORY_CARD, f"F{size}.BIN") == bytes(size)
+        names = [e.name for e in await list_files(plc, Disk.MEMORY_CARD)]
+        assert {f"F{size}.BIN" for size in (0, 1, 1987, 1988, 1989, 5000)} <= set(names)
