@@ -385,7 +385,7 @@ async def test_a_listing_refuses_a_short_page_that_is_not_the_last(anyio_scheme:
     pages = _pages_for_ever(65_535)
 
     def lie(request: FileNameRead, result: None) -> FileNameReadResult:
-        page = pages(request, result)
+        page: FileNameReadResult = pages(request, result)
         return dataclasses.replace(page, files=page.files[:1])
 
     async with lying(anyio_scheme, FileNameRead, lie, invent=True) as (plc, peer):
