@@ -62,6 +62,8 @@ def option_value(name: str, value: object) -> int | float | str:
         if bits not in (1, 1.5, 2):
             raise CommandError(f"stopbits must be 1, 1.5 or 2; got {value!r}")
         return bits
+    if name in ("dest", "src"):
+        return str(FinsAddress.parse(str(value)))
     if name == "parity":
         parity = str(value).upper()
         if parity not in _PARITIES:
@@ -134,12 +136,12 @@ def parse_endpoint(url: str) -> Endpoint:
     except ValueError as exc:  # e.g. an unclosed [ of an IPv6 address
         raise CommandError(f"{url!r}: {exc}") from None
     scheme = parts.scheme.lower()
-    # Blank options are dropped, but a bare ``?read_only`` turns the guard on: a guard asked
-    # for must never be ignored.
+    # A bare ``?read_only`` turns the guard on (a guard asked for must never be ignored);
+    # any other blank option (``?node=``) is refused by its check, not dropped: it would
+    # address node 1 or take the default.
     options = tuple(
-        (key, value or "1")
+        (key, "1" if key == "read_only" and not value else value)
         for key, value in parse_qsl(parts.query, keep_blank_values=True)
-        if value or key == "read_only"
     )
     if scheme == "serial":
         device = (parts.netloc + parts.path) if parts.netloc else parts.path
@@ -159,16 +161,16 @@ def parse_endpoint(url: str) -> Endpoint:
     if not host:
         raise CommandError(f"{url!r}: missing host")
     try:
-        port = parts.port or DEFAULT_PORT
+        port = DEFAULT_PORT if parts.port is None else parts.port
     except ValueError as exc:
         raise CommandError(f"{url!r}: bad port") from exc
+    if not port:  # ``:0`` was taken for the default port
+        raise CommandError(f"{url!r}: port must be 1..65535 (9600 if left out); got 0")
     for key, value in options:
         if key not in _NET_KEYS:
             raise CommandError(
                 f"{url!r}: unknown option {key!r}; known: {', '.join(sorted(_NET_KEYS))}"
             )
-        if key in ("dest", "src"):
-            FinsAddress.parse(value)
         _check(url, key, value)
     return Endpoint(scheme, host=host, port=port, options=options)
 
@@ -183,8 +185,6 @@ def _canonical_host(host: str) -> str:
 
 def _canonical(name: str, value: str) -> str:
     """One spelling of an option's value (``?node=07`` is ``node=7``, ``?dest=3.5`` ...)."""
-    if name in ("dest", "src"):
-        return str(FinsAddress.parse(value))
     return str(option_value(name, value))
 
 

@@ -27,6 +27,17 @@ from aiofins.protocol.errors import CommandError, ConnectionLost
         ("serial:///dev/ttyS0?unit=32", "Host Link unit number must be a whole number, 0..31"),
         ("serial:///dev/ttyS0?response_wait=x", "response wait time must be a whole number"),
         ("serial:///dev/ttyS0?timeout=-1", "timeout must be a positive number"),
+        # a blank value was dropped: ?node= addressed node 1, ?timeout= took the default
+        ("udp://127.0.0.1?node=", "node must be a whole number, 0..254; got ''"),
+        ("udp://127.0.0.1?node=7&timeout=", "timeout must be a positive number of seconds"),
+        ("serial:///dev/ttyS0?unit=", "unit number must be a whole number, 0..31; got ''"),
+        ("udp://127.0.0.1?dest=", "FINS address '' is not NET.NODE"),
+        # ':0' was taken for the default port 9600
+        ("udp://127.0.0.1:0", "port must be 1..65535 .* got 0"),
+        ("tcp://[::1]:0?node=3", "port must be 1..65535 .* got 0"),
+        # dest and src were checked without naming the URL
+        ("udp://127.0.0.1?dest=1.2.3.4", "FINS address '1.2.3.4' is not NET.NODE"),
+        ("udp://127.0.0.1?src=300.1.1", "network address 300 out of range"),
     ],
 )
 def test_bad_option_values_are_refused_naming_the_url(url: str, message: str) -> None:
