@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import io
 import logging
+import math
 import pathlib
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import anyio
 import pytest
@@ -412,3 +414,20 @@ async def test_held_answers_are_bounded_the_rest_dropped_and_counted() -> None:
         await send(sim, sock, with_sid(READ_D100, 42))  # room again
         assert await recv(sock) == with_sid(READ_D100_REPLY, 42)
         assert sim.counters.held_dropped == 7
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"max_held": math.nan}, "max_held must be a whole number, at least 1"),
+        ({"max_held": 2.5}, "max_held must be a whole number"),
+        ({"max_held": True}, "max_held must be a whole number"),
+        ({"max_concurrent": math.nan}, "max_concurrent must be a whole number"),
+        ({"max_concurrent": 0}, "max_concurrent must be a whole number"),
+    ],
+)
+def test_a_plan_refuses_bounds_that_bound_nothing(kwargs: dict[str, Any], message: str) -> None:
+    """``max_held=nan`` passed the ``< 1`` check, and every ``waiting >= nan`` was false: the
+    held answers were unbounded again."""
+    with pytest.raises(ValueError, match=message):
+        FaultPlan(**kwargs)

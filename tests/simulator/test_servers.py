@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import re
@@ -9,6 +10,7 @@ import shutil
 import subprocess
 import sys
 from collections.abc import AsyncIterator, Iterator
+from typing import Any
 
 import anyio
 import pytest
@@ -265,6 +267,27 @@ async def test_the_connection_limit_counts_handshaken_connections_only() -> None
         assert sim.tcp is not None and sim.tcp.pending_evictions == 0
         for peer in idle:
             await peer.stream.aclose()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"max_connections": math.nan}, "max_connections must be a whole number, at least 1"),
+        ({"max_pending": math.nan}, "max_pending must be a whole number, at least 1"),
+        ({"max_pending": 1.5}, "max_pending must be a whole number"),
+        ({"server_node": 1.5}, "server node must be a whole number, 1..254"),
+        ({"node_pool": (239, 300)}, r"node pool: node 300 out of range 1\.\.254"),
+        ({"node_pool": (0,)}, r"node pool: node 0 out of range 1\.\.254"),
+    ],
+)
+async def test_tcp_server_refuses_limits_that_limit_nothing(
+    kwargs: dict[str, Any], message: str
+) -> None:
+    """``max_pending=nan`` passed the ``< 1`` check and every ``>= nan`` was false: idle
+    sockets were unbounded again; a node pool with 300 had the simulator assign node 300."""
+    with pytest.raises(ValueError, match=message):
+        async with run_simulator(make_plc(), tcp=("127.0.0.1", 0), **kwargs):
+            pass
 
 
 async def test_tcp_connection_without_handshake_is_closed() -> None:

@@ -226,10 +226,12 @@ class FaultPlan:
         log: FrameLog | None = None,
         max_held: int = DEFAULT_MAX_HELD,
     ) -> None:
-        if max_concurrent is not None and max_concurrent < 1:
-            raise ValueError(f"max_concurrent {max_concurrent} must be at least 1")
-        if max_held < 1:
-            raise ValueError(f"max_held {max_held} must be at least 1")
+        for name, value in (("max_concurrent", max_concurrent), ("max_held", max_held)):
+            if value is None and name == "max_concurrent":
+                continue
+            # NaN or a float passed '< 1' and then bounded nothing ('waiting >= nan')
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a whole number, at least 1; got {value!r}")
         if tcp_refusal is not None and not 1 <= tcp_refusal <= 0xFFFFFFFF:
             raise ValueError(f"FINS/TCP refusal code {tcp_refusal:#x} must be non-zero u32")
         self.rule = rule if rule is not None else FaultRule()

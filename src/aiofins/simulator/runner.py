@@ -113,28 +113,31 @@ async def run_simulator(
     """
     dispatcher = Dispatcher(plc, faults)
     sim = Simulator(plc, dispatcher)
+    # The servers are made (their arguments checked) before any task: a bad argument is a
+    # ValueError of its own, not one wrapped in an exception group.
+    if udp is not None:
+        sim.udp = UdpServer(dispatcher, udp[0], udp[1])
+    if tcp is not None:
+        sim.tcp = TcpServer(
+            dispatcher,
+            tcp[0],
+            tcp[1],
+            server_node=server_node if server_node is not None else _plc_node(plc),
+            node_pool=node_pool,
+            max_connections=max_connections,
+            max_pending=max_pending,
+            handshake_timeout=handshake_timeout,
+        )
+    if serial is not None:
+        sim.serial = SerialServer(dispatcher, serial, unit=serial_unit, settings=serial_settings)
     async with anyio.create_task_group() as tg:
-        if udp is not None:
-            sim.udp = UdpServer(dispatcher, udp[0], udp[1])
+        if udp is not None and sim.udp is not None:
             with _naming_the_endpoint("FINS/UDP", udp):
                 await tg.start(sim.udp.serve)
-        if tcp is not None:
-            sim.tcp = TcpServer(
-                dispatcher,
-                tcp[0],
-                tcp[1],
-                server_node=server_node if server_node is not None else _plc_node(plc),
-                node_pool=node_pool,
-                max_connections=max_connections,
-                max_pending=max_pending,
-                handshake_timeout=handshake_timeout,
-            )
+        if tcp is not None and sim.tcp is not None:
             with _naming_the_endpoint("FINS/TCP", tcp):
                 await tg.start(sim.tcp.serve)
-        if serial is not None:
-            sim.serial = SerialServer(
-                dispatcher, serial, unit=serial_unit, settings=serial_settings
-            )
+        if sim.serial is not None:
             await tg.start(sim.serial.serve)
         where = ", ".join(sim.urls())
         _logger.info("virtual PLC serving on %s", where)

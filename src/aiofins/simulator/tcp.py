@@ -59,6 +59,11 @@ _SA1 = 7
 _logger = logging.getLogger(__name__)
 
 
+def _whole(value: object) -> bool:
+    """An ``int`` (not a ``bool``, a float or NaN, which compare false with every bound)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
 class ConnectionState(Enum):
     """Where one accepted FINS/TCP connection is (:meth:`TcpServer._enter` moves it)."""
 
@@ -102,12 +107,16 @@ class TcpServer:
         max_pending: int = MAX_PENDING_HANDSHAKES,
         handshake_timeout: float | None = None,
     ) -> None:
-        if not 1 <= server_node <= 254:
-            raise ValueError(f"FINS/TCP server node {server_node} out of range 1..254")
-        if max_connections < 1:
-            raise ValueError(f"max_connections {max_connections} must be at least 1")
-        if max_pending < 1:
-            raise ValueError(f"max_pending {max_pending} must be at least 1")
+        if not _whole(server_node) or not 1 <= server_node <= 254:
+            raise ValueError(
+                f"FINS/TCP server node must be a whole number, 1..254; got {server_node!r}"
+            )
+        for number in node_pool:
+            if not _whole(number) or not 1 <= number <= 254:
+                raise ValueError(f"FINS/TCP node pool: node {number!r} out of range 1..254")
+        for name, value in (("max_connections", max_connections), ("max_pending", max_pending)):
+            if not _whole(value) or value < 1:
+                raise ValueError(f"{name} must be a whole number, at least 1; got {value!r}")
         if handshake_timeout is None:
             handshake_timeout = HANDSHAKE_TIMEOUT
         if not 0 < handshake_timeout < float("inf"):
