@@ -30,6 +30,16 @@ _NET_KEYS = {"dest", "src", "node", "timeout", "read_only"}
 
 _PARITIES = ("N", "E", "O", "M", "S")
 
+#: Serial settings a ``serial://`` URL leaves out (what ``connect`` opens the line with).
+SERIAL_DEFAULTS: dict[str, int | float | str] = {
+    "baudrate": 9600,
+    "bytesize": 8,
+    "parity": "N",
+    "stopbits": 1.0,
+    "unit": 0,
+    "response_wait": 0,
+}
+
 
 def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
     return whole_number(name, value, low, high, text=True)
@@ -98,13 +108,16 @@ class Endpoint:
         """The link and every option that changes what is addressed or how, in one
         spelling: ``udp://h:9600?dest=3.5.0&timeout=0.3``. A pool shares a session only
         among URLs with the same key. An option given twice counts by its first value (the
-        one :meth:`option` and ``connect`` use). ``read_only`` is left out: it changes
-        what a borrower may send, not how, and each borrower of the shared session gets its
-        own guard (:meth:`Client.with_read_only`)."""
+        one :meth:`option` and ``connect`` use); a serial setting at its default is left out
+        (``serial:///dev/ttyS0?baudrate=9600`` is ``serial:///dev/ttyS0``). ``read_only`` is
+        left out: it changes what a borrower may send, not how, and each borrower of the
+        shared session gets its own guard (:meth:`Client.with_read_only`)."""
         seen: dict[str, str] = {}
         for name, value in self.options:
             if name not in seen and name != "read_only":
                 seen[name] = _canonical(name, value)
+        if self.scheme == "serial":
+            seen = {n: v for n, v in seen.items() if v != _SERIAL_DEFAULT_TEXT.get(n)}
         if not seen:
             return self.link
         query = "&".join(f"{name}={seen[name]}" for name in sorted(seen))
@@ -186,6 +199,9 @@ def _canonical_host(host: str) -> str:
 def _canonical(name: str, value: str) -> str:
     """One spelling of an option's value (``?node=07`` is ``node=7``, ``?dest=3.5`` ...)."""
     return str(option_value(name, value))
+
+
+_SERIAL_DEFAULT_TEXT = {name: _canonical(name, str(v)) for name, v in SERIAL_DEFAULTS.items()}
 
 
 def _check(url: str, key: str, value: str) -> None:

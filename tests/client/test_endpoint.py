@@ -119,3 +119,20 @@ def test_a_key_names_the_link_and_every_option_in_one_spelling(url: str, key: st
     endpoint = parse_endpoint(url)
     assert endpoint.key == key
     assert endpoint.link == key.split("?")[0]
+
+
+def test_serial_defaults_are_those_connect_uses() -> None:
+    """A serial option at its default is left out of the key: the defaults must be the
+    transport's."""
+    from aiofins.connection import make_transport
+    from aiofins.endpoint import SERIAL_DEFAULTS
+
+    transport = make_transport(parse_endpoint("serial:///dev/ttyS0"))
+    for name, value in SERIAL_DEFAULTS.items():
+        assert getattr(transport, name) == value, name
+    assert parse_endpoint("serial:///dev/ttyS0?unit=0&parity=N&baudrate=9600").key == (
+        "serial:///dev/ttyS0"
+    )
+    assert parse_endpoint("serial:///dev/ttyS0?unit=1&parity=n&baudrate=9600").key == (
+        "serial:///dev/ttyS0?unit=1"
+    )

@@ -330,4 +330,27 @@ async def test_a_serial_device_carries_one_session(
             async with pool.client(f"serial://{host}?baudrate=19200"):
                 pass
         async with pool.client(url):  # the same key: shared
-            assert pool.stats(url)[url].in_use == 2
+            (stats,) = pool.stats(url).values()
+            assert stats.in_use == 2
+
+
+async def test_serial_settings_at_their_defaults_share_the_session(
+    pty_pair: tuple[str, str], anyio_backend: object
+) -> None:
+    """``serial://DEV`` and ``serial://DEV?baudrate=9600`` are the same settings: the second
+    was refused as "other settings" for the open device."""
+    _, host = pty_pair
+    spellings = [
+        f"serial://{host}?baudrate=9600",
+        f"serial://{host}",
+        f"serial://{host}?parity=n&unit=0&stopbits=1&bytesize=8&response_wait=0",
+    ]
+    async with (
+        Pool() as pool,
+        pool.client(spellings[0]),
+        pool.client(spellings[1]),
+        pool.client(spellings[2]),
+    ):
+        assert pool.stats(spellings[0]) == pool.stats(spellings[2])
+        (stats,) = pool.stats(spellings[1]).values()
+        assert (stats.sessions, stats.in_use) == (1, 3)
