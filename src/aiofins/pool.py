@@ -423,8 +423,10 @@ class Pool:
     def _lease(self, url: str, timeout: float | None = None) -> _Lease:
         """:meth:`client`'s lease, also for the poller's scans (which borrow without
         ``async with``: see :meth:`_Lease.borrow_ready`)."""
-        if timeout is not None and not timeout > 0:  # math.inf: no bound but connect_timeout
-            raise CommandError(f"timeout must be a positive number of seconds, got {timeout}")
+        if timeout is not None and not (  # math.inf: no bound but the connect timeout
+            isinstance(timeout, (int, float)) and not isinstance(timeout, bool) and timeout > 0
+        ):
+            raise CommandError(f"timeout must be a positive number of seconds, got {timeout!r}")
         return _Lease(self, url, timeout)
 
     def stats(self, url: str | None = None) -> dict[str, EndpointStats]:

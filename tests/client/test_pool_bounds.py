@@ -19,6 +19,7 @@ import anyio
 import pytest
 
 import aiofins
+from aiofins.endpoint import parse_endpoint
 from aiofins.pool import EntryState, Pool, PoolFull, _Entry
 from aiofins.protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
 from aiofins.simulator.faults import FaultPlan, FaultRule
@@ -354,3 +355,30 @@ async def test_serial_settings_at_their_defaults_share_the_session(
         assert pool.stats(spellings[0]) == pool.stats(spellings[2])
         (stats,) = pool.stats(spellings[1]).values()
         assert (stats.sessions, stats.in_use) == (1, 3)
+
+
+@pytest.mark.parametrize("timeout", ["1", True, math.nan, -1, 0, None.__class__])
+async def test_a_borrowers_timeout_is_checked(sim: Simulator, timeout: Any) -> None:
+    """``timeout="1"`` leaked a TypeError, ``timeout=True`` waited one second."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool() as pool:
+        with pytest.raises(CommandError, match="timeout must be a positive number of seconds"):
+            pool.client(url, timeout=timeout)
+        async with pool.client(url, timeout=math.inf) as plc, pool.client(url, timeout=2):
+            assert await plc.read("D0") == [0]
+
+
+async def test_closing_the_pool_during_a_health_check_ends_it_at_once(
+    sim: Simulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(timeout=5, retries=0, health_interval=0.05, idle_timeout=60) as pool:
+        async with pool.client(url) as plc:
+            assert await plc.read("D0") == [0]
+        sim.plan.rule = FaultRule(drop_request=1.0)  # the check waits its 5 s
+        (entry,) = pool._entries[parse_endpoint(url).key]
+        await _until(lambda: entry.state is EntryState.CHECKING)
+        started = anyio.current_time()
+    assert anyio.current_time() - started < 1
+    assert entry.state is EntryState.CLOSED
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
