@@ -44,6 +44,15 @@ MAX_PROGRAM_BYTES = 4 * 1024 * 1024
 MAX_FILE_BYTES = 64 * 1024 * 1024
 
 
+def _max_size(value: object, low: int) -> int:
+    """``max_size`` checked before anything is sent (:class:`CommandError`)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise CommandError(
+            f"max_size must be a whole number of bytes, at least {low}; got {value!r}"
+        )
+    return value
+
+
 def _report(progress: Progress | None, done: int, total: int | None) -> None:
     if progress is not None:
         progress(done, total)
@@ -56,9 +65,11 @@ async def backup_program(
 
     Each response must echo the address asked and carry the bytes asked, in whole 4-byte
     units (fewer only with the last-block bit); more than ``max_size`` bytes without the
-    last-block bit is refused.
+    last-block bit is refused. ``max_size`` (at least 4) is checked before anything is sent
+    (:class:`CommandError`).
     :class:`~aiofins.DecodeError` in every case.
     """
+    max_size = _max_size(max_size, PROGRAM_BLOCK_UNIT)
     limit = client.limits.program_read_bytes - client.limits.program_read_bytes % PROGRAM_BLOCK_UNIT
     room = max_size - max_size % PROGRAM_BLOCK_UNIT
     out = bytearray()
@@ -265,7 +276,9 @@ async def download_file(
     is refused before more is read, and reading stops there. Every response must echo the
     position asked, the same file capacity, and carry exactly the bytes asked (the rest of
     the file, if less), with the last-byte bit only at the end (:class:`~aiofins.DecodeError`).
+    ``max_size`` (at least 1) is checked before anything is sent (:class:`CommandError`).
     """
+    max_size = _max_size(max_size, 1)
     limit = min(MAX_FILE_READ, client.limits.max_response_data_bytes - FILE_READ_OVERHEAD)
     out = bytearray()
     capacity: int | None = None

@@ -411,3 +411,18 @@ async def test_short_answers_at_the_end_are_what_a_plc_sends(anyio_scheme: str) 
             assert await download_file(plc, Disk.MEMORY_CARD, f"F{size}.BIN") == bytes(size)
         names = [e.name for e in await list_files(plc, Disk.MEMORY_CARD)]
         assert {f"F{size}.BIN" for size in (0, 1, 1987, 1988, 1989, 5000)} <= set(names)
+
+
+@pytest.mark.parametrize("max_size", [-1, 0, 2.5, "100", True])
+async def test_a_bad_max_size_is_refused_before_anything_is_sent(
+    anyio_scheme: str, max_size: Any
+) -> None:
+    """``max_size=-1`` sent a request and blamed the PLC (DecodeError); ``max_size=0`` did
+    the same without sending anything; ``"100"`` leaked a TypeError."""
+    async with lying(anyio_scheme, ProgramAreaRead, lambda q, r: r) as (plc, peer):
+        sent = plc.session.stats.completed
+        with pytest.raises(CommandError, match="max_size must be a whole number of bytes, at"):
+            await backup_program(plc, max_size=max_size)
+        with pytest.raises(CommandError, match="max_size must be a whole number of bytes, at"):
+            await download_file(plc, Disk.MEMORY_CARD, "A.BIN", max_size=max_size)
+        assert plc.session.stats.completed == sent and peer.asked == 0
