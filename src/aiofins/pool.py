@@ -367,6 +367,11 @@ class Pool:
         self._wake: anyio.Event | None = None
 
     async def __aenter__(self) -> Pool:
+        """Open the pool (again, after it closed: its counters are kept); ``RuntimeError``
+        if it is open already."""
+        if self._tg is not None:
+            raise RuntimeError("the pool is open already: one 'async with pool' at a time")
+        self._closed = False
         self._now = event_loop_clock()
         self._wake = anyio.Event()
         self._tg = anyio.create_task_group()

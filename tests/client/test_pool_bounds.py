@@ -382,3 +382,24 @@ async def test_closing_the_pool_during_a_health_check_ends_it_at_once(
     assert anyio.current_time() - started < 1
     assert entry.state is EntryState.CLOSED
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+async def test_a_pool_opened_again_lends_again(sim: Simulator) -> None:
+    """A second ``async with pool`` (an app's lifespan run twice, as test clients do) gave a
+    pool that refused every borrower with "the pool is closed"; opening it while open lost
+    the first task group."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    pool = Pool()
+    for _ in range(2):
+        async with pool:
+            async with pool.client(url) as plc:
+                assert await plc.read("D0") == [0]
+            with pytest.raises(RuntimeError, match="open already"):
+                async with pool:
+                    pass
+            async with pool.client(url) as plc:  # still open after the refused entry
+                assert await plc.read("D0") == [0]
+    assert pool.stats(url)[url].completed == 4
+    with pytest.raises(ConnectionLost, match="the pool is closed"):
+        async with pool.client(url):
+            pass
