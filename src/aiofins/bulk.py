@@ -250,7 +250,9 @@ async def list_files(client: Client, disk: Disk, directory: str = "") -> list[Fi
                 f"file name read: asked for {count} of {total} files from file {len(entries)}, "
                 f"the PLC answered {got}"
             )
-        if got < count and not result.last:  # a PLC answers fewer only with the last page
+        # a PLC answers fewer than asked only with the last page (or the last announced file:
+        # an empty directory's one page may well not flag a last file it does not have)
+        if got < count and not result.last and len(entries) + got < total:
             raise DecodeError(
                 f"file name read: asked for {count} of {total} files from file {len(entries)}, "
                 f"the PLC answered {got} without the last-file bit"

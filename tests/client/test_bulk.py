@@ -426,3 +426,20 @@ async def test_a_bad_max_size_is_refused_before_anything_is_sent(
         with pytest.raises(CommandError, match="max_size must be a whole number of bytes, at"):
             await download_file(plc, Disk.MEMORY_CARD, "A.BIN", max_size=max_size)
         assert plc.session.stats.completed == sent and peer.asked == 0
+
+
+@pytest.mark.parametrize("total", [0, 3])
+async def test_a_listing_ending_at_the_announced_total_needs_no_last_bit(
+    anyio_scheme: str, total: int
+) -> None:
+    """An empty directory's page may not flag a last file it does not have: it is the end."""
+    pages = _pages_for_ever(total)
+
+    def lie(request: FileNameRead, result: None) -> FileNameReadResult:
+        page: FileNameReadResult = pages(request, result)
+        return dataclasses.replace(page, files=page.files[:total])
+
+    async with lying(anyio_scheme, FileNameRead, lie, invent=True) as (plc, peer):
+        entries = await list_files(plc, Disk.MEMORY_CARD)
+        assert [e.name for e in entries] == [f"F{i}.BIN" for i in range(total)]
+        assert peer.asked == 1
