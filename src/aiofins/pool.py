@@ -428,6 +428,8 @@ class Pool:
     def _lease(self, url: str, timeout: float | None = None) -> _Lease:
         """:meth:`client`'s lease, also for the poller's scans (which borrow without
         ``async with``: see :meth:`_Lease.borrow_ready`)."""
+        if not isinstance(url, str):  # CommandError saying what a URL is, not a TypeError
+            parse_endpoint(url)
         if timeout is not None and not (  # math.inf: no bound but the connect timeout
             isinstance(timeout, (int, float)) and not isinstance(timeout, bool) and timeout > 0
         ):

@@ -368,6 +368,16 @@ async def test_a_borrowers_timeout_is_checked(sim: Simulator, timeout: Any) -> N
             assert await plc.read("D0") == [0]
 
 
+@pytest.mark.parametrize("url", [None, 5, b"udp://127.0.0.1"])
+async def test_a_url_that_is_not_text_is_refused_as_connect_refuses_it(
+    anyio_backend: object, url: Any
+) -> None:
+    """``pool.client(None)`` leaked a TypeError from the read-only check."""
+    async with Pool() as pool:
+        with pytest.raises(CommandError, match="the connection URL must be text"):
+            pool.client(url)
+
+
 async def test_closing_the_pool_during_a_health_check_ends_it_at_once(
     sim: Simulator, caplog: pytest.LogCaptureFixture
 ) -> None:
