@@ -483,7 +483,11 @@ class Pool:
             entries = [e for e in self._entries.get(key, []) if e.state in _LIVE]
             usable = [e for e in entries if e.state is not EntryState.CLOSING]
             idle = min(usable, key=_users, default=None)
-            most = 1 if endpoint.scheme == "serial" else self.max_per_endpoint
+            # one session a serial line, and a FINS/TCP PLC for a fixed tcp_node
+            one = endpoint.scheme == "serial" or (
+                endpoint.scheme == "tcp" and bool(self.connect_options.get("tcp_node"))
+            )
+            most = 1 if one else self.max_per_endpoint
             if idle is None or (idle.users and len(usable) < most):
                 retry_at = self._failures.get(key, (0.0, 0.0, 0.0))[0]
                 now = self._now()
@@ -615,6 +619,15 @@ class Pool:
                 raise CommandError(
                     f"{endpoint.key}: {endpoint.link} is open in this pool with other settings "
                     f"({open_[0].key}); a serial line carries one session"
+                )
+            return None, None
+        if endpoint.scheme == "tcp":
+            fixed = self.connect_options.get("tcp_node")
+            if fixed and others:  # the unit gives one connection a fixed node
+                raise CommandError(
+                    f"{endpoint.key}: FINS/TCP node {fixed} (tcp_node) is held by another "
+                    f"session to {link} in this pool ({others[0].key}); the PLC refuses a "
+                    "second connection asking for it. Leave tcp_node out (the PLC assigns one)"
                 )
             return None, None
         if endpoint.scheme != "udp":

@@ -261,3 +261,35 @@ async def test_one_ethernet_unit_under_several_names_gets_a_source_node_per_sess
                     async with pool.client(f"{urls[1]}&src=0.200.0"):
                         pass
         tg.cancel_scope.cancel()
+
+
+async def test_a_fixed_tcp_node_is_refused_for_a_second_session_to_the_plc(
+    site: Simulator,
+) -> None:
+    """With ``Pool(tcp_node=5)`` every key to a FINS/TCP PLC asked for node 5: all but the
+    first handshake were refused by the PLC (0x21), and the key backed off."""
+    base = _base(site, "tcp")
+    async with Pool(tcp_node=5, timeout=1) as pool:
+        async with pool.client(base + "?node=1") as plc:
+            assert plc.session.source.node == 5
+            with pytest.raises(CommandError, match=r"node 5 \(tcp_node\) is held by another"):
+                async with pool.client(base + "?node=7"):
+                    pass
+            assert await plc.read("D0") == [100]
+        assert pool.stats(base + "?node=7")[base + "?node=7"].connect_failures == 0
+    async with Pool(tcp_node=5, max_per_endpoint=3, timeout=1) as pool:
+        async with anyio.create_task_group() as tg:  # busy: shared, no second connection
+            for _ in range(6):
+
+                async def borrow() -> None:
+                    async with pool.client(base) as plc:
+                        assert await plc.read("D0") == [100]
+
+                tg.start_soon(borrow)
+        assert pool.stats(base)[base].sessions == 1
+    async with (  # without it the PLC assigns each its node
+        Pool(timeout=1) as pool,
+        pool.client(base + "?node=1") as a,
+        pool.client(base + "?node=7") as b,
+    ):
+        assert (await a.read("D0"), await b.read("D0")) == ([100], [700])
