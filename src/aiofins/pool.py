@@ -230,19 +230,21 @@ def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
 
 async def _peer_link(endpoint: Endpoint) -> str:
     """Where a session to ``endpoint`` sends its frames, as the pool tells links apart: a
-    UDP host name is resolved as the transport resolves it (``localhost`` and ``127.0.0.1``
-    are one Ethernet unit, which keeps one reply port per source node); otherwise, and if
-    the name does not resolve (the connect fails on its own), the link as written."""
-    if endpoint.scheme != "udp":
+    host name is resolved as the UDP transport resolves it (``localhost`` and ``127.0.0.1``
+    are one Ethernet unit, which keeps one reply port per source node, and one FINS/TCP
+    node per connection); a serial device, or a name that does not resolve (the connect
+    fails on its own), is the link as written."""
+    if endpoint.scheme == "serial":
         return endpoint.link
+    kind = socket.SOCK_DGRAM if endpoint.scheme == "udp" else socket.SOCK_STREAM
     try:
-        infos = await anyio.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_DGRAM)
+        infos = await anyio.getaddrinfo(endpoint.host, endpoint.port, type=kind)
     except OSError:
         return endpoint.link
     if not infos:
         return endpoint.link
     address = infos[0][4]
-    return f"udp://{url_host(str(address[0]))}:{address[1]}"
+    return f"{endpoint.scheme}://{url_host(str(address[0]))}:{address[1]}"
 
 
 def _users(entry: _Entry) -> int:
