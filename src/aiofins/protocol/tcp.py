@@ -6,14 +6,17 @@
 
 Commands: 0 client node address send, 1 server node address send (reply), 2 FINS frame send,
 3 FINS frame send error notification, 6 connection confirmation.
+
+:class:`TcpClientConnection` is the client side of one connection, sans-IO (bytes in, events
+out, as h11 and wsproto do it): the transport's asyncio and anyio pumps only move bytes.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from enum import IntEnum
+from enum import Enum, IntEnum
 
 from .errors import FinsTcpError, FrameError
 from .header import MAX_FRAME_SIZE
@@ -23,6 +26,11 @@ TCP_HEADER_SIZE = 16
 #: Largest value of the length field: 8 + a 2012-byte FINS frame (W421: 0x7E4 = 2020).
 MAX_LENGTH = 8 + MAX_FRAME_SIZE
 DEFAULT_PORT = 9600
+
+
+#: FINS nodes a FINS/TCP handshake may name (client and server alike; 0 only asks the server
+#: to allocate one, 255 is the broadcast node).
+MIN_NODE, MAX_NODE = 1, 254
 
 
 class TcpCommand(IntEnum):
@@ -142,8 +150,12 @@ def parse_node_request(message: TcpMessage) -> int:
     return int.from_bytes(message.payload, "big")
 
 
-def parse_node_response(message: TcpMessage) -> tuple[int, int]:
-    """``(client_node, server_node)`` of a command-1 reply; :class:`FinsTcpError` if refused."""
+def parse_node_response(message: TcpMessage, requested: int = 0) -> tuple[int, int]:
+    """``(client_node, server_node)`` of a command-1 reply; :class:`FinsTcpError` if refused.
+
+    Both nodes must be 1..254 and differ; a client node other than ``requested`` (when it is
+    not 0, "allocate one") is refused too: :class:`FrameError` naming the field.
+    """
     if message.command != TcpCommand.NODE_ADDRESS_RESPONSE:
         raise FrameError(f"expected FINS/TCP command 1, got {message.command}")
     if message.error_code:
@@ -155,7 +167,22 @@ def parse_node_response(message: TcpMessage) -> tuple[int, int]:
         raise FrameError(
             f"FINS/TCP node address reply has {len(message.payload)} payload bytes, expected 8"
         )
-    return (int.from_bytes(message.payload[:4], "big"), int.from_bytes(message.payload[4:], "big"))
+    client = int.from_bytes(message.payload[:4], "big")
+    server = int.from_bytes(message.payload[4:], "big")
+    for name, node in (("client", client), ("server", server)):
+        if not MIN_NODE <= node <= MAX_NODE:
+            raise FrameError(
+                f"FINS/TCP node address reply names {name} node {node}, "
+                f"out of range {MIN_NODE}..{MAX_NODE}"
+            )
+    if requested and client != requested:
+        raise FrameError(
+            f"FINS/TCP node address reply assigns client node {client}; node {requested} "
+            "was asked for"
+        )
+    if client == server:
+        raise FrameError(f"FINS/TCP node address reply gives client and server node {client}")
+    return client, server
 
 
 class TcpDecoder:
@@ -232,3 +259,231 @@ class TcpDecoder:
             if pos < n:
                 buf += data[pos:] if pos else data
         return found
+
+
+# --------------------------------------------------------------------------- the connection
+
+
+class TcpConnectionState(Enum):
+    """Where a client's FINS/TCP connection stands (transitions: :meth:`TcpClientConnection._to`).
+
+    ::
+
+        IDLE --start()--> AWAITING_NODE --node address reply--> OPEN
+          any state --peer error, broken stream or close()--> CLOSED
+    """
+
+    #: Made, nothing sent yet: :meth:`TcpClientConnection.start` gives the node request.
+    IDLE = "idle"
+    #: Node address request sent; waiting for the server's reply (command 1).
+    AWAITING_NODE = "awaiting node"
+    #: Handshake done: both nodes known, FINS frames flow both ways.
+    OPEN = "open"
+    #: Over: the peer reported an error, broke the stream or refused the handshake, or we
+    #: closed it. Nothing more is sent or received.
+    CLOSED = "closed"
+
+
+@dataclass(frozen=True, slots=True)
+class NodeAssigned:
+    """The handshake completed: our (client) node and the server's, both 1..254."""
+
+    client_node: int
+    server_node: int
+
+
+@dataclass(frozen=True, slots=True)
+class FrameReceived:
+    """One whole FINS frame (10-byte header first) arrived in a command-2 message."""
+
+    frame: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class ConnectionConfirmed:
+    """The server sent a connection confirmation (command 6); nothing to do about it."""
+
+
+@dataclass(frozen=True, slots=True)
+class PeerError:
+    """The server reported a FINS/TCP error code (command 3, or a refused handshake): the
+    connection is over."""
+
+    #: The FINS/TCP error code (:class:`TcpErrorCode` for the known ones).
+    code: int
+    #: Whether it refused the handshake (a command-1 reply with an error code).
+    refused: bool = False
+
+    @property
+    def meaning(self) -> str:
+        """What the code means (W421), e.g. ``"all connections are in use"``."""
+        return tcp_error_meaning(self.code)
+
+    def error(self, where: str) -> FinsTcpError:
+        """The exception a caller gets for it, naming the peer (``where``)."""
+        what = "refused the FINS/TCP handshake" if self.refused else "reported a FINS/TCP error"
+        return FinsTcpError(f"{where} {what}: {self.meaning}", tcp_error_code=self.code)
+
+
+@dataclass(frozen=True, slots=True)
+class MessageDiscarded:
+    """A well-formed message the client has no use for after the handshake (another node
+    address reply, a command-2 message with an error code, an unknown command): dropped,
+    and worth counting."""
+
+    command: int
+    error_code: int
+
+    @property
+    def reason(self) -> str:
+        return f"unexpected FINS/TCP command {self.command} (error code {self.error_code:#x})"
+
+
+#: What :meth:`TcpClientConnection.receive_data` returns.
+TcpEvent = NodeAssigned | FrameReceived | ConnectionConfirmed | PeerError | MessageDiscarded
+
+_NO_EVENTS: tuple[TcpEvent, ...] = ()
+_IDLE, _AWAITING, _OPEN, _CLOSED = (
+    TcpConnectionState.IDLE,
+    TcpConnectionState.AWAITING_NODE,
+    TcpConnectionState.OPEN,
+    TcpConnectionState.CLOSED,
+)
+_CONFIRMED = ConnectionConfirmed()
+
+
+class TcpClientConnection:
+    """The client side of one FINS/TCP connection, without I/O.
+
+    ``start()`` gives the node address request to write; every byte read goes to
+    :meth:`receive_data`, which returns the events it completes. A stream that cannot go on
+    (bad magic or length, a handshake reply naming node 0 or 300, a FINS frame before the
+    handshake, ...) raises :class:`FrameError` and closes the connection; an error the peer
+    reports is a :class:`PeerError` event and closes it too. After the handshake, FINS frames
+    can go straight to a callback (the receive path's fast form: no event object per frame).
+    """
+
+    __slots__ = ("_decoder", "_feed", "client_node", "requested_node", "server_node", "state")
+
+    def __init__(self, node: int = 0, *, max_length: int = MAX_LENGTH) -> None:
+        if not 0 <= node <= MAX_NODE:
+            raise FrameError(f"FINS/TCP client node {node} out of range 0..{MAX_NODE}")
+        #: The client node asked for in the handshake (0: let the server allocate one).
+        self.requested_node = node
+        #: Our node and the server's, once the handshake assigned them.
+        self.client_node: int | None = None
+        self.server_node: int | None = None
+        self.state = _IDLE
+        self._decoder = TcpDecoder(max_length)
+        self._feed = self._decoder.feed_frames
+
+    def _to(self, state: TcpConnectionState) -> None:
+        """The one place the state changes (forward only; CLOSED is final)."""
+        current = self.state
+        if current is _CLOSED or (state is not _CLOSED and state is not _NEXT[current]):
+            raise FrameError(f"FINS/TCP connection cannot go from {current.value} to {state.value}")
+        self.state = state
+
+    def start(self) -> bytes:
+        """The node address request to send first (IDLE -> AWAITING_NODE)."""
+        self._to(_AWAITING)
+        return encode_node_request(self.requested_node)
+
+    def send_frame(self, frame: bytes) -> bytes:
+        """The bytes that carry one FINS frame (only while OPEN)."""
+        if self.state is not _OPEN:
+            raise FrameError(f"cannot send a FINS frame on a {self.state.value} connection")
+        return encode_frame(frame)
+
+    def close(self) -> None:
+        """We ended the connection (CLOSED)."""
+        if self.state is not _CLOSED:
+            self._to(_CLOSED)
+
+    def receive_data(
+        self, data: bytes, on_frame: Callable[[bytes], object] | None = None
+    ) -> Sequence[TcpEvent]:
+        """The events completed by ``data`` (bytes read from the stream), in order.
+
+        With ``on_frame``, FINS frames received while OPEN go to it, in order with the
+        events, instead of becoming :class:`FrameReceived` events. Raises
+        :class:`FrameError` (the connection is then CLOSED) for a stream that cannot go on.
+        Events after a :class:`PeerError` are not decoded: it ends the connection.
+        """
+        if self.state is _OPEN and on_frame is not None:  # the receive path: frames only
+            try:
+                message = self._feed(data, on_frame)
+            except FrameError:
+                self._to(_CLOSED)
+                raise
+            if message is None:
+                return _NO_EVENTS
+            return self._rest(message, on_frame)
+        if self.state is _CLOSED:
+            raise FrameError("the FINS/TCP connection is closed")
+        if self.state is _IDLE:
+            raise FrameError("FINS/TCP data arrived before the node address request was sent")
+        events: list[TcpEvent] = []
+        emit = on_frame or (lambda frame: events.append(FrameReceived(frame)))
+        try:
+            message = self._feed(
+                data, self._frame_before_handshake if self.state is _AWAITING else emit
+            )
+            while message is not None:
+                event = self._message(message)
+                events.append(event)
+                if self.state is _CLOSED:
+                    break
+                message = self._feed(
+                    b"", emit if self.state is _OPEN else self._frame_before_handshake
+                )
+        except FrameError:
+            self.close()
+            raise
+        return events
+
+    def _rest(
+        self, message: TcpMessage | None, on_frame: Callable[[bytes], object]
+    ) -> list[TcpEvent]:
+        """The events from ``message`` on, frames going to ``on_frame`` (OPEN)."""
+        events: list[TcpEvent] = []
+        try:
+            while message is not None:
+                events.append(self._message(message))
+                if self.state is _CLOSED:
+                    break
+                message = self._feed(b"", on_frame)
+        except FrameError:
+            self.close()
+            raise
+        return events
+
+    @staticmethod
+    def _frame_before_handshake(frame: bytes) -> None:
+        raise FrameError("FINS/TCP server sent a FINS frame before its node address reply")
+
+    def _message(self, message: TcpMessage) -> TcpEvent:
+        """The event for one message other than a plain FINS frame; a protocol violation
+        raises :class:`FrameError`."""
+        command, code = message.command, message.error_code
+        if command == TcpCommand.CONNECTION_CONFIRMATION:
+            return _CONFIRMED
+        if command == TcpCommand.FRAME_ERROR:
+            self._to(_CLOSED)
+            return PeerError(code)
+        if self.state is _AWAITING:
+            if command != TcpCommand.NODE_ADDRESS_RESPONSE:
+                raise FrameError(
+                    f"FINS/TCP server sent command {command} before its node address reply"
+                )
+            if code:
+                self._to(_CLOSED)
+                return PeerError(code, refused=True)
+            self.client_node, self.server_node = parse_node_response(message, self.requested_node)
+            self._to(_OPEN)
+            return NodeAssigned(self.client_node, self.server_node)
+        return MessageDiscarded(command, code)
+
+
+#: The state after each one on the way to OPEN.
+_NEXT = {_IDLE: _AWAITING, _AWAITING: _OPEN, _OPEN: _CLOSED, _CLOSED: _CLOSED}

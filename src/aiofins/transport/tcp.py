@@ -1,6 +1,9 @@
 """FINS/TCP: a 16-byte envelope per message, a node-address handshake per connection.
 
-After connecting we send our client node (0 = "allocate one for me") and wait for the
+The protocol itself (handshake, framing, every field checked) is
+:class:`~aiofins.protocol.tcp.TcpClientConnection`, without I/O; this module only pumps bytes
+between it and a socket, under asyncio and under any anyio backend. After connecting we send
+our client node (0 = "allocate one for me") and wait for the
 server's reply, which names our node and the server's; both are exposed as
 :attr:`TcpTransport.local_node` and :attr:`TcpTransport.remote_node`. The session uses the
 allocated node as SA1. Command 3 (error notification) ends the connection with
@@ -11,8 +14,8 @@ Under asyncio (stock or uvloop) an asyncio protocol hands frames to the session 
 ``data_received`` and sends synchronously: a frame alone in flight at once, frames sent while
 others are in flight gathered into one write per event-loop step. We make and connect the
 socket ourselves, so the session can read what already arrived right after a send
-(``poll_now``, into the same decoder). Under trio a reader task waits on the stream's socket
-and reads it (the session's ``poll_now`` reads it too, into the same decoder), and each frame
+(``poll_now``, into the same connection). Under trio a reader task waits on the stream's socket
+and reads it (the session's ``poll_now`` reads it too, into the same connection), and each frame
 is written on its own.
 """
 
@@ -21,22 +24,25 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
+from collections.abc import Sequence
 from typing import cast
 
 import anyio
 from anyio.abc import SocketAttribute, SocketStream
 
-from ..protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout, FrameError
+from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout, FrameError
 from ..protocol.tcp import (
     DEFAULT_PORT,
-    TcpCommand,
-    TcpDecoder,
-    TcpMessage,
+    MAX_NODE,
+    FrameReceived,
+    MessageDiscarded,
+    NodeAssigned,
+    PeerError,
+    TcpClientConnection,
+    TcpConnectionState,
+    TcpEvent,
     encode_frame,
     encode_frames,
-    encode_node_request,
-    parse_node_response,
-    tcp_error_meaning,
 )
 from .base import (
     FrameSink,
@@ -55,13 +61,19 @@ DEFAULT_CONNECT_TIMEOUT = 5.0
 _RECV_SIZE = 65536
 
 
+_OPEN = TcpConnectionState.OPEN
+
+
 class _TcpProtocol(asyncio.Protocol):
-    """The asyncio path: frames go from ``data_received`` straight to the session."""
+    """The asyncio pump: bytes from ``data_received`` into the connection, frames from it
+    straight to the session."""
 
     def __init__(self, owner: TcpTransport, sink: FrameSink) -> None:
         self.owner = owner
         self.sink = sink
-        self.decoder = TcpDecoder()
+        self.conn = TcpClientConnection(owner.node)
+        self.receive = self.conn.receive_data
+        self.received = sink.frame_received
         self.handshake: asyncio.Future[tuple[int, int]] = asyncio.get_running_loop().create_future()
         self.transport: asyncio.Transport | None = None
         self.outbox: list[bytes] = []
@@ -130,11 +142,12 @@ class _TcpProtocol(asyncio.Protocol):
             self.data_received(data)
 
     def data_received(self, data: bytes) -> None:
-        if not self.handshake.done():
+        if self.conn.state is not _OPEN:
             self.before_handshake(data)
             return
         try:
-            error = _deliver_all(self.owner, self.decoder, data, self.sink)
+            events = self.receive(data, self.received)
+            error = _deliver(self.owner, events, self.sink) if events else None
         except FrameError as exc:
             error = exc
         if error is not None:
@@ -142,29 +155,21 @@ class _TcpProtocol(asyncio.Protocol):
 
     def before_handshake(self, data: bytes) -> None:
         try:
-            messages = self.decoder.feed(data)
+            nodes, early = _handshake_step(self.owner, self.conn, data)
         except FrameError as exc:
             self.fail(exc)
             return
-        for message in messages:
-            if self.handshake.done():
-                error = _deliver(self.owner, message, self.sink)
-            elif message.command == TcpCommand.CONNECTION_CONFIRMATION:
-                continue
-            elif message.command == TcpCommand.FRAME_ERROR:
-                error = _error_notification(self.owner, message.error_code)
-            else:
-                try:
-                    self.handshake.set_result(parse_node_response(message))
-                    continue
-                except FrameError as exc:
-                    error = exc
-            if error is not None:
-                self.fail(error)
-                return
+        if nodes is None:
+            return
+        if not self.handshake.done():  # (cancelled: the connect gave up and closes us)
+            self.handshake.set_result(nodes)
+        error = _deliver(self.owner, early, self.sink)
+        if error is not None:
+            self.fail(error)
 
     def fail(self, exc: BaseException) -> None:
         """End the connection: the stream is unusable after a framing error or command 3."""
+        self.conn.close()
         if not self.handshake.done():
             self.handshake.set_exception(exc)
         elif self.owner._aio is self:
@@ -179,39 +184,39 @@ class _TcpProtocol(asyncio.Protocol):
         self.fail(lost)
 
 
-def _deliver(owner: TcpTransport, message: TcpMessage, sink: FrameSink) -> FrameError | None:
-    """Hand one message after the handshake to the sink; the error it reports, if any.
+def _handshake_step(
+    owner: TcpTransport, conn: TcpClientConnection, data: bytes
+) -> tuple[tuple[int, int] | None, list[TcpEvent]]:
+    """Feed bytes read during the handshake to ``conn``: ``(client node, server node)`` once
+    assigned (else ``None``) and the events that followed the assignment in ``data``.
+
+    A refused handshake raises :class:`FinsTcpError`; a reply that breaks the protocol (a
+    node out of 1..254, a FINS frame first, ...) :class:`FrameError`.
+    """
+    events = conn.receive_data(data)
+    for i, event in enumerate(events):
+        if isinstance(event, PeerError):
+            raise event.error(owner.description)
+        if isinstance(event, NodeAssigned):
+            return (event.client_node, event.server_node), list(events[i + 1 :])
+    return None, []
+
+
+def _deliver(owner: TcpTransport, events: Sequence[TcpEvent], sink: FrameSink) -> FrameError | None:
+    """Hand the events after the handshake to the sink, in order; the error that ends the
+    connection, if any.
 
     A FINS frame goes to the session, a connection confirmation is discarded, an error
     notification (command 3) comes back as :class:`FinsTcpError` (the connection is over),
-    and any other command is dropped and counted.
+    and any other message is dropped and counted.
     """
-    command = message.command
-    if command == TcpCommand.FRAME:
-        sink.frame_received(message.payload)
-    elif command == TcpCommand.FRAME_ERROR:
-        return _error_notification(owner, message.error_code)
-    elif command != TcpCommand.CONNECTION_CONFIRMATION:
-        sink.frame_dropped(f"unexpected FINS/TCP command {command}")
-    return None
-
-
-def _deliver_all(
-    owner: TcpTransport, decoder: TcpDecoder, data: bytes, sink: FrameSink
-) -> FrameError | None:
-    """Hand every whole message of the stream so far (with ``data``) to the sink, in order.
-
-    FINS frames go straight to ``sink.frame_received``; other messages through
-    :func:`_deliver`. Returns the error that ends the connection, if any; a broken stream
-    (bad magic or length) raises :class:`FrameError`.
-    """
-    received = sink.frame_received
-    message = decoder.feed_frames(data, received)
-    while message is not None:
-        error = _deliver(owner, message, sink)
-        if error is not None:
-            return error
-        message = decoder.feed_frames(b"", received)
+    for event in events:
+        if isinstance(event, FrameReceived):
+            sink.frame_received(event.frame)
+        elif isinstance(event, PeerError):
+            return event.error(owner.description)
+        elif isinstance(event, MessageDiscarded):
+            sink.frame_dropped(event.reason)
     return None
 
 
@@ -236,13 +241,6 @@ async def _connect(loop: asyncio.AbstractEventLoop, host: str, port: int) -> soc
     raise error
 
 
-def _error_notification(owner: TcpTransport, code: int) -> FinsTcpError:
-    return FinsTcpError(
-        f"{owner.description} reported a FINS/TCP error: {tcp_error_meaning(code)}",
-        tcp_error_code=code,
-    )
-
-
 class TcpTransport(Transport):
     """FINS/TCP to ``host:port``; ``node`` 0 lets the PLC allocate our node."""
 
@@ -258,8 +256,8 @@ class TcpTransport(Transport):
         connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
         gather_writes: bool = True,
     ) -> None:
-        if not 0 <= node <= 0xFE:
-            raise FrameError(f"FINS/TCP client node {node} out of range 0..254")
+        if not 0 <= node <= MAX_NODE:
+            raise FrameError(f"FINS/TCP client node {node} out of range 0..{MAX_NODE}")
         self.host = host
         self.port = port
         #: The client node we ask for in the handshake (0 = let the server allocate).
@@ -291,30 +289,25 @@ class TcpTransport(Transport):
         if is_asyncio():
             await self._open_asyncio(sink)
             return
+        conn = TcpClientConnection(self.node)
+        stream: SocketStream | None = None
         try:
-            with anyio.fail_after(self.connect_timeout):
+            with anyio.fail_after(self.connect_timeout):  # connect and handshake
                 stream = await anyio.connect_tcp(self.host, self.port)
-        except TimeoutError as exc:
-            raise ConnectionLost(
-                f"cannot connect to {self.description} within {self.connect_timeout} s"
-            ) from exc
-        except OSError as exc:
-            raise wrap_os_error(exc, f"cannot connect to {self.description}") from exc
-        decoder = TcpDecoder()
-        try:
-            backlog = await self._handshake(stream, decoder)
-        except BaseException:
-            with anyio.CancelScope(shield=True):
-                await stream.aclose()
-            raise
+                early = await self._handshake(stream, conn)
+        except BaseException as exc:
+            if stream is not None:
+                with anyio.CancelScope(shield=True):
+                    await stream.aclose()
+            raise self._open_failed(exc) from exc
         self._stream = stream
         self._sink = sink
         raw = self._raw = stream.extra(SocketAttribute.raw_socket)  # looked up once
         self._send_lock = anyio.Lock()
-        task_group.start_soon(self._reader, stream, raw, decoder, backlog, sink)
+        task_group.start_soon(self._reader, stream, raw, conn, early, sink)
 
         def poll() -> None:
-            """Read what has already arrived, now, into the reader's decoder (the reader
+            """Read what has already arrived, now, into the reader's connection (the reader
             task would wake for it; it waits on the socket, never inside the decoder). The
             end of the stream or a socket error is left to the reader; a broken stream ends
             the connection here, and the reader, woken, closes the socket."""
@@ -327,13 +320,33 @@ class TcpTransport(Transport):
             if not data:
                 return
             try:
-                error = _deliver_all(self, decoder, data, sink)
+                events = receive(data, received)
+                error = _deliver(self, events, sink) if events else None
             except FrameError as exc:
                 error = exc
             if error is not None:
                 self._end(stream, error)
 
+        receive, received = conn.receive_data, sink.frame_received
         self.poll_now = poll
+
+    def _open_failed(self, exc: BaseException) -> BaseException:
+        """What a failed connection attempt raises: a :class:`FinsError` as it is (a refused
+        or broken handshake), :class:`ConnectionLost` for a timeout or a socket error."""
+        if isinstance(exc, FinsError):
+            return exc
+        if isinstance(exc, TimeoutError):
+            return ConnectionLost(
+                f"no FINS/TCP connection or node address reply from {self.description} "
+                f"within {self.connect_timeout} s"
+            )
+        if isinstance(exc, (anyio.EndOfStream, anyio.BrokenResourceError)):
+            return ConnectionLost(
+                f"{self.description} closed the connection during the FINS/TCP handshake"
+            )
+        if isinstance(exc, OSError):
+            return wrap_os_error(exc, f"cannot connect to {self.description}")
+        return exc
 
     def _end(self, stream: SocketStream, error: BaseException) -> None:
         """End ``stream``'s connection now, from a synchronous path (trio): detach, wake the
@@ -358,7 +371,7 @@ class TcpTransport(Transport):
                     raise
                 proto.sock = sock
                 assert proto.transport is not None
-                proto.transport.write(encode_node_request(self.node))
+                proto.transport.write(proto.conn.start())
                 self.local_node, self.remote_node = await proto.handshake
         except BaseException as exc:
             handshake = proto.handshake
@@ -368,14 +381,10 @@ class TcpTransport(Transport):
                 handshake.exception()  # retrieved: not logged as never retrieved
             if proto.transport is not None:
                 proto.transport.close()
-            if isinstance(exc, TimeoutError):
-                raise ConnectionLost(
-                    f"no FINS/TCP connection or node address reply from {self.description} "
-                    f"within {self.connect_timeout} s"
-                ) from exc
-            if isinstance(exc, OSError):
-                raise wrap_os_error(exc, f"cannot connect to {self.description}") from exc
-            raise
+            error = self._open_failed(exc)
+            if error is exc:
+                raise
+            raise error from exc
         self._aio = proto
         self.fast_send = proto.send
         self.fast_send_many = proto.send_many
@@ -391,49 +400,30 @@ class TcpTransport(Transport):
         self.fast_send_many = None
         self.poll_now = None
 
-    async def _handshake(self, stream: SocketStream, decoder: TcpDecoder) -> list[TcpMessage]:
-        """Send our node, read the server's reply; returns messages that followed it."""
-        try:
-            with anyio.fail_after(self.connect_timeout):
-                await stream.send(encode_node_request(self.node))
-                while True:
-                    messages = decoder.feed(await stream.receive())
-                    while messages:
-                        message = messages.pop(0)
-                        if message.command == TcpCommand.CONNECTION_CONFIRMATION:
-                            continue
-                        if message.command == TcpCommand.FRAME_ERROR:
-                            raise FinsTcpError(
-                                "FINS/TCP handshake refused: "
-                                + tcp_error_meaning(message.error_code),
-                                tcp_error_code=message.error_code,
-                            )
-                        self.local_node, self.remote_node = parse_node_response(message)
-                        return messages
-        except TimeoutError as exc:
-            raise ConnectionLost(
-                f"no FINS/TCP node address reply from {self.description} "
-                f"within {self.connect_timeout} s"
-            ) from exc
-        except (anyio.EndOfStream, anyio.BrokenResourceError, OSError) as exc:
-            raise ConnectionLost(
-                f"{self.description} closed the connection during the FINS/TCP handshake"
-            ) from exc
+    async def _handshake(self, stream: SocketStream, conn: TcpClientConnection) -> list[TcpEvent]:
+        """Send our node, read until the server assigned both; returns the events that
+        followed the assignment in the same read (the anyio pump of the handshake)."""
+        await stream.send(conn.start())
+        while True:
+            nodes, early = _handshake_step(self, conn, await stream.receive())
+            if nodes is not None:
+                self.local_node, self.remote_node = nodes
+                return early
 
     async def _reader(
         self,
         stream: SocketStream,
         raw: socket.socket,
-        decoder: TcpDecoder,
-        backlog: list[TcpMessage],
+        conn: TcpClientConnection,
+        early: list[TcpEvent],
         sink: FrameSink,
     ) -> None:
         exc: BaseException | None = None
+        receive, received = conn.receive_data, sink.frame_received
         try:
-            for early in backlog:
-                error = _deliver(self, early, sink)
-                if error is not None:
-                    raise error
+            error = _deliver(self, early, sink)
+            if error is not None:
+                raise error
             # The socket itself, not stream.receive(): that tries a recv() before waiting,
             # which fails once per reply for a request/reply peer (two system calls each).
             while True:
@@ -446,9 +436,11 @@ class TcpTransport(Transport):
                     continue
                 if not data:
                     raise anyio.EndOfStream
-                error = _deliver_all(self, decoder, data, sink)
-                if error is not None:
-                    raise error
+                events = receive(data, received)
+                if events:
+                    error = _deliver(self, events, sink)
+                    if error is not None:
+                        raise error
         except FrameError as err:  # FinsTcpError included: the stream is unusable now
             exc = err
         except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError) as err:
@@ -457,6 +449,7 @@ class TcpTransport(Transport):
         except OSError as err:
             exc = wrap_os_error(err, f"connection to {self.description} failed")
         finally:
+            conn.close()
             # Detach and report before closing: closing yields to other tasks, which must
             # not send on the closed socket nor open a new connection while requests of
             # this one are still waiting.
