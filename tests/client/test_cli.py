@@ -6,6 +6,7 @@ import json
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -306,3 +307,18 @@ def test_poll_changes_only_counts_scans_not_printed_lines(
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert done.returncode == 0 and len(lines) == 1, done  # the first scan: all changed
     assert lines[0]["scan"] == 1 and set(lines[0]["tags"]) == {"a", "b"}
+
+
+def test_timeout_bounds_the_fins_tcp_handshake(capsys: pytest.CaptureFixture[str]) -> None:
+    """A FINS/TCP peer that accepts (the kernel completes the TCP handshake of a listening
+    socket nobody accepts on) but never answers the node address request."""
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)
+        url = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        started = time.monotonic()
+        code, out, err = run(capsys, "read", url, "D0", "--timeout", "0.3")
+        elapsed = time.monotonic() - started
+    assert code != 0 and out == ""
+    assert "no FINS/TCP connection or node address reply" in err and "within 0.3 s" in err
+    assert elapsed < 3  # the default connect timeout (5 s) did not apply

@@ -332,3 +332,182 @@ def test_feed_frames_against_a_reference_with_damage_and_max_length(
     assert bad_at is None
     assert out == expected
     assert decoder.buffered == left
+
+
+# ------------------------------------------------------------- the sans-IO client connection
+
+
+def _state(conn: tcp.TcpClientConnection) -> tcp.TcpConnectionState:
+    """The state now (a call, so that mypy does not keep an earlier assertion's narrowing)."""
+    return conn.state
+
+
+def _open_connection(node: int = 0) -> tcp.TcpClientConnection:
+    conn = tcp.TcpClientConnection(node)
+    assert conn.start() == tcp.encode_node_request(node)
+    assert conn.state is tcp.TcpConnectionState.AWAITING_NODE
+    return conn
+
+
+def test_connection_handshake_and_frames_as_events() -> None:
+    conn = tcp.TcpClientConnection()
+    assert conn.state is tcp.TcpConnectionState.IDLE
+    assert conn.start() == HELLO
+    events = conn.receive_data(WELCOME + tcp.encode_message(6) + READ_REPLY)
+    assert list(events) == [
+        tcp.NodeAssigned(0xEF, 0x0A),
+        tcp.ConnectionConfirmed(),
+        tcp.FrameReceived(READ_REPLY[16:]),
+    ]
+    assert _state(conn) is tcp.TcpConnectionState.OPEN
+    assert (conn.client_node, conn.server_node) == (0xEF, 0x0A)
+    assert conn.send_frame(READ[16:]) == READ
+
+
+def test_connection_fast_path_hands_frames_to_the_callback() -> None:
+    conn = _open_connection()
+    conn.receive_data(WELCOME)
+    frames: list[bytes] = []
+    two = READ_REPLY + READ_REPLY
+    assert conn.receive_data(two[:30], frames.append) == ()
+    assert conn.receive_data(two[30:], frames.append) == ()
+    assert frames == [READ_REPLY[16:]] * 2
+    odd = tcp.encode_message(2, b"x" * 10, 5) + tcp.encode_message(1, bytes(8))
+    events = conn.receive_data(odd + READ_REPLY, frames.append)
+    assert [e.reason for e in events if isinstance(e, tcp.MessageDiscarded)] == [
+        "unexpected FINS/TCP command 2 (error code 0x5)",
+        "unexpected FINS/TCP command 1 (error code 0x0)",
+    ]
+    assert len(frames) == 3
+
+
+@pytest.mark.parametrize(
+    ("client", "server", "requested", "match"),
+    [
+        (0, 10, 0, "client node 0, out of range 1..254"),
+        (300, 10, 0, "client node 300, out of range 1..254"),
+        (255, 10, 0, "client node 255"),
+        (5, 0, 0, "server node 0, out of range"),
+        (5, 255, 0, "server node 255, out of range"),
+        (7, 10, 5, "assigns client node 7; node 5 was asked for"),
+        (10, 10, 0, "client and server node 10"),
+    ],
+)
+def test_connection_refuses_a_handshake_reply_with_bad_nodes(
+    client: int, server: int, requested: int, match: str
+) -> None:
+    conn = _open_connection(requested)
+    reply = tcp.encode_message(1, client.to_bytes(4, "big") + server.to_bytes(4, "big"))
+    with pytest.raises(FrameError, match=match):
+        conn.receive_data(reply)
+    assert conn.state is tcp.TcpConnectionState.CLOSED
+    with pytest.raises(FrameError, match="closed"):
+        conn.receive_data(READ_REPLY)
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        (READ_REPLY, "FINS frame before its node address reply"),
+        (tcp.encode_message(0, bytes(4)), "command 0 before its node address reply"),
+        (tcp.encode_message(9), "command 9 before its node address reply"),
+        (tcp.encode_message(1, bytes(4)), "4 payload bytes, expected 8"),
+        (b"FINZ" + WELCOME[4:], "not 'FINS'"),
+        (WELCOME[:4] + bytes.fromhex("00000007") + WELCOME[8:], "length 7 out of range"),
+    ],
+)
+def test_connection_refuses_what_breaks_the_handshake(data: bytes, match: str) -> None:
+    conn = _open_connection()
+    with pytest.raises(FrameError, match=match):
+        conn.receive_data(data)
+    assert conn.state is tcp.TcpConnectionState.CLOSED
+
+
+def test_peer_errors_are_events_that_close_the_connection() -> None:
+    conn = _open_connection()
+    (refused,) = conn.receive_data(REFUSED)
+    assert refused == tcp.PeerError(0x20, refused=True)
+    assert isinstance(refused, tcp.PeerError)
+    assert refused.meaning == "all connections are in use"
+    error = refused.error("tcp://plc:9600")
+    assert isinstance(error, FinsTcpError) and error.tcp_error_code == 0x20
+    assert str(error) == "tcp://plc:9600 refused the FINS/TCP handshake: all connections are in use"
+    assert conn.state is tcp.TcpConnectionState.CLOSED
+
+    conn = _open_connection()
+    notice = tcp.encode_error_notification(TcpErrorCode.COMMAND_NOT_SUPPORTED)
+    events = conn.receive_data(WELCOME + notice + READ_REPLY, lambda f: None)
+    assert list(events) == [tcp.NodeAssigned(0xEF, 0x0A), tcp.PeerError(3)]
+    assert events[1].meaning == "the command is not supported"  # type: ignore[union-attr]
+    assert conn.state is tcp.TcpConnectionState.CLOSED
+
+
+def test_connection_refuses_steps_out_of_order() -> None:
+    conn = tcp.TcpClientConnection()
+    with pytest.raises(FrameError, match="before the node address request was sent"):
+        conn.receive_data(WELCOME)
+    conn = tcp.TcpClientConnection()
+    with pytest.raises(FrameError, match="cannot send a FINS frame: the connection is idle"):
+        conn.send_frame(READ[16:])
+    conn.start()
+    with pytest.raises(FrameError, match="from awaiting node to awaiting node"):
+        conn.start()
+    conn.close()
+    conn.close()  # idempotent
+    with pytest.raises(FrameError):
+        conn.start()
+    with pytest.raises(FrameError, match=r"out of range 0\.\.254"):
+        tcp.TcpClientConnection(255)
+
+
+def _splits(data: bytes, cuts: list[int]) -> list[bytes]:
+    points = sorted({c % (len(data) + 1) for c in cuts})
+    return [data[a:b] for a, b in zip([0, *points], [*points, len(data)], strict=True)]
+
+
+@given(st.binary(max_size=300), st.lists(st.integers(0, 10_000), max_size=8), st.booleans())
+def test_connection_never_raises_but_frame_error_on_arbitrary_bytes(
+    data: bytes, cuts: list[int], handshaken: bool
+) -> None:
+    conn = _open_connection()
+    if handshaken:
+        conn.receive_data(WELCOME)
+    for chunk in _splits(data, cuts):
+        try:
+            events = conn.receive_data(chunk, (lambda f: None) if handshaken else None)
+        except FrameError:
+            assert conn.state is tcp.TcpConnectionState.CLOSED
+            return
+        for event in events:
+            assert isinstance(
+                event,
+                tcp.NodeAssigned
+                | tcp.FrameReceived
+                | tcp.ConnectionConfirmed
+                | tcp.PeerError
+                | tcp.MessageDiscarded,
+            )
+            if isinstance(event, tcp.NodeAssigned):
+                assert 1 <= event.client_node <= 254 and 1 <= event.server_node <= 254
+        if conn.state is tcp.TcpConnectionState.CLOSED:
+            return
+
+
+_MESSAGES = st.one_of(
+    st.builds(lambda f: tcp.encode_message(2, f), st.binary(min_size=10, max_size=40)),
+    st.builds(lambda c: tcp.encode_message(c), st.sampled_from([6, 7, 1, 0])),
+)
+
+
+@given(st.lists(_MESSAGES, max_size=10), st.lists(st.integers(0, 10_000), max_size=10))
+def test_connection_events_do_not_depend_on_how_the_stream_is_split(
+    messages: list[bytes], cuts: list[int]
+) -> None:
+    stream = WELCOME + b"".join(messages)
+    whole = _open_connection()
+    expected = list(whole.receive_data(stream))
+    split = _open_connection()
+    got = [event for chunk in _splits(stream, cuts) for event in split.receive_data(chunk)]
+    assert got == expected
+    assert expected[0] == tcp.NodeAssigned(0xEF, 0x0A)
+    assert len(expected) == 1 + len(messages)

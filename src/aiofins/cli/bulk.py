@@ -130,7 +130,12 @@ def _sync(handler: Any, question: Any = None) -> Any:
 
 async def _with_client(handler: Any, args: argparse.Namespace) -> int:
     async with connect(
-        args.url, dest=args.dest, src=args.src, timeout=args.timeout, read_only=args.read_only
+        args.url,
+        dest=args.dest,
+        src=args.src,
+        timeout=args.timeout,
+        tcp_connect_timeout=args.timeout,  # bounds the FINS/TCP connect and handshake too
+        read_only=args.read_only,
     ) as plc:
         code = int(await handler(plc, args))
         warn_of_cpu_errors(plc.last_end_code)

@@ -40,7 +40,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
-    add_timeout(p, 2.0, "seconds per attempt (default 2)")
+    add_timeout(p, 2.0, "seconds per attempt, and for a FINS/TCP connect and handshake (default 2)")
     p.add_argument("--json", action="store_true", help="print one JSON document")
     add_read_only(p)
 
@@ -133,7 +133,12 @@ def _runner(
 
 async def _with_client(handler: Handler, args: argparse.Namespace) -> Any:
     async with connect(
-        args.url, dest=args.dest, src=args.src, timeout=args.timeout, read_only=args.read_only
+        args.url,
+        dest=args.dest,
+        src=args.src,
+        timeout=args.timeout,
+        tcp_connect_timeout=args.timeout,  # bounds the FINS/TCP connect and handshake too
+        read_only=args.read_only,
     ) as plc:
         result = await handler(plc, args)
         warn_of_cpu_errors(plc.last_end_code)

@@ -79,7 +79,12 @@ async def poll(args: argparse.Namespace) -> None:
     tags = parse_tags(args.tags)
     if args.count < 0:
         raise CommandError(f"--count {args.count}: give a number of scans, or 0 to run until ^C")
-    options = {"timeout": args.timeout, "dest": args.dest, "src": args.src}
+    options = {
+        "timeout": args.timeout,
+        "dest": args.dest,
+        "src": args.src,
+        "tcp_connect_timeout": args.timeout,  # bounds the FINS/TCP connect and handshake too
+    }
     pool = Pool(read_only=True, **options)  # polling only reads: nothing else can be sent
     # Every scan is delivered (--count counts scans); --changes-only filters here.
     poller = Poller(pool)

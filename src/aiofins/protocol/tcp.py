@@ -392,7 +392,7 @@ class TcpClientConnection:
     def send_frame(self, frame: bytes) -> bytes:
         """The bytes that carry one FINS frame (only while OPEN)."""
         if self.state is not _OPEN:
-            raise FrameError(f"cannot send a FINS frame on a {self.state.value} connection")
+            raise FrameError(f"cannot send a FINS frame: the connection is {self.state.value}")
         return encode_frame(frame)
 
     def close(self) -> None:
