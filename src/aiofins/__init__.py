@@ -31,6 +31,7 @@ from .protocol.errors import (
     RelayError,
 )
 from .protocol.header import FinsAddress
+from .transport.memory import MemoryTransport
 
 try:
     __version__ = version("aiofins")  #: The installed distribution's version (pyproject.toml).
@@ -53,6 +54,7 @@ __all__ = [
     "FinsTimeout",
     "FrameError",
     "MemoryAddress",
+    "MemoryTransport",
     "Poller",
     "Pool",
     "PoolFull",

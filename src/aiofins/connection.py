@@ -187,8 +187,9 @@ def _flag(name: str, value: object) -> bool:
 
 @asynccontextmanager
 async def connect(
-    url: str,
+    url: str | None = None,
     *,
+    transport: Transport | None = None,
     dest: FinsAddress | str | None = None,
     src: FinsAddress | str | None = None,
     timeout: float = DEFAULT_TIMEOUT,
@@ -220,8 +221,13 @@ async def connect(
     :class:`~aiofins.ReadOnlyError` before anything is sent (see
     :mod:`aiofins.protocol.guard`). ``hooks`` (:class:`~aiofins.EventHooks`) receive the
     session's request and link events (see docs/observability.md).
+
+    ``transport=`` instead of a URL runs the client over a transport made by the caller, e.g.
+    :class:`~aiofins.transport.MemoryTransport` around a virtual PLC (tests without sockets);
+    ``dest`` then defaults to ``0.1.0`` and ``src`` to ``0.254.0``.
     """
-    endpoint = parse_endpoint(url)
+    if (url is None) == (transport is None):
+        raise CommandError("connect() takes a URL or transport=, one of them")
     check_options(
         {
             "timeout": timeout,
@@ -233,29 +239,44 @@ async def connect(
         }
     )
     check_options(transport_options)
-    guarded = read_only or bool(option_value("read_only", endpoint.option("read_only", "0")))
-    d, s = await default_addresses(endpoint, dest, src)
-    route = limits or limits_for(
-        *(networks or ((NetworkType.HOST_LINK,) if endpoint.scheme == "serial" else ()))
-    )
-    transport = make_transport(endpoint, **transport_options)
+    endpoint: Endpoint | None = None
+    guarded = read_only
+    if transport is None:
+        assert url is not None
+        endpoint = parse_endpoint(url)
+        guarded = guarded or bool(option_value("read_only", endpoint.option("read_only", "0")))
+        d, s = await default_addresses(endpoint, dest, src)
+        transport = make_transport(endpoint, **transport_options)
+    else:
+        if not isinstance(transport, Transport):
+            raise CommandError(f"transport must be a Transport, got {type(transport).__name__}")
+        if transport_options:
+            raise CommandError(
+                f"option(s) {', '.join(sorted(transport_options))} make a transport; "
+                "with transport= the transport is already made"
+            )
+        d = _address(dest) or FinsAddress(0, 1, 0)
+        s = _address(src) or FinsAddress(0, 254, 0)
+    serial = endpoint is not None and endpoint.scheme == "serial"
+    route = limits or limits_for(*(networks or ((NetworkType.HOST_LINK,) if serial else ())))
     session = Session(
         transport,
         source=s,
         dest=d,
         gct=gct,
         max_in_flight=5 if max_in_flight is None else max_in_flight,
-        timeout=request_timeout(endpoint, timeout),
+        timeout=timeout if endpoint is None else request_timeout(endpoint, timeout),
         retries=retries,
         hooks=hooks,
     )
     async with session:
         if (
-            endpoint.scheme == "tcp"
-            and transport.remote_node is not None
+            transport.remote_node is not None
             and dest is None
-            and endpoint.option("dest") is None
-            and endpoint.option("node") is None
+            and (
+                endpoint is None
+                or (endpoint.option("dest") is None and endpoint.option("node") is None)
+            )
         ):
             session.dest = FinsAddress(0, transport.remote_node, 0)
         yield Client(session, limits=route, word_order=word_order, read_only=guarded)
@@ -266,7 +287,7 @@ CONNECT_OPTIONS = (
     frozenset(
         name
         for name, parameter in inspect.signature(connect).parameters.items()
-        if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+        if parameter.kind is inspect.Parameter.KEYWORD_ONLY and name != "transport"
     )
     | TRANSPORT_OPTIONS
 )

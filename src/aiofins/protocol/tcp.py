@@ -363,7 +363,7 @@ class TcpClientConnection:
     can go straight to a callback (the receive path's fast form: no event object per frame).
     """
 
-    __slots__ = ("_decoder", "_feed", "client_node", "requested_node", "server_node", "state")
+    __slots__ = ("_decoder", "client_node", "requested_node", "server_node", "state")
 
     def __init__(self, node: int = 0, *, max_length: int = MAX_LENGTH) -> None:
         if not 0 <= node <= MAX_NODE:
@@ -375,7 +375,6 @@ class TcpClientConnection:
         self.server_node: int | None = None
         self.state = _IDLE
         self._decoder = TcpDecoder(max_length)
-        self._feed = self._decoder.feed_frames
 
     def _to(self, state: TcpConnectionState) -> None:
         """The one place the state changes (forward only; CLOSED is final)."""
@@ -412,7 +411,7 @@ class TcpClientConnection:
         """
         if self.state is _OPEN and on_frame is not None:  # the receive path: frames only
             try:
-                message = self._feed(data, on_frame)
+                message = self._decoder.feed_frames(data, on_frame)
             except FrameError:
                 self._to(_CLOSED)
                 raise
@@ -426,7 +425,7 @@ class TcpClientConnection:
         events: list[TcpEvent] = []
         emit = on_frame or (lambda frame: events.append(FrameReceived(frame)))
         try:
-            message = self._feed(
+            message = self._decoder.feed_frames(
                 data, self._frame_before_handshake if self.state is _AWAITING else emit
             )
             while message is not None:
@@ -434,7 +433,7 @@ class TcpClientConnection:
                 events.append(event)
                 if self.state is _CLOSED:
                     break
-                message = self._feed(
+                message = self._decoder.feed_frames(
                     b"", emit if self.state is _OPEN else self._frame_before_handshake
                 )
         except FrameError:
@@ -452,7 +451,7 @@ class TcpClientConnection:
                 events.append(self._message(message))
                 if self.state is _CLOSED:
                     break
-                message = self._feed(b"", on_frame)
+                message = self._decoder.feed_frames(b"", on_frame)
         except FrameError:
             self.close()
             raise

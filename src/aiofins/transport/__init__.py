@@ -1,10 +1,19 @@
-"""Transports: move whole FINS frames over UDP, FINS/TCP or a Host Link serial line."""
+"""Transports: move whole FINS frames over UDP, FINS/TCP, a Host Link serial line, or in memory."""
 
 from __future__ import annotations
 
 from .base import FrameSink, Transport
+from .memory import FrameHandler, MemoryTransport
 from .serial import SerialTransport
 from .tcp import TcpTransport
 from .udp import UdpTransport
 
-__all__ = ["FrameSink", "SerialTransport", "TcpTransport", "Transport", "UdpTransport"]
+__all__ = [
+    "FrameHandler",
+    "FrameSink",
+    "MemoryTransport",
+    "SerialTransport",
+    "TcpTransport",
+    "Transport",
+    "UdpTransport",
+]

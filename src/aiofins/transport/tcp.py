@@ -72,7 +72,6 @@ class _TcpProtocol(asyncio.Protocol):
         self.owner = owner
         self.sink = sink
         self.conn = TcpClientConnection(owner.node)
-        self.receive = self.conn.receive_data
         self.received = sink.frame_received
         self.handshake: asyncio.Future[tuple[int, int]] = asyncio.get_running_loop().create_future()
         self.transport: asyncio.Transport | None = None
@@ -146,7 +145,7 @@ class _TcpProtocol(asyncio.Protocol):
             self.before_handshake(data)
             return
         try:
-            events = self.receive(data, self.received)
+            events = self.conn.receive_data(data, self.received)
             error = _deliver(self.owner, events, self.sink) if events else None
         except FrameError as exc:
             error = exc
@@ -320,14 +319,14 @@ class TcpTransport(Transport):
             if not data:
                 return
             try:
-                events = receive(data, received)
+                events = conn.receive_data(data, received)
                 error = _deliver(self, events, sink) if events else None
             except FrameError as exc:
                 error = exc
             if error is not None:
                 self._end(stream, error)
 
-        receive, received = conn.receive_data, sink.frame_received
+        received = sink.frame_received
         self.poll_now = poll
 
     def _open_failed(self, exc: BaseException) -> BaseException:
@@ -419,7 +418,7 @@ class TcpTransport(Transport):
         sink: FrameSink,
     ) -> None:
         exc: BaseException | None = None
-        receive, received = conn.receive_data, sink.frame_received
+        received = sink.frame_received
         try:
             error = _deliver(self, early, sink)
             if error is not None:
@@ -436,7 +435,7 @@ class TcpTransport(Transport):
                     continue
                 if not data:
                     raise anyio.EndOfStream
-                events = receive(data, received)
+                events = conn.receive_data(data, received)
                 if events:
                     error = _deliver(self, events, sink)
                     if error is not None:
