@@ -6,9 +6,12 @@ that many large replies in flight do not overflow it.
 
 Under stock asyncio a reader callback on the socket drains every queued datagram straight
 into the session (asyncio's datagram transport reads one per loop iteration); under uvloop its
-own datagram transport calls the session directly (it reads in C); under any other anyio
-backend (trio) a reader task drains the socket. Under every loop the session may also read the
-socket right after a send (``poll_now``) when that request is the only one in flight.
+own datagram transport calls the session directly (it reads in C); under an asyncio loop
+without ``add_reader`` (Windows' default proactor loop) the loop's own datagram endpoint reads
+and sends; under any other anyio backend (trio) a reader task drains the socket. The path is
+chosen by what the loop can do, not by the platform's name. Under every loop but the proactor
+the session may also read the socket right after a send (``poll_now``) when that request is
+the only one in flight.
 """
 
 from __future__ import annotations
@@ -134,22 +137,31 @@ class _AsyncioSocket:
         self.sock.close()
 
 
-class _UvloopProtocol(asyncio.DatagramProtocol):
-    """The uvloop path: uvloop's own datagram transport reads in C and calls us directly."""
+class _EndpointProtocol(asyncio.DatagramProtocol):
+    """The path through the loop's own datagram endpoint, which reads and calls us.
 
-    def __init__(self, owner: UdpTransport, sink: FrameSink) -> None:
+    Two loops take it: uvloop (it reads in C; ``direct``: we also send and read on our own
+    socket object, cheaper than its transport), and a loop without ``add_reader`` (Windows'
+    proactor loop: its transport keeps a read of its own outstanding, which a read of ours
+    would overtake, and sends through the loop too).
+    """
+
+    def __init__(self, owner: UdpTransport, sink: FrameSink, sock: socket.socket, direct: bool):
         self.owner = owner
         self.sink = sink
-        self.transport: Any = None  # uvloop's UDPTransport (not an asyncio subclass)
-        self._raw_send: Any = None
-        self._raw_recv: Any = None
+        self.direct = direct
+        self.transport: Any = None  # uvloop's UDPTransport is not an asyncio subclass
+        self._raw_send = sock.send  # our own socket object: connected, non-blocking
+        self._raw_recv = sock.recv
+        self._sock = sock
         self.awaited = replies_awaited(sink)
         self.datagram_received = sink.frame_received  # type: ignore[assignment,method-assign]
+        if not direct:
+            self.send = self._send_via_loop  # type: ignore[method-assign]
 
     @property
     def sock(self) -> socket.socket:
-        sock: socket.socket = self.transport.get_extra_info("socket")
-        return sock
+        return self._sock
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport
@@ -165,6 +177,13 @@ class _UvloopProtocol(asyncio.DatagramProtocol):
             self.sink.frame_dropped(f"socket error: {exc}")
         except OSError as exc:
             raise ConnectionLost(f"cannot send to {self.owner.description}: {exc}") from exc
+
+    def _send_via_loop(self, frame: bytes) -> None:
+        """Send through the loop's transport (it buffers; errors come to error_received)."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            raise ConnectionLost(f"{self.owner.description} is closed")
+        transport.sendto(frame)
 
     def poll(self) -> None:
         """Read what has already arrived on the socket (uvloop reads it only at its next pass)."""
@@ -204,7 +223,7 @@ class UdpTransport(Transport):
         self.local_host = local_host
         self.local_port = local_port
         self.rcvbuf = rcvbuf
-        self._aio: _AsyncioSocket | _UvloopProtocol | None = None
+        self._aio: _AsyncioSocket | _EndpointProtocol | None = None
         self._sock: socket.socket | None = None  # the socket of the anyio (trio) driver
 
     @property
@@ -251,20 +270,28 @@ class UdpTransport(Transport):
             raise wrap_os_error(exc, f"cannot open {self.description}") from exc
         if is_asyncio():
             loop = asyncio.get_running_loop()
-            if is_uvloop(loop):
-                proto = _UvloopProtocol(self, sink)
-                proto._raw_send = sock.send  # our own socket object: connected, non-blocking
-                proto._raw_recv = sock.recv
+            aio: _AsyncioSocket | _EndpointProtocol | None = None
+            if not is_uvloop(loop):
+                try:
+                    aio = _AsyncioSocket(loop, sock, self, sink)
+                except NotImplementedError:  # no add_reader (a proactor loop): the endpoint
+                    aio = None
+            if aio is None:
+                direct = is_uvloop(loop)
+                proto = _EndpointProtocol(self, sink, sock, direct)
                 try:
                     await loop.create_datagram_endpoint(lambda: proto, sock=sock)
                 except BaseException:
                     sock.close()
                     raise
-                self._aio = proto
+                aio = proto
+                # Read-after-send only where the loop reads after readiness (uvloop), not
+                # where a read of the loop's own is always outstanding (proactor).
+                self.poll_now = proto.poll if direct else None
             else:
-                self._aio = _AsyncioSocket(loop, sock, self, sink)
-            self.fast_send = self._aio.send
-            self.poll_now = self._aio.poll
+                self.poll_now = aio.poll
+            self._aio = aio
+            self.fast_send = aio.send
         else:
             self._sock = sock
             task_group.start_soon(self._reader, sock, sink)
@@ -326,7 +353,7 @@ class UdpTransport(Transport):
         self.fast_send = None
         self.poll_now = None
 
-    def _lost(self, aio: _AsyncioSocket | _UvloopProtocol, exc: BaseException) -> None:
+    def _lost(self, aio: _AsyncioSocket | _EndpointProtocol, exc: BaseException) -> None:
         if self._aio is aio:
             self._detach()
             aio.close()
