@@ -48,7 +48,9 @@ async def test_a_reconnect_assigning_node_300_is_a_typed_error_of_the_call() -> 
                 if not isinstance(info.value, ConnectionLost):
                     break
             assert isinstance(errors[-1], FrameError), errors
-            assert "client node 300" in str(errors[-1])
+            assert str(errors[-1]) == (
+                f"{url}: FINS/TCP node address reply names client node 300, out of range 1..254"
+            )
             assert all(isinstance(e, ConnectionLost) for e in errors[:-1])
             assert peer.requested_nodes == [0, 0]
             assert (stats.connects, stats.connect_failures) == (1, 1)

@@ -192,7 +192,11 @@ def _handshake_step(
     A refused handshake raises :class:`FinsTcpError`; a reply that breaks the protocol (a
     node out of 1..254, a FINS frame first, ...) :class:`FrameError`.
     """
-    events = conn.receive_data(data)
+    try:
+        events = conn.receive_data(data)
+    except FrameError as exc:  # the same error, naming the peer (its class and fields kept)
+        exc.args = (f"{owner.description}: {exc}", *exc.args[1:])
+        raise
     for i, event in enumerate(events):
         if isinstance(event, PeerError):
             raise event.error(owner.description)
