@@ -240,10 +240,10 @@ def test_arbitrary_bytes_raise_only_decode_errors(raw: bytes) -> None:
 
 
 def test_docs_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    """The example in docs/protocol.md runs and prints what the page says."""
+    """Each example in docs/protocol.md runs and prints what the page says after it."""
     doc = (Path(__file__).parents[2] / "docs" / "protocol.md").read_text()
-    (code,) = re.findall(r"```python\n(.*?)```", doc, re.S)
-    exec(compile(code, "docs/protocol.md", "exec"), {})
-    printed = capsys.readouterr().out
-    output = doc.split("Output:\n\n```\n", 1)[1].split("```", 1)[0]
-    assert printed == output
+    examples = re.findall(r"```python\n(.*?)```\n\nOutput:\n\n```\n(.*?)```", doc, re.S)
+    assert len(examples) == 2
+    for code, output in examples:
+        exec(compile(code, "docs/protocol.md", "exec"), {})
+        assert capsys.readouterr().out == output

@@ -45,7 +45,7 @@ async def test_many_requests_in_flight_and_request_many() -> None:
             for word in range(0, 100, 2):
                 tg.start_soon(one, word)
         assert got == {w: [w, w + 1] for w in range(0, 100, 2)}
-        # 3,000 words: several frames, through request_many under asyncio
+        # 1,000 words: two frames (999 + 1), pipelined through request_many under asyncio
         assert await client.read("D0", 1000) == list(range(1000))
         assert client.session.stats.malformed == 0
 
