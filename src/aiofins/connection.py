@@ -226,8 +226,10 @@ async def connect(
     :class:`~aiofins.transport.MemoryTransport` around a virtual PLC (tests without sockets);
     ``dest`` then defaults to ``0.1.0`` and ``src`` to ``0.254.0``.
     """
-    if (url is None) == (transport is None):
-        raise CommandError("connect() takes a URL or transport=, one of them")
+    if url is None and transport is None:
+        raise CommandError("the connection URL must be text (or give transport=); got None")
+    if url is not None and transport is not None:
+        raise CommandError("connect() takes a URL or transport=, not both")
     check_options(
         {
             "timeout": timeout,

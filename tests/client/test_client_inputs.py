@@ -68,7 +68,7 @@ async def test_wrong_types_are_command_errors_not_type_errors(url: str, sim: Sim
 
 async def test_connect_needs_a_url_string() -> None:
     with pytest.raises(aiofins.CommandError, match="the connection URL must be text"):
-        async with aiofins.connect(None):  # type: ignore[arg-type]
+        async with aiofins.connect(None):
             pass
 
 
