@@ -284,3 +284,35 @@ def test_any_address_gets_an_end_code(
         if code != 0:
             assert data == b""  # an error reads nothing
     assert code in {0, 0x1001, 0x1003, 0x1101, 0x1103, 0x1104, 0x110B, 0x110C, 0x2101}
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    start=st.integers(0, 6144 * 16 - 1),
+    bits=st.lists(st.integers(0, 1), min_size=1, max_size=600),
+    forced=st.sets(st.integers(0, 6144 * 16 - 1), max_size=20),
+    seed=st.lists(st.integers(0, 0xFFFF), min_size=40, max_size=40),
+)
+def test_bit_runs_match_the_per_bit_definition(
+    start: int, bits: list[int], forced: set[int], seed: list[int]
+) -> None:
+    """Reads and writes of CIO bits (area 30) go word-wise; they must agree with the
+    element-by-element definition (``_get``/``_set``), forced bits included."""
+    start = min(start, 6144 * 16 - len(bits))
+    fast, slow = IOMemory(em_banks=0), IOMemory(em_banks=0)
+    first = start // 16
+    for memory in (fast, slow):
+        memory.write_words(0xB0, min(first, 6144 - 40), seed)
+        for i in forced:
+            memory.force(0x30, i // 16, i % 16, 0x0001)
+    area = slow.area(0x30)
+    word, bit = divmod(start, 16)
+    expected = bytes(slow._get(area, i) for i in range(start, start + len(bits)))
+    assert fast.read(0x30, word, bit, len(bits), frozenset({0x30})) == expected
+    assert fast.read_bits(0x30, word, bit, len(bits)) == [b == 1 for b in expected]
+    fast.write(0x30, word, bit, bytes(bits), len(bits), frozenset({0x30}))
+    for j, v in enumerate(bits):
+        slow._set(area, start + j, v)
+    assert fast._stores["CIO"] == slow._stores["CIO"]
+    near = min(first, 6141)
+    assert fast.read_words(0xB0, near, 3) == slow.read_words(0xB0, near, 3)

@@ -28,6 +28,7 @@ from typing import Literal
 from .codec import from_bcd, to_bcd
 from .errors import CommandError, DecodeError
 from .inputs import float_value, shown
+from .wordcodec import values_from_words, words_from_values
 
 
 class WordOrder(Enum):
@@ -331,11 +332,17 @@ def words_to_values(vtype: ValueType, words: Sequence[int]) -> list[Value]:
     n = vtype.words
     if len(words) % n:
         raise DecodeError(f"{len(words)} words is not a whole number of {vtype} values")
+    fast = values_from_words(vtype, words)  # the whole run at once
+    if fast is not None:
+        return fast
     return [vtype.decode(words[i : i + n]) for i in range(0, len(words), n)]
 
 
 def values_to_words(vtype: ValueType, values: Sequence[Value]) -> list[int]:
     """The words that store ``values`` one after another."""
+    fast = words_from_values(vtype, values)  # the whole run at once
+    if fast is not None:
+        return fast
     out: list[int] = []
     for v in values:
         out.extend(vtype.encode(v))

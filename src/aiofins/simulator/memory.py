@@ -334,6 +334,8 @@ class IOMemory:
             if sys.byteorder == "little":
                 chunk.byteswap()
             return chunk.tobytes()
+        if area.kind is Kind.BIT and count:  # the bits of the words they sit in, at once
+            return _bits_of(self._store(area), start, count)
         size = area.element_size
         out = bytearray()
         for i in range(start, start + count):
@@ -356,9 +358,13 @@ class IOMemory:
             self._store(area)[start : start + count] = chunk
             return
         size = area.element_size
-        values = [int.from_bytes(data[j * size : (j + 1) * size], "big") for j in range(count)]
-        if area.is_bit and any(v > 1 for v in values):
+        if area.is_bit and max(data[:count]) > 1:
             raise CommandFailed(PARAMETER_ERROR, message="bit data must be 00 or 01")
+        if area.kind is Kind.BIT:  # one pass over the words the bits sit in
+            forced = self._forced.get(area.store)
+            _set_bits(self._store(area), forced, start, data[:count])
+            return
+        values = [int.from_bytes(data[j * size : (j + 1) * size], "big") for j in range(count)]
         if area.kind is Kind.REGISTER:
             bank_index = _CURRENT_BANK_INDEX - start
             if 0 <= bank_index < count and values[bank_index] >= max(self.em_banks, 1):
@@ -400,6 +406,8 @@ class IOMemory:
     def read_words(self, code: int, word: int, count: int) -> list[int]:
         area = self.area(code)
         start = self.locate(area, word, 0, max(count, 1))
+        if area.kind is Kind.WORD:
+            return self._store(area)[start : start + count].tolist()
         return [self._get(area, i) for i in range(start, start + count)]
 
     def write_words(self, code: int, word: int, values: Sequence[int]) -> None:
@@ -412,6 +420,8 @@ class IOMemory:
     def read_bits(self, code: int, word: int, bit: int, count: int) -> list[bool]:
         area = self.area(code)
         start = self.locate(area, word, bit, max(count, 1))
+        if area.kind is Kind.BIT and count:
+            return [b == 1 for b in _bits_of(self._store(area), start, count)]
         return [bool(self._get(area, i) & 1) for i in range(start, start + count)]
 
     def write_bits(self, code: int, word: int, bit: int, values: Sequence[bool]) -> None:
@@ -458,3 +468,37 @@ class IOMemory:
     def forced_count(self) -> int:
         n = sum(bin(w).count("1") for f in self._forced.values() for w in f)
         return n + sum(self.completion_forced)
+
+
+_BIT_CHARS = bytes.maketrans(b"01", b"\x00\x01")
+
+
+def _words_int(store: array[int], first: int, last: int) -> int:
+    """Words ``first..last`` of ``store`` as one integer, word ``first`` least significant."""
+    return int.from_bytes(store[first : last + 1].tobytes(), sys.byteorder)
+
+
+def _bits_of(store: array[int], start: int, count: int) -> bytes:
+    """Bits ``start..start+count-1`` (16 per word, bit 0 first) as bytes 00/01."""
+    first, last = start >> 4, (start + count - 1) >> 4
+    value = _words_int(store, first, last) >> (start & 15)
+    return format(value, f"0{count}b")[-count:][::-1].encode().translate(_BIT_CHARS)
+
+
+def _set_bits(store: array[int], forced: array[int] | None, start: int, bits: bytes) -> None:
+    """Set bits ``start..`` from bytes 00/01; a forced bit keeps its state."""
+    count = len(bits)
+    first, last = start >> 4, (start + count - 1) >> 4
+    shift = start & 15
+    span = ((1 << count) - 1) << shift
+    new = int(bits[::-1].translate(_DIGIT_CHARS) or b"0", 2) << shift
+    if forced is not None:
+        span &= ~_words_int(forced, first, last)
+    old = _words_int(store, first, last)
+    value = (old & ~span) | (new & span)
+    words = array("H")
+    words.frombytes(value.to_bytes(2 * (last - first + 1), sys.byteorder))
+    store[first : last + 1] = words
+
+
+_DIGIT_CHARS = bytes.maketrans(b"\x00\x01", b"01")

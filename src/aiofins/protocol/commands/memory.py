@@ -9,7 +9,7 @@ chunking layer's business.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -19,6 +19,7 @@ from ..decoding import as_decode_error
 from ..errors import AddressError, CommandError, DecodeError
 from ..header import MAX_PARAMETER_SIZE, MAX_RESPONSE_DATA_SIZE
 from ..inputs import shown
+from ..wordcodec import pack_elements, unpack_elements
 from ._base import (
     Request,
     _decode_fields,
@@ -108,11 +109,16 @@ def _check_count(name: str, value: int, high: int, end_code: int) -> None:
 
 
 def _element_values(data: bytes, size: int) -> tuple[int, ...]:
-    return tuple(int.from_bytes(data[i : i + size], "big") for i in range(0, len(data), size))
+    return unpack_elements(data, size)
 
 
 def _element_bytes(values: Iterable[int], size: int, what: str) -> bytes:
-    out = bytearray()
+    if not isinstance(values, Sequence):
+        values = list(values)
+    packed = pack_elements(values, size)
+    if packed is not None:
+        return packed
+    out = bytearray()  # one by one, to name the value that is wrong
     limit = (1 << (8 * size)) - 1
     for value in values:
         if not isinstance(value, int) or not 0 <= value <= limit:
@@ -123,7 +129,7 @@ def _element_bytes(values: Iterable[int], size: int, what: str) -> bytes:
 
 def _check_bit_data(address: MemoryAddress, data: bytes, size: int) -> None:
     """Bit data (1-byte elements of a writable area) must be 00 or 01."""
-    if size == 1:
+    if size == 1 and data and max(data) > 1:
         for index, byte in enumerate(data):
             if byte > 1:
                 raise CommandError(
