@@ -10,12 +10,22 @@ route's limits and send the chunks pipelined.
 from __future__ import annotations
 
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar, overload
 
+import anyio
+
+from ._callplan import (
+    ReadFrames,
+    cacheable,
+    read_frames,
+    start_address,
+    typed_read,
+    typed_start,
+    value_type,
+    write_frames,
+)
 from ._commands import CommandMethods
-from .chunking import plan_memory
-from .protocol.addresses import parse_span
 from .protocol.areas import MemoryAddress
 from .protocol.commands import Request, operation_for
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
@@ -64,6 +74,8 @@ _PARTIAL_RESULTS: dict[int, frozenset[int]] = {
 }
 
 AddressLike = str | MemoryAddress
+#: ``progress(done, total)``: elements transferred so far, of ``total``.
+Progress = Callable[[int, int], object]
 
 
 class Client(CommandMethods):
@@ -238,37 +250,102 @@ class Client(CommandMethods):
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
+        progress: Progress | None = None,
     ) -> list[int]:
         """Read ``count`` elements from ``address`` (words, or 0/1 for bits), any size.
 
-        Transfers over the route's limit go as several 0101 frames, sent pipelined and
-        reassembled in order.
+        Transfers over the route's limit go as several 0101 frames, sent pipelined (up to the
+        session's in-flight cap) and reassembled in order. ``progress(done, total)`` is called
+        with the elements read so far as the replies come in (after each batch of as many
+        frames as the session keeps in flight).
         """
         if type(count) is not int or count < 0:
             count = whole_number("count", count, 0)
-        start = _start(address, count)
-        chunks = plan_memory(start, count, self.limits.memory_read_words)
-        if len(chunks) == 1:
-            result = await self.call(
-                MemoryAreaRead(chunks[0].address, chunks[0].count),
-                dest=dest,
-                timeout=timeout,
-                retries=retries,
-            )
-            return list(result.values)
-        requests = [MemoryAreaRead(chunk.address, chunk.count) for chunk in chunks]
-        responses = await self.execute_many(
-            [(r.MRC, r.SRC, r.encode()) for r in requests],
-            dest=dest,
-            timeout=timeout,
-            retries=retries,
-            idempotent=True,
+        limit = self.limits.memory_read_words
+        plan = (
+            read_frames(address, count, limit)
+            if cacheable(address)
+            else read_frames(start_address(address, count), count, limit)
         )
-        return [
-            v
-            for request, response in zip(requests, responses, strict=True)
-            for v in request.decode_response(response.data).values
-        ]
+        commands = plan.commands
+        if len(commands) == 1:  # the usual read: one frame, no extra coroutine
+            mrc, src, params = commands[0]
+            if retries is not None or (
+                timeout is not None and (type(timeout) is not float or not timeout > 0.0)
+            ):  # checked as execute() checks them
+                timeout, retries = _call_options(timeout, retries)
+            target = self.dest if dest is None else FinsAddress.of(dest)
+            try:
+                response = await self.session.request(
+                    mrc, src, params, dest=target, timeout=timeout, idempotent=True,
+                    retries=retries,
+                )  # fmt: skip
+            except EndCodeError as exc:
+                self._add_addressing_hint(exc, target)
+                raise
+            self.last_end_code = response.end_code
+            if progress is not None:
+                progress(count, count)
+            return plan.one(response.data)
+        if progress is not None and commands:
+            return plan.values(
+                await self._read_reporting(plan, count, dest, timeout, retries, progress)
+            )
+        responses = await self.execute_many(
+            commands, dest=dest, timeout=timeout, retries=retries, idempotent=True
+        )
+        return plan.values([response.data for response in responses])
+
+    async def _read_reporting(
+        self,
+        plan: ReadFrames,
+        total: int,
+        dest: FinsAddress | str | None,
+        timeout: float | None,
+        retries: int | None,
+        progress: Progress,
+    ) -> list[bytes]:
+        """The frames of ``plan`` in batches of the session's in-flight cap, two batches
+        under way at once (one fills the wire while the other's caller reports), so the read
+        stays pipelined; ``progress`` is called after each batch. The first error cancels
+        the rest and is raised."""
+        commands = plan.commands
+        counts = [r.count for r in plan.requests]
+        step = self.session.max_in_flight
+        data: list[bytes] = [b""] * len(commands)
+        batches = iter(range(0, len(commands), step))
+        done = 0
+        errors: list[Exception] = []
+
+        async def worker(scope: anyio.CancelScope) -> None:
+            nonlocal done
+            try:
+                for first in batches:
+                    last = first + step
+                    responses = await self.execute_many(
+                        commands[first:last],
+                        dest=dest,
+                        timeout=timeout,
+                        retries=retries,
+                        idempotent=True,
+                    )
+                    if errors:  # another batch failed: report no more
+                        return
+                    data[first:last] = [response.data for response in responses]
+                    done += sum(counts[first:last])
+                    progress(done, total)
+            except Exception as exc:
+                if not errors:
+                    errors.append(exc)
+                scope.cancel()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(worker, tg.cancel_scope)
+            if len(commands) > step:
+                tg.start_soon(worker, tg.cancel_scope)
+        if errors:
+            raise errors[0]
+        return data
 
     async def write(
         self,
@@ -279,35 +356,47 @@ class Client(CommandMethods):
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
+        progress: Progress | None = None,
     ) -> None:
         """Write words (or 0/1 bits) from ``address``.
 
         A write over the route's limit needs several frames and is therefore **not atomic**:
         the PLC's program may run between them and see half-old, half-new data, and a failure
-        midway leaves a partial write. It is refused unless ``allow_split=True``.
+        midway leaves a partial write. It is refused unless ``allow_split=True``. The frames
+        go one after another; ``progress(done, total)`` is called with the elements written
+        so far after each.
         """
         if type(values) is not list and type(values) is not tuple:
             _check_words(values)
-        start = _start(address, len(values))
-        chunks = plan_memory(start, len(values), self.limits.memory_write_words)
-        if len(chunks) > 1 and not allow_split:
+        limit = self.limits.memory_write_words
+        count = len(values)
+        plan = (
+            write_frames(address, count, limit)
+            if cacheable(address)
+            else write_frames(start_address(address, count), count, limit)
+        )
+        frames = plan.frames
+        if len(frames) > 1 and not allow_split:
             raise CommandError(
-                f"writing {len(values)} elements needs {len(chunks)} frames on this route "
-                f"(limit {self.limits.memory_write_words}); such a write is not atomic — pass "
+                f"writing {count} elements needs {len(frames)} frames on this route "
+                f"(limit {limit}); such a write is not atomic — pass "
                 "allow_split=True to accept that"
             )
-        if not chunks:  # count 0: a normal response that writes nothing (manual 5-3-3)
+        if not frames:  # count 0: a normal response that writes nothing (manual 5-3-3)
             await self.call(
-                MemoryAreaWrite(start, b""), dest=dest, timeout=timeout, retries=retries
+                MemoryAreaWrite(plan.start, b""), dest=dest, timeout=timeout, retries=retries
             )
-        for chunk in chunks:
-            part = values[chunk.offset : chunk.offset + chunk.count]
-            await self.call(
-                MemoryAreaWrite.from_values(chunk.address, part),
-                dest=dest,
-                timeout=timeout,
-                retries=retries,
+        for i, (offset, n, _) in enumerate(frames):
+            response = await self.execute(
+                0x01, 0x02, plan.params(i, values), dest=dest, timeout=timeout, retries=retries
             )
+            if response.data:
+                raise DecodeError(
+                    f"{MemoryAreaWrite.NAME}: expected no response data, got "
+                    f"{len(response.data)} bytes"
+                )
+            if progress is not None:
+                progress(offset + n, count)
 
     async def read_bit(self, address: AddressLike, **kw: Any) -> bool:
         """Read one bit (``"CIO 0.01"``) as a bool."""
@@ -316,7 +405,12 @@ class Client(CommandMethods):
     # -- typed values -------------------------------------------------------------------
 
     def _type(self, vtype: str | ValueType) -> ValueType:
-        return parse_value_type(vtype, default_word_order=self.word_order)
+        if isinstance(vtype, ValueType):
+            return vtype
+        try:
+            return value_type(vtype, self.word_order)
+        except TypeError:  # unhashable: let the parser say what it takes
+            return parse_value_type(vtype, default_word_order=self.word_order)
 
     @overload
     async def read_value(self, address: AddressLike, vtype: FloatTypeName, **kw: Any) -> float: ...
@@ -339,6 +433,10 @@ class Client(CommandMethods):
         ``"int32"`` or ``"bcd16"``, ``bool`` for ``"bit"``); other specs (``"string:8"``,
         ``"float32:ABCD"``, a :class:`ValueType`) give the union :data:`Value`.
         """
+        if cacheable(address) and (type(vtype) is str or isinstance(vtype, ValueType)):
+            plan = typed_read(address, vtype, 1, self.word_order.value)
+            value: Value = plan.decode(await self.read(plan.start, plan.words, **kw))[0]
+            return value
         return (await self.read_values(address, vtype, 1, **kw))[0]
 
     @overload
@@ -361,9 +459,11 @@ class Client(CommandMethods):
         self, address: AddressLike, vtype: str | ValueType, count: int, **kw: Any
     ) -> list[Any]:  # list[Value], of the one type the overloads name
         """Read ``count`` consecutive typed values (typed as :meth:`read_value` says)."""
-        t = self._type(vtype)
-        start = _typed_start(address, t, count)
-        return words_to_values(t, await self.read(start, t.words * count, **kw))
+        if cacheable(address) and (type(vtype) is str or isinstance(vtype, ValueType)):
+            plan = typed_read(address, vtype, count, self.word_order.value)
+            return plan.decode(await self.read(plan.start, plan.words, **kw))
+        t = self._type(vtype)  # what is wrong with the address: read() says it
+        return words_to_values(t, await self.read(address, t.words * count, **kw))
 
     async def write_value(
         self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
@@ -376,7 +476,7 @@ class Client(CommandMethods):
     ) -> None:
         """Write consecutive typed values."""
         t = self._type(vtype)
-        start = _typed_start(address, t, len(values))
+        start = typed_start(address, t, len(values)) if cacheable(address) else address
         await self.write(start, values_to_words(t, values), **kw)
 
     # -- tag lists ----------------------------------------------------------------------
@@ -411,10 +511,17 @@ class Client(CommandMethods):
             plan = self.compile_tags(tags)
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
-            mrc, src, params, request, _ = self._run_read(plan, 0)
-            response = await self.execute(
-                mrc, src, params, timeout=timeout, idempotent=request.IDEMPOTENT
-            )
+            mrc, src, params, _, _ = self._run_read(plan, 0)
+            if timeout is not None and (type(timeout) is not float or not timeout > 0.0):
+                timeout, _ = _call_options(timeout, None)  # checked as execute() checks it
+            try:  # (the session directly: no coroutine of execute() per scan)
+                response = await self.session.request(
+                    mrc, src, params, dest=self.dest, timeout=timeout, idempotent=True
+                )
+            except EndCodeError as exc:
+                self._add_addressing_hint(exc, self.dest)
+                raise
+            self.last_end_code = response.end_code
             return plan.decode((self._run_words(plan, 0, response),), (), errors)
         commands, multiple = self._scan_commands(plan)
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
@@ -490,35 +597,6 @@ class Client(CommandMethods):
             return values
         words: tuple[int, ...] = unpack(data)
         return words
-
-
-def _typed_start(address: AddressLike, vtype: ValueType, count: int) -> AddressLike:
-    """:func:`_start` for ``count`` values of ``vtype``, which (but for ``bit``) need words.
-
-    A typed value at a bit address would read its bits as the value's words.
-    """
-    if vtype.kind == "bit":
-        return address
-    start = _start(address, vtype.words * count)
-    size = start.element_size
-    if size != 2:
-        what = "a bit address" if size == 1 else f"an area of {size}-byte elements"
-        raise CommandError(
-            f"{address} is {what}: {vtype.kind} values need word addresses (drop the type, "
-            "or use 'bit' for bits)"
-        )
-    return start
-
-
-def _start(address: AddressLike, count: int) -> MemoryAddress:
-    """The address of the first of ``count`` elements.
-
-    Address text (CS/CJ notation) is also checked for room for all ``count`` elements, so a
-    transfer running past the end of its area fails here (:class:`AddressError`, end code
-    1104) before anything is sent, instead of at the PLC, possibly after part of a split
-    write. A :class:`MemoryAddress` is sent as given (it may be meant for another series).
-    """
-    return address if isinstance(address, MemoryAddress) else parse_span(address, count)
 
 
 def _call_options(timeout: float | None, retries: int | None) -> tuple[float | None, int | None]:

@@ -302,3 +302,42 @@ async def test_typed_values_need_word_addresses(url: str) -> None:
         assert await plc.read("CIO 0", 1) == [0xFFFB]
         await plc.write_value("D500", 2.5, "float32")  # words: fine
         assert await plc.read_value("D500", "float32") == 2.5
+
+
+async def test_progress_of_a_multi_frame_read_and_write(sim: Simulator, url: str) -> None:
+    data = [(i * 3) & 0xFFFF for i in range(5000)]
+    written: list[tuple[int, int]] = []
+    read: list[tuple[int, int]] = []
+    async with connect(url, timeout=2) as plc:
+        await plc.write("D100", data, allow_split=True, progress=lambda *a: written.append(a))
+        assert written == [(997 * k, 5000) for k in range(1, 6)] + [(5000, 5000)]
+        before = sim.counters.requests
+        words = await plc.read("D100", 5000, progress=lambda *a: read.append(a))
+        assert words == data
+        assert sim.counters.requests - before == 6  # ceil(5000 / 999), as without progress
+        dones = [done for done, _ in read]
+        assert dones == sorted(dones) and dones[-1] == 5000 and len(dones) == 6
+        assert {total for _, total in read} == {5000}
+        assert set(b - a for a, b in zip([0, *dones], dones, strict=False)) <= {999, 5}
+        one: list[tuple[int, int]] = []
+        assert await plc.read("D100", 3, progress=lambda *a: one.append(a)) == data[:3]
+        assert one == [(3, 3)]
+
+
+async def test_an_error_in_a_reported_read_is_raised_as_itself(sim: Simulator, url: str) -> None:
+    calls: list[int] = []
+
+    def progress(done: int, total: int) -> None:
+        calls.append(done)
+        if len(calls) == 2:
+            raise RuntimeError("stop here")
+
+    async with connect(url, timeout=2) as plc:
+        with pytest.raises(RuntimeError, match="stop here"):
+            await plc.read("D0", 9000, progress=progress)
+        assert len(calls) == 2
+        assert await plc.read("D0", 2000) == [0] * 2000  # the client still works
+        sim.plan.per_command[0x0101] = FaultRule(end_code=0x1103)
+        with pytest.raises(EndCodeError) as info:
+            await plc.read("D0", 3000, progress=progress, retries=0)
+        assert info.value.end_code.code == 0x1103

@@ -12,6 +12,7 @@ the word digits then two bit digits) is accepted too. ``#82:0064:00`` is a raw d
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 
 from .areas import (
     AREAS,
@@ -94,6 +95,12 @@ def parse_address(text: str, series: Series = Series.CS_CJ) -> MemoryAddress:
     """
     if not isinstance(text, str):
         raise AddressError(f"address text must be str, got {type(text).__name__}")
+    return _parse_text(text, series)
+
+
+@lru_cache(maxsize=4096)
+def _parse_text(text: str, series: Series) -> MemoryAddress:
+    """:func:`parse_address` of str text, once per distinct text (errors are not kept)."""
     norm = "".join(text.split()).upper()
     if not norm:
         raise AddressError("empty address text")
@@ -108,7 +115,14 @@ def parse_address(text: str, series: Series = Series.CS_CJ) -> MemoryAddress:
 def parse_span(text: str, count: int, series: Series = Series.CS_CJ) -> MemoryAddress:
     """Parse address text for the first of ``count`` elements and check they all fit in its
     area (:func:`check_span`: :class:`AddressError` with end code 1104, naming the text)."""
-    address = parse_address(text, series)
+    if not isinstance(text, str):
+        raise AddressError(f"address text must be str, got {type(text).__name__}")
+    return _parse_span(text, count, series)
+
+
+@lru_cache(maxsize=4096)
+def _parse_span(text: str, count: int, series: Series) -> MemoryAddress:
+    address = _parse_text(text, series)
     try:
         check_span(address, count, series)
     except AddressError as exc:

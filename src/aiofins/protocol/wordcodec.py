@@ -24,7 +24,13 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from .values import Value, ValueType
 
-__all__ = ["pack_elements", "unpack_elements", "values_from_words", "words_from_values"]
+__all__ = [
+    "numeric_codec",
+    "pack_elements",
+    "unpack_elements",
+    "values_from_words",
+    "words_from_values",
+]
 
 #: ``struct`` codes of unsigned elements by size in bytes.
 _ELEMENT_CODES = {1: "B", 2: "H", 4: "I"}
@@ -89,9 +95,18 @@ def _orders(order_value: str) -> tuple[str, str]:
     }[order_value]
 
 
+def numeric_codec(vtype: ValueType, count: int) -> tuple[struct.Struct, struct.Struct] | None:
+    """(memory words struct, values struct) for ``count`` values of a numeric or BCD type
+    (the BCD values as the integers of their digits' nibbles), else ``None``.
+
+    ``values.unpack(words.pack(*memory_words))`` decodes a run; ``words.unpack(values.pack(
+    *numbers))`` encodes one.
+    """
+    return _run_codec(vtype, count)
+
+
 @lru_cache(maxsize=512)
 def _run_codec(vtype: ValueType, count: int) -> tuple[struct.Struct, struct.Struct] | None:
-    """(memory words struct, values struct) for ``count`` values of a numeric or BCD type."""
     code = _NUMBER_CODES.get(vtype.kind) or _BCD_CODES.get(vtype.kind)
     if code is None:
         return None
