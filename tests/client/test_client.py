@@ -316,9 +316,9 @@ async def test_progress_of_a_multi_frame_read_and_write(sim: Simulator, url: str
         assert words == data
         assert sim.counters.requests - before == 6  # ceil(5000 / 999), as without progress
         dones = [done for done, _ in read]
-        assert dones == sorted(dones) and dones[-1] == 5000 and len(dones) == 6
+        assert dones == sorted(set(dones)) and dones[-1] == 5000
+        assert all(done % 999 in (0, 5) for done in dones)  # whole frames, as they come
         assert {total for _, total in read} == {5000}
-        assert set(b - a for a, b in zip([0, *dones], dones, strict=False)) <= {999, 5}
         one: list[tuple[int, int]] = []
         assert await plc.read("D100", 3, progress=lambda *a: one.append(a)) == data[:3]
         assert one == [(3, 3)]
