@@ -23,10 +23,10 @@ address is refused).
 
 from __future__ import annotations
 
-import logging
+import heapq
 import math
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from types import TracebackType
@@ -34,8 +34,8 @@ from typing import TYPE_CHECKING
 
 import anyio
 from anyio.abc import TaskGroup
-from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
+from ._channel import Channel, Wake
 from .endpoint import parse_endpoint
 from .hooks import EventHooks, ScanDone
 from .pool import backend_sleep, event_loop_clock
@@ -86,12 +86,44 @@ class Snapshot:
 
     @property
     def values(self) -> dict[str, Value | None]:
-        return {name: r.value for name, r in self.readings.items()}
+        readings = self.readings
+        if isinstance(readings, GoodReadings):
+            return readings.values_by_name()  # type: ignore[return-value]
+        return {name: r.value for name, r in readings.items()}
+
+
+class ScanState(Enum):
+    """Where a scan group is in its cycle (:attr:`ScanGroup.state`)."""
+
+    #: Added, not yet started (the poller is not running).
+    STOPPED = "stopped"
+    #: Waiting for its next scan time.
+    IDLE = "idle"
+    #: Its scan time came: the poller's timer woke it, its scan starts.
+    DUE = "due"
+    #: Reading its tags.
+    SCANNING = "scanning"
+    #: Waiting for room in the poller's buffer to deliver its snapshot (backpressure).
+    DELIVERING = "delivering"
+
+
+#: The transitions :meth:`ScanGroup._enter` allows.
+_NEXT_STATES: dict[ScanState, frozenset[ScanState]] = {
+    ScanState.STOPPED: frozenset({ScanState.IDLE}),
+    ScanState.IDLE: frozenset({ScanState.DUE, ScanState.STOPPED}),
+    ScanState.DUE: frozenset({ScanState.SCANNING, ScanState.STOPPED}),
+    ScanState.SCANNING: frozenset({ScanState.DELIVERING, ScanState.IDLE, ScanState.STOPPED}),
+    ScanState.DELIVERING: frozenset({ScanState.IDLE, ScanState.STOPPED}),
+}
 
 
 @dataclass
 class ScanGroup:
-    """A tag list read from one endpoint every ``interval`` seconds, with its counters."""
+    """A tag list read from one endpoint every ``interval`` seconds, with its counters.
+
+    ``missed`` counts the scan times that passed while the group was still busy with an
+    earlier scan (or the event loop was too late to start it): each is skipped, never queued.
+    """
 
     name: str
     url: str
@@ -103,12 +135,17 @@ class ScanGroup:
     missed: int = 0
     last_duration: float = 0.0
     plan: ReadPlan | None = None
-    _last: dict[str, TagReading] = field(default_factory=dict)
-    #: The error of the last failed scan while scans fail (logged once per outage).
-    _failing: str | None = None
-    #: Missed scans not yet warned about, and when the last warning was logged.
-    _missed_unlogged: int = 0
-    _missed_logged_at: float = -math.inf
+    state: ScanState = ScanState.STOPPED
+    _last: Mapping[str, TagReading] = field(default_factory=dict)
+    #: The values of the last scan when every tag was good in it (else None).
+    _last_good: dict[str, Value] | None = None
+    _wake: Wake = field(default_factory=Wake, repr=False)
+
+    def _enter(self, state: ScanState) -> None:
+        """The one place a group changes state."""
+        if state not in _NEXT_STATES[self.state]:
+            raise RuntimeError(f"scan group {self.name!r}: {self.state.name} -> {state.name}")
+        self.state = state
 
 
 class Poller:
@@ -135,12 +172,16 @@ class Poller:
         self._hooks = None if hooks is None else hooks.or_none()
         self.changes_only = changes_only
         self.groups: dict[str, ScanGroup] = {}
-        send, receive = anyio.create_memory_object_stream[Snapshot](buffer)
-        self._send: MemoryObjectSendStream[Snapshot] = send
-        self._receive: MemoryObjectReceiveStream[Snapshot] = receive
+        self._channel: Channel[Snapshot] = Channel(buffer)
         self._tg: TaskGroup | None = None
         self._now = anyio.current_time
         self._sleep: Callable[[float], Awaitable[None]] = anyio.sleep
+        #: (next scan time, order added, group): the one timer's schedule.
+        self._schedule: list[tuple[float, int, ScanGroup]] = []
+        self._added = 0
+        self._timer_at = math.inf  # when the timer task wakes next
+        self._timer_scope: anyio.CancelScope | None = None
+        self._timer_wake = Wake()
 
     def add_group(
         self,
@@ -170,16 +211,36 @@ class Poller:
         group = ScanGroup(name, url, dict(tags), interval, timeout)
         self.groups[name] = group
         if self._tg is not None:
-            self._tg.start_soon(self._run_group, group)
+            self._start(group)
         return group
+
+    def _start(self, group: ScanGroup) -> None:
+        """Start ``group``'s task and schedule its first scan now."""
+        assert self._tg is not None
+        group._wake.bind()
+        group._enter(ScanState.IDLE)
+        self._tg.start_soon(self._run_group, group)
+        self._plan_scan(self._now(), group)
+
+    def _plan_scan(self, when: float, group: ScanGroup) -> None:
+        self._added += 1
+        heapq.heappush(self._schedule, (when, self._added, group))
+        if when < self._timer_at:  # earlier than the timer sleeps: wake it
+            if self._timer_scope is not None:
+                self._timer_scope.cancel()
+            else:
+                self._timer_wake.set()
 
     async def __aenter__(self) -> Poller:
         self._now = event_loop_clock()
         self._sleep = backend_sleep()
+        self._channel.bind()
+        self._timer_wake.bind()
         self._tg = anyio.create_task_group()
         await self._tg.__aenter__()
+        self._tg.start_soon(self._timer)
         for group in self.groups.values():
-            self._tg.start_soon(self._run_group, group)
+            self._start(group)
         return self
 
     async def __aexit__(
@@ -194,76 +255,63 @@ class Poller:
             return await self._tg.__aexit__(exc_type, exc, tb)
         finally:
             self._tg = None
-            self._send.close()
-            self._receive.close()
+            self._schedule.clear()
+            self._timer_at = math.inf
+            for group in self.groups.values():
+                if group.state is not ScanState.STOPPED:
+                    group._enter(ScanState.STOPPED)
+            self._channel.close()
 
     def __aiter__(self) -> AsyncIterator[Snapshot]:
-        return self._receive.__aiter__()
+        return self._channel
+
+    async def _timer(self) -> None:
+        """The one timer of all groups: sleeps until the earliest scan time, wakes each group
+        that is due, and puts its next scan time on the schedule (a group still busy then
+        misses that scan, counted)."""
+        clock, sleep, schedule = self._now, self._sleep, self._schedule
+        pop, push = heapq.heappop, heapq.heappush
+        idle, due = ScanState.IDLE, ScanState.DUE
+        while True:
+            if not schedule:
+                self._timer_at = math.inf
+                await self._timer_wake.wait()
+                continue
+            now = clock()
+            when = schedule[0][0]
+            if when > now:
+                self._timer_at = when
+                with anyio.CancelScope() as scope:
+                    self._timer_scope = scope
+                    await sleep(when - now)
+                self._timer_scope = None
+                continue
+            self._timer_at = -math.inf  # (awake: nothing need wake it)
+            while schedule and schedule[0][0] <= now:
+                when, order, group = pop(schedule)
+                interval = group.interval
+                late = math.floor((now - when) / interval)  # scan times already gone
+                if late:
+                    group.missed += late
+                    when += late * interval
+                if group.state is idle:
+                    group._enter(due)
+                    group._wake.set()
+                else:
+                    group.missed += 1
+                push(schedule, (when + interval, order, group))
 
     async def _run_group(self, group: ScanGroup) -> None:
-        clock, sleep = self._now, self._sleep
-        next_at = clock()
-        logger.info(
-            "scan group %s started: %d tags from %s every %.3g s",
-            group.name,
-            len(group.tags),
-            group.url,
-            group.interval,
-            extra={"group": group.name, "endpoint": group.url},
-        )
-        try:
-            while True:
-                now = clock()
-                if now < next_at:
-                    await sleep(next_at - now)
-                snapshot = await self.scan_once(group)
-                if snapshot is not None:
-                    try:  # room in the buffer: no extra trip through the event loop
-                        self._send.send_nowait(snapshot)
-                    except anyio.WouldBlock:  # full: wait for the consumer (backpressure)
-                        await self._send.send(snapshot)
-                next_at += group.interval
-                now = clock()
-                skipped = 0
-                if now > next_at:
-                    skipped = math.floor((now - next_at) / group.interval) + 1
-                    group.missed += skipped
-                    next_at += skipped * group.interval
-                    self._missed(group, skipped, now)
-                hooks = self._hooks
-                if hooks is not None and hooks.scan_done:
-                    hooks.emit(
-                        hooks.scan_done,
-                        ScanDone(
-                            group.name, group.scans, group.last_duration, skipped, group._failing
-                        ),
-                    )
-        finally:
-            logger.info(
-                "scan group %s stopped after %d scans (%d failed, %d missed)",
-                group.name,
-                group.scans,
-                group.errors,
-                group.missed,
-                extra={"group": group.name, "endpoint": group.url},
-            )
-
-    def _missed(self, group: ScanGroup, skipped: int, now: float) -> None:
-        """Count missed scans; warn at the first and then at most once a minute per group."""
-        group._missed_unlogged += skipped
-        if now - group._missed_logged_at < MISSED_WARNING_INTERVAL:
-            return
-        logger.warning(
-            "scan group %s missed %d scans (last scan took %.3f s, interval %.3g s): "
-            "the PLC, the pool or the consumer cannot keep up",
-            group.name,
-            group._missed_unlogged,
-            group.last_duration,
-            group.interval,
-            extra={"group": group.name, "endpoint": group.url},
-        )
-        group._missed_unlogged = 0
-        group._missed_logged_at = now
+        channel = self._channel
+        wake = group._wake
+        while True:
+            await wake.wait()
+            group._enter(ScanState.SCANNING)
+            snapshot = await self.scan_once(group)
+            if snapshot is not None and not channel.send_nowait(snapshot):
+                group._enter(ScanState.DELIVERING)  # full: wait for the consumer
+                await channel.send(snapshot)
+            group._enter(ScanState.IDLE)
 
     async def scan_once(self, group: ScanGroup) -> Snapshot | None:
         """Run one scan of ``group`` now; the snapshot (``None`` if nothing to deliver)."""
@@ -311,17 +359,25 @@ class Poller:
         changed: set[str] = set()
         last = group._last
         if error is None and not bad:  # the usual scan: every tag read, in the tag list's order
-            for name, read in values.items():
-                previous = last.get(name)
-                readings[name] = _reading(read, _GOOD, stamp, None)
-                if (
-                    previous is None
-                    or previous.quality is not _GOOD
-                    or not (previous.value is read or previous.value == read)
-                ):
-                    changed.add(name)
-            group._last = readings
-            return self._deliver(group, stamp, readings, changed, error)
+            before = group._last_good
+            if before is not None:  # so was the last one: compare values only
+                changed = {
+                    name
+                    for name, read in values.items()
+                    if not ((old := before.get(name, _NONE)) is read or old == read)
+                }
+            else:
+                for name, read in values.items():
+                    previous = last.get(name)
+                    if (
+                        previous is None
+                        or previous.quality is not _GOOD
+                        or not (previous.value is read or previous.value == read)
+                    ):
+                        changed.add(name)
+            good = GoodReadings(values, stamp)  # a reading is made when asked for
+            group._last, group._last_good = good, values
+            return self._deliver(group, stamp, good, changed, error)
         for name in group.tags:
             previous = last.get(name)
             failed = error if error is not None else bad.get(name)
@@ -342,14 +398,14 @@ class Poller:
             ):
                 changed.add(name)
             readings[name] = reading
-        group._last = readings
+        group._last, group._last_good = readings, None
         return self._deliver(group, stamp, readings, changed, error)
 
     def _deliver(
         self,
         group: ScanGroup,
         stamp: float,
-        readings: dict[str, TagReading],
+        readings: Mapping[str, TagReading],
         changed: set[str],
         error: str | None,
     ) -> Snapshot | None:
@@ -371,6 +427,39 @@ class Poller:
 
 
 _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR
+_NONE = object()
+
+
+class GoodReadings(Mapping[str, TagReading]):
+    """The readings of a scan in which every tag was read: built from the values when
+    looked up, so a scan nobody looks into costs no object per tag."""
+
+    __slots__ = ("_stamp", "_values")
+
+    def __init__(self, values: dict[str, Value], stamp: float) -> None:
+        self._values = values
+        self._stamp = stamp
+
+    def __getitem__(self, name: str) -> TagReading:
+        return _reading(self._values[name], _GOOD, self._stamp, None)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._values
+
+    def __repr__(self) -> str:
+        return repr(dict(self.items()))
+
+    def values_by_name(self) -> dict[str, Value]:
+        """``{name: value}`` without a reading per tag."""
+        return dict(self._values)
+
+
 _new = object.__new__
 _set = object.__setattr__
 

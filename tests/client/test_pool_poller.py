@@ -9,7 +9,7 @@ import anyio
 import pytest
 
 from aiofins.connection import connect
-from aiofins.poller import Poller, Quality
+from aiofins.poller import Poller, Quality, ScanState, TagReading
 from aiofins.pool import Pool
 from aiofins.protocol.errors import (
     AddressError,
@@ -399,3 +399,34 @@ async def test_a_tag_holding_no_value_of_its_type_fails_alone(sim: Simulator) ->
         )
         assert snap["name"].quality is Quality.STALE and "tag 'name'" in str(snap["name"].error)
         assert snap.changed == {"preset", "name"}
+
+
+async def test_poller_groups_run_on_one_timer_with_states(sim: Simulator) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(timeout=1) as pool:
+        async with pool.client(url) as plc:
+            await plc.write("D0", [1, 2])
+        poller = Poller(pool)
+        fast = poller.add_group("fast", url, {"a": "D0", "b": "D1"}, interval=0.02)
+        slow = poller.add_group("slow", url, {"a": "D0"}, interval=10)
+        assert (fast.state, slow.state) == (ScanState.STOPPED, ScanState.STOPPED)
+        seen: dict[str, int] = {"fast": 0, "slow": 0}
+        async with poller:
+            assert fast.state is ScanState.IDLE  # started, its first scan due now
+            with anyio.fail_after(5):
+                async for snap in poller:
+                    seen[snap.group] += 1
+                    if snap.group == "fast":
+                        assert dict(snap.readings) == {
+                            "a": TagReading(1, Quality.GOOD, snap.timestamp),
+                            "b": TagReading(2, Quality.GOOD, snap.timestamp),
+                        }
+                        assert snap.values == {"a": 1, "b": 2} and len(snap.readings) == 2
+                        assert snap.changed == ({"a", "b"} if seen["fast"] == 1 else set())
+                    if seen["fast"] == 5:
+                        break
+            assert seen == {"fast": 5, "slow": 1}  # the slow group waits its 10 s
+            assert slow.state is ScanState.IDLE
+            # One schedule entry per group; the next slow scan ~10 s after its first.
+            assert sorted(g.name for _, _, g in poller._schedule) == ["fast", "slow"]
+        assert (fast.state, slow.state) == (ScanState.STOPPED, ScanState.STOPPED)
