@@ -1,0 +1,381 @@
+"""The public API against a bare client in the same run, as ratios next to issue #13's targets.
+
+Rows (the C responder of ../shared/tools/perf answers; word i of its DM holds i):
+
+* ``plc.read("D100", 1)`` one after another, against the bare asyncio ``DatagramProtocol``
+  client of ``bench_session.py`` (stock asyncio and uvloop) and the C client;
+* 50 tasks calling ``plc.read`` on one client (``max_in_flight=50``), against the bare client
+  with 50 in flight;
+* ``plc.read("D0", 32768)``: all words right, 33 frames, its time in sequential 1-word round
+  trips; then through a relay adding 5 ms to each reply, against one frame at a time, and
+  with a ``progress`` callback against without;
+* a Poller over 100 PLCs (100 C responders) x a 20-tag group every 50 ms: missed scans and
+  CPU per scan (``getrusage``) against one bare ``Session.request``'s CPU in the same run;
+  and 1,000 PLCs at 1 s: missed scans.
+
+    python benchmarks/bench_api.py [--pin 0] [--seconds 3] [--skip poll1000]
+
+``--pin 0`` puts the responder and this process on CPU 0 (the per-call cost); the Poller rows
+run unpinned with their responders. The VM's speed moves by +-30 %: read the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import anyio
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_session import (
+    PERF_TOOLS,
+    c_baseline,
+    free_port,
+    raw_baseline,
+    start_responder,
+)
+
+import aiofins
+from aiofins.poller import Poller
+from aiofins.pool import Pool
+
+Row = dict[str, Any]
+ROWS: list[Row] = []
+
+
+def row(
+    name: str, value: float, unit: str, ratio: float | None, target: str, met: bool | None
+) -> None:
+    ROWS.append(
+        {"name": name, "value": value, "unit": unit, "ratio": ratio, "target": target, "met": met}
+    )
+    shown = "" if ratio is None else f"{ratio:6.2f}"
+    verdict = {None: "", True: "met", False: "NOT met"}[met]
+    print(f"  {name:<58} {value:>10.1f} {unit:<7} {shown:>7}  {target:<22} {verdict}", flush=True)
+
+
+def uvloop_options(loop: str) -> dict[str, Any]:
+    return {"use_uvloop": True} if loop == "uvloop" else {}
+
+
+# -- the call path -------------------------------------------------------------------------
+
+
+async def api_sequential(port: int, seconds: float) -> float:
+    async with aiofins.connect(f"udp://127.0.0.1:{port}?node=1", max_in_flight=50) as plc:
+        read = plc.read
+        for _ in range(500):
+            await read("D100", 1)
+        n = 0
+        start = time.perf_counter()
+        end = start + seconds
+        while True:
+            for _ in range(100):
+                await read("D100", 1)
+            n += 100
+            now = time.perf_counter()
+            if now >= end:
+                return n / (now - start)
+
+
+async def api_tasks(port: int, seconds: float, width: int = 50) -> float:
+    async with aiofins.connect(f"udp://127.0.0.1:{port}?node=1", max_in_flight=width) as plc:
+        stop = time.perf_counter() + seconds
+        counts = [0] * width
+
+        async def worker(i: int) -> None:
+            read = plc.read
+            while time.perf_counter() < stop:
+                for _ in range(20):
+                    await read("D100", 1)
+                counts[i] += 20
+
+        start = time.perf_counter()
+        async with anyio.create_task_group() as tg:
+            for i in range(width):
+                tg.start_soon(worker, i)
+        return sum(counts) / (time.perf_counter() - start)
+
+
+def bare(port: int, seconds: float, loop: str, case: str) -> float:
+    rows: list[Row] = anyio.run(
+        raw_baseline, port, seconds, loop, [case], backend_options=uvloop_options(loop)
+    )
+    return float(rows[0]["req_s"])
+
+
+def call_path_rows(port: int, seconds: float, cpu: int | None) -> dict[str, float]:
+    print("call path (one core each for client and responder if --pin is given)")
+    c_seq = c_baseline(port, seconds, cpu, ["seq"])[0]["req_s"]
+    c_50 = c_baseline(port, seconds, cpu, ["inflight"])[0]["req_s"]
+    row("C client, sequential 1-word reads", c_seq / 1e3, "k/s", None, "(the floor)", None)
+    row("C client, 50 in flight", c_50 / 1e3, "k/s", None, "", None)
+    rates: dict[str, float] = {}
+    for loop, goal in (("asyncio", 1.0), ("uvloop", 0.6)):
+        b = bare(port, seconds, loop, "seq")
+        a = anyio.run(api_sequential, port, seconds, backend_options=uvloop_options(loop))
+        rates[loop] = a
+        row(f"{loop}: bare protocol, sequential", b / 1e3, "k/s", b / c_seq, "x C", None)
+        row(f"{loop}: plc.read(addr, 1) sequential", a / 1e3, "k/s", a / b, f"≥ {goal} x bare",
+            a / b >= goal)  # fmt: skip
+    for loop in ("asyncio", "uvloop"):
+        b = bare(port, seconds, loop, "inflight")
+        a = anyio.run(api_tasks, port, seconds, backend_options=uvloop_options(loop))
+        want: float | None = 0.6 if loop == "uvloop" else None
+        row(f"{loop}: bare protocol, 50 in flight", b / 1e3, "k/s", b / c_50, "x C", None)
+        row(f"{loop}: 50 tasks x plc.read, max_in_flight=50", a / 1e3, "k/s", a / b,
+            f"≥ {want} x bare" if want else "(no target)",
+            None if want is None else a / b >= want)  # fmt: skip
+    return rates
+
+
+# -- big reads -----------------------------------------------------------------------------
+
+
+async def full_dm(url: str, cap: int, rounds: int, progress: bool = False) -> tuple[float, int]:
+    """Median seconds per ``read("D0", 32768)`` and frames per read; checks every word."""
+    async with aiofins.connect(url, max_in_flight=cap, timeout=2.0) as plc:
+        expected = list(range(32768))
+        assert await plc.read("D0", 32768) == expected
+        report = (lambda done, total: None) if progress else None
+        times = []
+        before = plc.session.stats.completed
+        for _ in range(rounds):
+            t0 = time.perf_counter()
+            words = await plc.read("D0", 32768, progress=report)
+            times.append(time.perf_counter() - t0)
+            if words != expected:
+                raise AssertionError("wrong words in the full DM read")
+        frames = (plc.session.stats.completed - before) // rounds
+        return statistics.median(times), frames
+
+
+RELAY = r"""
+import asyncio, sys
+port, target, delay = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
+async def main():
+    loop = asyncio.get_running_loop()
+    clients = {}
+    class Up(asyncio.DatagramProtocol):
+        def __init__(self, down, addr): self.down, self.addr = down, addr
+        def datagram_received(self, data, _):
+            loop.call_later(delay, self.down.sendto, data, self.addr)
+    class Down(asyncio.DatagramProtocol):
+        def connection_made(self, t): self.t = t
+        def datagram_received(self, data, addr):
+            up = clients.get(addr)
+            if up is None:
+                return loop.create_task(self.open(data, addr))
+            up.sendto(data)
+        async def open(self, data, addr):
+            t, _ = await loop.create_datagram_endpoint(
+                lambda: Up(self.t, addr), remote_addr=("127.0.0.1", target))
+            clients[addr] = t
+            t.sendto(data)
+    await loop.create_datagram_endpoint(Down, local_addr=("127.0.0.1", port))
+    print("ready", flush=True)
+    await asyncio.Event().wait()
+asyncio.run(main())
+"""
+
+
+@contextmanager
+def relay(target: int, delay: float) -> Iterator[int]:
+    """A UDP relay in its own process that holds every reply ``delay`` seconds."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", RELAY, str(port), str(target), str(delay)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        proc.stdout.readline()
+        yield port
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
+def big_read_rows(port: int, seq_rate: float, loop: str) -> None:
+    print(f"full DM read, {loop}")
+    opts = uvloop_options(loop)
+    url = f"udp://127.0.0.1:{port}?node=1"
+    piped, frames = anyio.run(full_dm, url, 5, 20, backend_options=opts)
+    one, _ = anyio.run(full_dm, url, 1, 20, backend_options=opts)
+    round_trip = 1 / seq_rate
+    row("read('D0', 32768), 5 in flight: frames", frames, "frames", None, "= 33", frames == 33)
+    row("  time, in sequential 1-word round trips", piped * 1e3, "ms", piped / round_trip,
+        "≤ 40 round trips", piped / round_trip <= 40)  # fmt: skip
+    row("  one frame at a time instead", one * 1e3, "ms", one / round_trip, "(round trips)",
+        None)  # fmt: skip
+    reported, _ = anyio.run(full_dm, url, 5, 20, True, backend_options=opts)
+    row("  with progress=callback, against without", reported * 1e3, "ms", reported / piped,
+        "≤ 1.0 (no slower)", reported / piped <= 1.05)  # fmt: skip
+    with relay(port, 0.005) as relayed:
+        url = f"udp://127.0.0.1:{relayed}?node=1"
+        slow_one, _ = anyio.run(full_dm, url, 1, 3, backend_options=opts)
+        slow_piped, frames = anyio.run(full_dm, url, 5, 3, backend_options=opts)
+        slow_reported, _ = anyio.run(full_dm, url, 5, 3, True, backend_options=opts)
+    row("5 ms per reply: one frame at a time", slow_one * 1e3, "ms", None, "", None)
+    row("5 ms per reply: 5 in flight, against one at a time", slow_piped * 1e3, "ms",
+        slow_piped / slow_one, "≤ 0.3", slow_piped / slow_one <= 0.3)  # fmt: skip
+    row("5 ms per reply: with progress, against one at a time", slow_reported * 1e3, "ms",
+        slow_reported / slow_one, "≤ 0.3", slow_reported / slow_one <= 0.3)  # fmt: skip
+
+
+# -- the Poller ----------------------------------------------------------------------------
+
+#: 20 tags in one 0101 frame: floats, 32-bit counters, bits, words.
+TAGS = {
+    **{f"temp{i}": f"D{2 * i}:float32" for i in range(5)},
+    **{f"count{i}": f"D{10 + 2 * i}:uint32" for i in range(5)},
+    **{f"bit{i}": f"D20.{i:02d}" for i in range(5)},
+    **{f"word{i}": f"D{21 + i}" for i in range(5)},
+}
+
+
+@contextmanager
+def responders(count: int) -> Iterator[list[int]]:
+    subprocess.run(["make", "-s", "-C", str(PERF_TOOLS)], check=True)
+    exe = PERF_TOOLS / "bin" / "fins_responder"
+    ports: list[int] = []
+    while len(ports) < count:
+        port = free_port()
+        if port not in ports:
+            ports.append(port)
+    procs = [
+        subprocess.Popen([str(exe), "-p", str(p), "-q"], stderr=subprocess.DEVNULL) for p in ports
+    ]
+    try:
+        time.sleep(0.5 + count / 1000)  # let them bind (a benchmark, not a test)
+        yield ports
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.wait()
+
+
+def cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+async def bare_request_cpu(port: int, n: int = 20000) -> float:
+    """CPU seconds of one ``Session.request`` (prebuilt parameters), sequential."""
+    async with aiofins.connect(f"udp://127.0.0.1:{port}?node=1") as plc:
+        request = plc.session.request
+        params = bytes((0x82, 0, 100, 0, 0, 1))
+        for _ in range(500):
+            await request(1, 1, params)
+        before = cpu()
+        for _ in range(n):
+            await request(1, 1, params)
+        return (cpu() - before) / n
+
+
+async def poll(ports: list[int], interval: float, seconds: float) -> tuple[int, int, float]:
+    """(scans, missed, CPU seconds) over ``seconds`` after a warm-up of 1 s plus 2 intervals."""
+    async with Pool(timeout=1.0) as pool, Poller(pool, buffer=4096) as poller:
+        for port in ports:
+            poller.add_group(str(port), f"udp://127.0.0.1:{port}?node=1", TAGS, interval=interval)
+        scans = 0
+
+        async def consume() -> None:
+            nonlocal scans
+            async for snap in poller:
+                scans += 1
+                if snap.error is not None:
+                    raise AssertionError(snap.error)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(consume)
+            await anyio.sleep(1.0 + 2 * interval)
+            missed0 = sum(g.missed for g in poller.groups.values())
+            scans0, cpu0 = scans, cpu()
+            await anyio.sleep(seconds)
+            used = cpu() - cpu0
+            done = scans - scans0
+            missed = sum(g.missed for g in poller.groups.values()) - missed0
+            tg.cancel_scope.cancel()
+    return done, missed, used
+
+
+def poller_rows(seconds: float, loop: str, skip: set[str]) -> None:
+    opts = uvloop_options(loop)
+    if "poll100" not in skip:
+        print(f"Poller, {loop}")
+        with responders(100) as ports:
+            per_request = anyio.run(bare_request_cpu, ports[0], backend_options=opts)
+            done, missed, used = anyio.run(poll, ports, 0.05, seconds, backend_options=opts)
+        per_scan = used / max(done, 1)
+        asked = 100 / 0.05 * seconds
+        row("100 PLCs x 20 tags at 50 ms: scans delivered", done, "scans", done / asked,
+            "x asked", None)  # fmt: skip
+        row("  missed scans", missed, "", None, "= 0", missed == 0)
+        row("  bare Session.request CPU (same run)", per_request * 1e6, "µs", None, "", None)
+        row("  CPU per scan, against one bare request", per_scan * 1e6, "µs",
+            per_scan / per_request, "≤ 2 x bare request", per_scan / per_request <= 2)  # fmt: skip
+        row("  CPU, % of one core", 100 * used / seconds, "%", None, "", None)
+    if "poll1000" not in skip:
+        with responders(1000) as ports:
+            done, missed, used = anyio.run(poll, ports, 1.0, seconds, backend_options=opts)
+        row("1,000 PLCs x 20 tags at 1 s: scans delivered", done, "scans",
+            done / (1000 * seconds), "x asked", None)  # fmt: skip
+        row("  missed scans", missed, "", None, "= 0", missed == 0)
+        row("  CPU, % of one core", 100 * used / seconds, "%", None, "", None)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds per timed case")
+    parser.add_argument("--pin", default="", help="CPU for the responder and this process")
+    parser.add_argument(
+        "--skip", default="", help="comma list of: calls, dm, poll100, poll1000 (rows to skip)"
+    )
+    parser.add_argument("--loop", default="uvloop", help="event loop of the DM and Poller rows")
+    args = parser.parse_args()
+    skip = {s.strip() for s in args.skip.split(",") if s.strip()}
+    cpu_pin = int(args.pin) if args.pin else None
+    affinity = os.sched_getaffinity(0)
+    print(f"{'row':<60} {'value':>10} {'unit':<7} {'ratio':>7}  {'target':<22}")
+    port = free_port()
+    proc = start_responder(port, cpu_pin)
+    try:
+        if cpu_pin is not None:
+            os.sched_setaffinity(0, {cpu_pin})
+        seq = {"uvloop": 0.0, "asyncio": 0.0}
+        if "calls" not in skip:
+            seq = call_path_rows(port, args.seconds, cpu_pin)
+        if "dm" not in skip:
+            if not seq[args.loop]:
+                seq[args.loop] = anyio.run(
+                    api_sequential, port, args.seconds, backend_options=uvloop_options(args.loop)
+                )
+            big_read_rows(port, seq[args.loop], args.loop)
+    finally:
+        os.sched_setaffinity(0, affinity)
+        proc.terminate()
+        proc.wait()
+    poller_rows(args.seconds, args.loop, skip)
+    missed = [r["name"] for r in ROWS if r["met"] is False]
+    print(f"\n{sum(r['met'] is True for r in ROWS)} targets met, {len(missed)} not met")
+    for name in missed:
+        print(f"  NOT met: {name.strip()}")
+
+
+if __name__ == "__main__":
+    asyncio.set_event_loop_policy(None)
+    main()
