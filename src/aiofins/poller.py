@@ -2,7 +2,8 @@
 
 Each scan group reads its tag list (compiled once into the fewest frames, see
 :mod:`aiofins.tags`) from one endpoint every ``interval`` seconds, in its own task, through a
-:class:`~aiofins.pool.Pool`, so a slow or dead PLC never delays the others. Scans are
+:class:`~aiofins.pool.Pool`, so a slow or dead PLC never delays the others. One timer task
+keeps every group's next scan time and wakes the groups that are due. Scans are
 deadline-driven: a scan that overruns makes the group skip the scan times it missed (counted in
 :attr:`ScanGroup.missed`), never queue them up. Snapshots go through a bounded buffer; when the
 consumer is slower than the scans, groups wait for room (backpressure) and the scans they miss
@@ -23,6 +24,7 @@ address is refused).
 
 from __future__ import annotations
 
+import asyncio
 import heapq
 import math
 import time
@@ -42,6 +44,7 @@ from .pool import backend_sleep, event_loop_clock
 from .protocol.errors import CommandError, FinsError
 from .protocol.values import Value
 from .tags import ReadPlan, parse_tag
+from .transport.base import is_asyncio
 
 if TYPE_CHECKING:
     from .pool import Pool
@@ -214,19 +217,19 @@ class Poller:
             self._start(group)
         return group
 
-    def _start(self, group: ScanGroup) -> None:
+    def _start(self, group: ScanGroup, now: float | None = None) -> None:
         """Start ``group``'s task and schedule its first scan now."""
         assert self._tg is not None
         group._wake.bind()
         group._enter(ScanState.IDLE)
         self._tg.start_soon(self._run_group, group)
-        self._plan_scan(self._now(), group)
+        self._plan_scan(self._now() if now is None else now, group)
 
     def _plan_scan(self, when: float, group: ScanGroup) -> None:
         self._added += 1
         heapq.heappush(self._schedule, (when, self._added, group))
         if when < self._timer_at:  # earlier than the timer sleeps: wake it
-            if self._timer_scope is not None:
+            if self._timer_scope is not None:  # (not asyncio: the timer sleeps in a scope)
                 self._timer_scope.cancel()
             else:
                 self._timer_wake.set()
@@ -239,8 +242,9 @@ class Poller:
         self._tg = anyio.create_task_group()
         await self._tg.__aenter__()
         self._tg.start_soon(self._timer)
+        now = self._now()  # the groups added before start share one time grid
         for group in self.groups.values():
-            self._start(group)
+            self._start(group, now)
         return self
 
     async def __aexit__(
@@ -272,21 +276,31 @@ class Poller:
         clock, sleep, schedule = self._now, self._sleep, self._schedule
         pop, push = heapq.heappop, heapq.heappush
         idle, due = ScanState.IDLE, ScanState.DUE
+        wake = self._timer_wake
+        loop = asyncio.get_running_loop() if is_asyncio() else None
         while True:
             if not schedule:
                 self._timer_at = math.inf
-                await self._timer_wake.wait()
+                await wake.wait()
                 continue
             now = clock()
             when = schedule[0][0]
-            if when > now:
+            if when > now + _TIMER_SLACK:
                 self._timer_at = when
-                with anyio.CancelScope() as scope:
-                    self._timer_scope = scope
-                    await sleep(when - now)
-                self._timer_scope = None
+                if loop is not None:  # a timer handle that sets the wake-up: no cancel scope
+                    handle = loop.call_at(when, wake.set)
+                    try:
+                        await wake.wait()
+                    finally:
+                        handle.cancel()
+                else:
+                    with anyio.CancelScope() as scope:
+                        self._timer_scope = scope
+                        await sleep(when - now)
+                    self._timer_scope = None
                 continue
             self._timer_at = -math.inf  # (awake: nothing need wake it)
+            now += _TIMER_SLACK
             while schedule and schedule[0][0] <= now:
                 when, order, group = pop(schedule)
                 interval = group.interval
@@ -427,6 +441,9 @@ class Poller:
 
 
 _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR
+#: Scan times this close are due now: event loops round timers (uvloop to 1 ms), and a timer
+#: that fires a little early must not make the timer task spin until the exact time.
+_TIMER_SLACK = 0.001
 _NONE = object()
 
 
