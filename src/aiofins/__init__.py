@@ -4,16 +4,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .client import Client
 from .connection import connect
-from .hooks import (
-    ConnectionStateChanged,
-    EventHooks,
-    RequestRetried,
-    RequestSent,
-    RequestTimedOut,
-    ResponseReceived,
-    ScanDone,
-)
-from .poller import Poller, Quality, Snapshot
+from .poller import Poller, Quality, ScanState, Snapshot
 from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
 from .protocol.endcodes import EndCode
@@ -61,11 +52,7 @@ __all__ = [
     "Quality",
     "ReadOnlyError",
     "RelayError",
-    "RequestRetried",
-    "RequestSent",
-    "RequestTimedOut",
-    "ResponseReceived",
-    "ScanDone",
+    "ScanState",
     "Snapshot",
     "__version__",
     "connect",
