@@ -109,6 +109,10 @@ class ScanState(Enum):
     #: Waiting for room in the poller's buffer to deliver its snapshot (backpressure).
     DELIVERING = "delivering"
 
+    #: Members are singletons: hash them by identity in C (Enum's own hash is a Python
+    #: call, paid three times per scan by the transition table).
+    __hash__ = object.__hash__
+
 
 #: The transitions :meth:`ScanGroup._enter` allows.
 _NEXT_STATES: dict[ScanState, frozenset[ScanState]] = {
