@@ -4,6 +4,15 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .client import Client
 from .connection import connect
+from .hooks import (
+    ConnectionStateChanged,
+    EventHooks,
+    RequestRetried,
+    RequestSent,
+    RequestTimedOut,
+    ResponseReceived,
+    ScanDone,
+)
 from .poller import Poller, Quality, ScanState, Snapshot
 from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
@@ -52,6 +61,11 @@ __all__ = [
     "Quality",
     "ReadOnlyError",
     "RelayError",
+    "RequestRetried",
+    "RequestSent",
+    "RequestTimedOut",
+    "ResponseReceived",
+    "ScanDone",
     "ScanState",
     "Snapshot",
     "__version__",

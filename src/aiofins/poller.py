@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import heapq
+import logging
 import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
@@ -147,6 +148,13 @@ class ScanGroup:
     #: The values of the last scan when every tag was good in it (else None).
     _last_good: dict[str, Value] | None = None
     _wake: Wake = field(default_factory=Wake, repr=False)
+    #: The error of the last failed scan while scans fail (logged once per outage).
+    _failing: str | None = None
+    #: Missed scans not yet warned about, and when the last warning was logged.
+    _missed_unlogged: int = 0
+    _missed_logged_at: float = -math.inf
+    #: ``missed`` when the last ScanDone was emitted (the next one says how many since).
+    _missed_reported: int = 0
 
     def _enter(self, state: ScanState) -> None:
         """The one place a group changes state."""
@@ -310,26 +318,73 @@ class Poller:
                 interval = group.interval
                 late = math.floor((now - when) / interval)  # scan times already gone
                 if late:
-                    group.missed += late
                     when += late * interval
                 if group.state is idle:
                     group._enter(due)
                     group._wake.set()
                 else:
-                    group.missed += 1
+                    late += 1
+                if late:
+                    group.missed += late
+                    self._missed(group, late, now)
                 push(schedule, (when + interval, order, group))
+
+    def _missed(self, group: ScanGroup, skipped: int, now: float) -> None:
+        """Count missed scans; warn at the first and then at most once a minute per group."""
+        group._missed_unlogged += skipped
+        if now - group._missed_logged_at < MISSED_WARNING_INTERVAL:
+            return
+        logger.warning(
+            "scan group %s missed %d scans (last scan took %.3f s, interval %.3g s): "
+            "the PLC, the pool or the consumer cannot keep up",
+            group.name,
+            group._missed_unlogged,
+            group.last_duration,
+            group.interval,
+            extra={"group": group.name, "endpoint": group.url},
+        )
+        group._missed_unlogged = 0
+        group._missed_logged_at = now
 
     async def _run_group(self, group: ScanGroup) -> None:
         channel = self._channel
         wake = group._wake
-        while True:
-            await wake.wait()
-            group._enter(ScanState.SCANNING)
-            snapshot = await self.scan_once(group)
-            if snapshot is not None and not channel.send_nowait(snapshot):
-                group._enter(ScanState.DELIVERING)  # full: wait for the consumer
-                await channel.send(snapshot)
-            group._enter(ScanState.IDLE)
+        logger.info(
+            "scan group %s started: %d tags from %s every %.3g s",
+            group.name,
+            len(group.tags),
+            group.url,
+            group.interval,
+            extra={"group": group.name, "endpoint": group.url},
+        )
+        try:
+            while True:
+                await wake.wait()
+                group._enter(ScanState.SCANNING)
+                snapshot = await self.scan_once(group)
+                if snapshot is not None and not channel.send_nowait(snapshot):
+                    group._enter(ScanState.DELIVERING)  # full: wait for the consumer
+                    await channel.send(snapshot)
+                group._enter(ScanState.IDLE)
+                hooks = self._hooks
+                if hooks is not None and hooks.scan_done:
+                    skipped = group.missed - group._missed_reported
+                    group._missed_reported = group.missed
+                    hooks.emit(
+                        hooks.scan_done,
+                        ScanDone(
+                            group.name, group.scans, group.last_duration, skipped, group._failing
+                        ),
+                    )
+        finally:
+            logger.info(
+                "scan group %s stopped after %d scans (%d failed, %d missed)",
+                group.name,
+                group.scans,
+                group.errors,
+                group.missed,
+                extra={"group": group.name, "endpoint": group.url},
+            )
 
     async def scan_once(self, group: ScanGroup) -> Snapshot | None:
         """Run one scan of ``group`` now; the snapshot (``None`` if nothing to deliver)."""
