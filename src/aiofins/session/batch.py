@@ -34,7 +34,7 @@ from ..protocol.errors import (
 from ..protocol.frames import BUSY_CODES, ERROR_BITS, check_command, end_code_error, pack_head
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
 from .response import Response, _new, _set_data, _set_end_code, _set_frame
-from .slots import DestState, Pending, Retransmission, SlotTimeout, no_free_sid_message
+from .slots import DestState, Pending, Plan, Retransmission, SlotTimeout, no_free_sid_message
 
 if TYPE_CHECKING:
     from .core import Session
@@ -85,7 +85,7 @@ class BatchPending(Pending):
         self.deadline = 0.0
         self.sent_at = 0.0
         self.attempts = 1
-        self.resend: Retransmission | None = None
+        self.plan: Plan | Retransmission | None = None
         self.rtt: DestState | None = None
         self.abandoned = False
 
@@ -233,8 +233,8 @@ class Batch:
         frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
         retries = self.retries
         if retries:
-            wait = session.first_wait(state, retries, self.timeout, None)
-            p.resend = Retransmission(frame, retries, now + self.timeout, None, wait)
+            wait = state.rto or self.timeout / ((2 << retries) - 1)  # as in request()
+            p.plan = (frame, retries, now + self.timeout, None, wait)
             deadline = p.deadline = now + wait
         else:
             deadline = p.deadline = now + self.timeout

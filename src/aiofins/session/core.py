@@ -15,7 +15,7 @@ import asyncio
 import logging
 import math
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from collections.abc import Set as AbstractSet
 from time import monotonic
 from types import TracebackType
@@ -62,6 +62,7 @@ from .slots import (
     DestState,
     EventPending,
     Pending,
+    Plan,
     Retransmission,
     SlotQueue,
     SlotTimeout,
@@ -75,6 +76,8 @@ _DEBUG = logging.DEBUG
 _NORMAL = EndCode(0)
 _CLOSED_BREAKER = BreakerState.CLOSED
 _NONE: frozenset[int] = frozenset()
+#: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
+_SAMPLE_MASK = 7
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
@@ -239,6 +242,7 @@ class Session:
         self._fifo = self._deadlines.fifo  # the in-order part, appended to inline
         self._timer_at = math.inf
         self._timer_scope: anyio.CancelScope | None = None
+        self._clock: Callable[[], float] = monotonic  # the backend's clock, set on entry
         self._tg: TaskGroup | None = None
         self._background: Background | None = None
         self._asyncio = False
@@ -318,6 +322,9 @@ class Session:
         self._asyncio = is_asyncio()
         if self._asyncio:
             self._loop = asyncio.get_running_loop()
+            self._clock = self._loop.time
+        else:
+            self._clock = anyio.current_time
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
@@ -516,8 +523,17 @@ class Session:
         now = monotonic()
         self._recent[key] = now
         latency = now - p.sent_at
+        stats = self.stats  # latency bookkeeping inlined: this runs once per reply
+        n = stats._lat_count
+        stats._lat_count = n + 1
+        stats._lat_sum += latency
+        stats._lat_ring[n & RING_MASK] = latency
         r = p.rtt
-        if r is not None:  # RFC 6298 (2.2, 2.3): one sample per reply to a single send
+        if r is None:  # sent again: a reply to another transmission may follow
+            linger = self._retransmitted_linger(p, now)
+        elif n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
+            linger = self._linger
+        else:  # RFC 6298 (2.2, 2.3); Karn: only replies to a single send are timed
             srtt = r.srtt
             if srtt:
                 err = latency - srtt
@@ -530,8 +546,6 @@ class Session:
             low, high = self.rto_bounds
             r.rto = low if rto < low else high if rto > high else rto
             linger = self._linger
-        else:  # sent again: a reply to another transmission may follow (one RTO at least)
-            linger = self._retransmitted_linger(p, now)
         if linger:  # before the wake-up: a batch sends its next command inside it
             self._lingering[key] = now + linger
         fut = p.fut
@@ -542,11 +556,6 @@ class Session:
                 fut.set_result(frame)
             except asyncio.InvalidStateError:  # cancelled: the caller cleans up as it resumes
                 pass
-        stats = self.stats  # latency bookkeeping inlined: this runs once per reply
-        n = stats._lat_count
-        stats._lat_count = n + 1
-        stats._lat_sum += latency
-        stats._lat_ring[n & RING_MASK] = latency
         if self._hooks is not None:
             self._answered(p, frame, latency)
         fifo = self._fifo
@@ -727,10 +736,13 @@ class Session:
             self._timer_scope = None
 
     def _arm(self, deadline: float) -> None:
+        """Wake the watcher at ``deadline`` (monotonic) if that is earlier than planned. Runs
+        in receive callbacks too (a batch sends from there), so the backend's clock is read
+        directly rather than through ``anyio.current_time()``, which needs a task."""
         scope = self._timer_scope
         if deadline < self._timer_at and scope is not None:
             self._timer_at = deadline
-            scope.deadline = anyio.current_time() + (deadline - monotonic())
+            scope.deadline = self._clock() + (deadline - monotonic())
 
     def quarantine_until(self, now: float, timeout: float) -> float:
         """When a SID given up on ``now`` (its request timed out or was cancelled) may be used
@@ -740,10 +752,14 @@ class Session:
 
     def _expire(self, now: float) -> None:
         for p in self._deadlines.due(now):
-            resend = p.resend
-            if resend is not None and resend.left and now < resend.end:
-                self._retransmit(p, resend, now)
-                continue
+            plan = p.plan
+            if plan is not None:
+                if type(plan) is tuple:  # the first retransmission: now an object
+                    plan = p.plan = Retransmission(*plan)
+                assert isinstance(plan, Retransmission)
+                if plan.left and now < plan.end:
+                    self._retransmit(p, plan, now)
+                    continue
             self._pending.pop(p.key, None)
             p.done = True
             p.abandoned = True
@@ -972,13 +988,6 @@ class Session:
         """The command frame of ``state``'s destination with ``key``'s SID."""
         return pack_head(state.prefix, key & 0xFF, mrc, src) + params
 
-    def first_wait(self, state: DestState, retries: int, left: float, cap: float | None) -> float:
-        """The first attempt's wait: the destination's RTO once measured, else the share of
-        the call's time that lets every attempt go out with the wait doubling each time;
-        never more than the caller's cap."""
-        wait = state.rto or left / ((2 << retries) - 1)
-        return wait if cap is None or wait < cap else cap
-
     async def request(
         self,
         mrc: int,
@@ -1050,29 +1059,32 @@ class Session:
                         # Built before the request is registered: bad parameters (not bytes)
                         # raise here and leave nothing behind.
                         frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
+                        # The first wait: the destination's RTO once measured, else the share
+                        # of the call's time that lets every attempt go out, the wait doubling
+                        # each time; never more than the caller's cap.
                         if retries:
-                            wait = self.first_wait(state, retries, end - now, attempt_timeout)
-                            resend: Retransmission | None = Retransmission(
-                                frame, retries, end, attempt_timeout, wait
-                            )
+                            wait = state.rto or (end - now) / ((2 << retries) - 1)
+                            if attempt_timeout is not None and wait > attempt_timeout:
+                                wait = attempt_timeout
+                            plan: Plan | None = (frame, retries, end, attempt_timeout, wait)
                             deadline = now + wait
                             if deadline > end:
                                 deadline = end
                         else:
-                            resend = None
+                            plan = None
                             deadline = end
                             if attempt_timeout is not None and now + attempt_timeout < end:
                                 deadline = now + attempt_timeout
                         fut: asyncio.Future[bytes] | None = None
                         if self._asyncio:
                             fut = self._loop.create_future()
-                            p = AsyncioPending(key, mrc, src, fut, now, deadline, state, resend)
+                            p = AsyncioPending(key, mrc, src, fut, now, deadline, state, plan)
                         else:
                             p = EventPending(key, mrc, src)
                             p.sent_at = now
                             p.deadline = deadline
                             p.rtt = state
-                            p.resend = resend
+                            p.plan = plan
                         pending[key] = p
                         fifo = self._fifo
                         if not fifo or deadline >= fifo[-1].deadline:
@@ -1274,20 +1286,22 @@ class Session:
                 len(self._lingering),
                 extra={"endpoint": self.transport.description, "dest": str(state.address)},
             )
-        while key is None:
-            now = monotonic()
-            left = end - now
-            if left <= 0:
-                raise SlotTimeout(
-                    no_free_sid_message(
-                        state.address,
-                        timeout,
-                        self._quarantine,
-                        len(self._lingering),
-                    )
-                )
-            await anyio.sleep(min(_SID_WAIT, left, self._sid_free_in(state, now)))
-            key = self._allocate_sid(state)
+        # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
+        # behind it, first come first served.
+        lock = state.sid_lock
+        if lock is None:
+            lock = state.sid_lock = anyio.Lock()
+        with anyio.move_on_after(max(end - monotonic(), 0.0)):
+            async with lock:
+                key = self._allocate_sid(state)
+                while key is None:
+                    now = monotonic()
+                    await anyio.sleep(min(_SID_WAIT, self._sid_free_in(state, now)))
+                    key = self._allocate_sid(state)
+        if key is None:
+            raise SlotTimeout(
+                no_free_sid_message(state.address, timeout, self._quarantine, len(self._lingering))
+            )
         return key
 
     def _sid_free_in(self, state: DestState, now: float) -> float:

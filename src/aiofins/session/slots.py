@@ -33,6 +33,12 @@ class Retransmission:
         self.wait = wait
 
 
+#: A request's retransmission plan as first registered (a tuple is cheaper to make than an
+#: object, and most requests are answered at once): ``(frame, retries, end, cap, wait)``;
+#: it becomes a :class:`Retransmission` at the first retransmission.
+Plan = tuple[bytes, int, float, float | None, float]
+
+
 class Pending:
     """One request on the wire: what its reply must carry and how to wake its caller.
 
@@ -51,7 +57,7 @@ class Pending:
         "fut",
         "key",
         "mrc",
-        "resend",
+        "plan",
         "rtt",
         "sent_at",
         "src",
@@ -66,7 +72,7 @@ class Pending:
         self.sent_at = 0.0
         self.fut: asyncio.Future[bytes] | None = None
         self.attempts = 1
-        self.resend: Retransmission | None = None
+        self.plan: Plan | Retransmission | None = None
         self.rtt: DestState | None = None
         self.abandoned = False
 
@@ -103,7 +109,7 @@ class AsyncioPending(Pending):
         sent_at: float = 0.0,
         deadline: float = 0.0,
         rtt: DestState | None = None,
-        resend: Retransmission | None = None,
+        plan: Plan | None = None,
     ) -> None:
         self.key = key
         self.mrc = mrc
@@ -113,7 +119,7 @@ class AsyncioPending(Pending):
         self.sent_at = sent_at
         self.deadline = deadline
         self.rtt = rtt
-        self.resend = resend
+        self.plan = plan
         self.attempts = 1
         self.abandoned = False
 
@@ -258,7 +264,17 @@ class DestState:
     estimate (RFC 6298: ``srtt``, ``rttvar``, and ``rto`` clamped to the session's bounds;
     ``srtt == 0.0`` until the first sample)."""
 
-    __slots__ = ("address", "base", "cursor", "prefix", "rto", "rttvar", "slots", "srtt")
+    __slots__ = (
+        "address",
+        "base",
+        "cursor",
+        "prefix",
+        "rto",
+        "rttvar",
+        "sid_lock",
+        "slots",
+        "srtt",
+    )
 
     def __init__(self, address: FinsAddress, prefix: bytes, slots: SlotQueue) -> None:
         self.address = address
@@ -269,3 +285,5 @@ class DestState:
         self.srtt = 0.0
         self.rttvar = 0.0
         self.rto = 0.0
+        #: Held by the one request looking for a free SID while all 256 are taken.
+        self.sid_lock: anyio.Lock | None = None
