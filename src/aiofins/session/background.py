@@ -1,4 +1,5 @@
-"""The session's own background tasks, cancellable without touching the caller's scope."""
+"""The session's own background tasks, cancellable without touching the caller's scope, and
+ending at a boundary: an error in one never reaches the caller's task group."""
 
 from __future__ import annotations
 
@@ -10,14 +11,21 @@ from anyio.abc import TaskGroup
 
 
 class Background:
-    """Starts the session's own tasks so that closing cancels them and nothing else.
+    """Starts the session's own tasks (and its transport's reader) so that closing cancels
+    them and nothing else.
 
     (Cancelling the task group's scope would also cancel the body of the caller's
-    ``async with session:`` block.)
+    ``async with session:`` block.) An exception escaping a task is handed to ``on_error``
+    (the session logs it, counts it and fails the link) instead of the task group.
     """
 
-    def __init__(self, task_group: TaskGroup) -> None:
+    def __init__(
+        self,
+        task_group: TaskGroup,
+        on_error: Callable[[Exception], None] | None = None,
+    ) -> None:
         self.task_group = task_group
+        self.on_error = on_error
         self.scopes: set[anyio.CancelScope] = set()
         self.closed = False
 
@@ -29,6 +37,11 @@ class Background:
                 self.scopes.add(scope)
                 try:
                     await func(*args)
+                except Exception as exc:
+                    if self.on_error is None:
+                        raise
+                    if not self.closed:
+                        self.on_error(exc)
                 finally:
                     self.scopes.discard(scope)
 

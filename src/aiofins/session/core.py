@@ -229,10 +229,13 @@ class Session:
         #: The linger after a completion the link has shown necessary (late duplicates).
         self._linger = min_linger
         self._linger_logged = 0.001  # the linger last logged (logged again once doubled)
+        #: The same after a retransmission (learnt from replies to earlier transmissions).
+        self._linger_resent = 0.0
         #: Requests go to more than one destination: a SID is then kept unique across them,
         #: as a relay error (from the relay point, not the destination) is matched by SID.
         self._routed = False
-        #: SID key -> when its last request was answered (to count and time duplicates).
+        #: SID key -> when its last request was answered (to count and time duplicates);
+        #: negative after a retransmission.
         self._recent: dict[int, float] = {}
         self._dests: dict[FinsAddress, DestState] = {}
         self._slots: dict[Any, SlotQueue] = {}
@@ -328,7 +331,7 @@ class Session:
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
-        self._background = Background(tg)
+        self._background = Background(tg, self._background_failed)
         try:
             self._background.start_soon(self._deadline_watcher)
             await self._ensure_open()
@@ -531,6 +534,7 @@ class Session:
         r = p.rtt
         if r is None:  # sent again: a reply to another transmission may follow
             linger = self._retransmitted_linger(p, now)
+            self._recent[key] = -now  # (negative: its duplicates teach this linger only)
         elif n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
             linger = self._linger
         else:  # RFC 6298 (2.2, 2.3); Karn: only replies to a single send are timed
@@ -576,7 +580,12 @@ class Session:
         one of its other transmissions may still be on its way. At least the largest
         retransmission timeout (a round trip longer than that counts as lost), twice the
         time the call took, and the linger the link has shown necessary."""
-        return max(self._linger, self.rto_bounds[1], LINGER_FACTOR * (now - p.sent_at))
+        return max(
+            self._linger,
+            self._linger_resent,
+            self.rto_bounds[1],
+            LINGER_FACTOR * (now - p.sent_at),
+        )
 
     def _unmatched(self, key: int, frame: bytes) -> None:
         """A reply no request waits for: counted (late, duplicate or unsolicited). A
@@ -584,7 +593,12 @@ class Session:
         kind = count_unmatched(self.stats, self._quarantine, self._recent, key)
         if kind == "duplicate":
             done_at = self._recent.get(key)
-            if done_at is not None:
+            if done_at is not None and done_at < 0:  # the reply to another transmission
+                lateness = monotonic() + done_at
+                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
+                if linger > self._linger_resent:
+                    self._linger_resent = linger
+            elif done_at is not None:  # the network duplicated a reply
                 lateness = monotonic() - done_at
                 linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
                 if linger > self._linger:
@@ -698,6 +712,22 @@ class Session:
                 err,
                 extra={"endpoint": self.transport.description},
             )
+            self._set_link_state(LinkState.CLOSED)
+        self._fail_all(err)
+
+    def _background_failed(self, exc: Exception) -> None:
+        """A background task (the transport's reader, a retransmission) raised: the link is
+        considered lost (requests in flight fail with :class:`ConnectionLost`), logged and
+        counted; the caller's task group never sees it."""
+        self.stats.background_errors += 1
+        where = self.transport.description
+        logger.warning(
+            "%s: background task failed: %r", where, exc, exc_info=exc, extra={"endpoint": where}
+        )
+        err = ConnectionLost(f"connection to {where} failed: {exc or type(exc).__name__}")
+        err.__cause__ = exc
+        if self._link is LinkState.OPEN:
+            self.stats.disconnects += 1
             self._set_link_state(LinkState.CLOSED)
         self._fail_all(err)
 

@@ -87,6 +87,7 @@ class SessionStats:
         "_lat_ring",
         "_lat_sum",
         "_pending",
+        "background_errors",
         "breaker_rejects",
         "busy_retries",
         "cancelled",
@@ -116,6 +117,7 @@ class SessionStats:
         self.mismatched = 0
         self.malformed = 0
         self.retries = 0  # retransmissions (same frame and SID)
+        self.background_errors = 0  # background tasks (transport reader...) that raised
         self.sid_exhausted = 0  # times a request found all 256 SIDs of its destination taken
         self.breaker_rejects = 0  # calls failed at once by an open circuit breaker
         self.busy_retries = 0

@@ -1,0 +1,431 @@
+"""The redesigned session against peers that misbehave on purpose (real loopback, asyncio and
+trio): SIDs never reused while a reply may come, retransmission on a lossy link, whole-call
+deadlines, the circuit breaker, the connect boundary, link states and hooks."""
+
+from __future__ import annotations
+
+import logging
+import random
+from time import monotonic
+
+import anyio
+import pytest
+
+from aiofins.hooks import (
+    ConnectionStateChanged,
+    EventHooks,
+    RequestRetried,
+    RequestSent,
+    RequestTimedOut,
+    ResponseReceived,
+)
+from aiofins.protocol.errors import CircuitOpen, ConnectionLost, FinsTimeout
+from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
+from aiofins.session.breaker import BreakerState
+from aiofins.session.slots import SlotTimeout
+from aiofins.session.states import LinkState
+
+from .test_session_tcp import TcpPeer, tcp_server, tcp_session
+from .test_session_udp import (
+    Reply,
+    answer,
+    read_params,
+    reply,
+    session_for,
+    udp_responder,
+    word_data,
+)
+
+pytestmark = pytest.mark.anyio
+
+PLC = FinsAddress(0, 1, 0)
+
+
+def expected(word: int) -> bytes:
+    return (((1 << 12) ^ word) & 0xFFFF).to_bytes(2, "big")
+
+
+async def run_readers(
+    session: Session, tasks: int, reads: int, **options: object
+) -> tuple[int, int, list[BaseException]]:
+    """``reads`` single-word reads of distinct words by ``tasks`` tasks: (good, wrong, errors)."""
+    good = wrong = 0
+    errors: list[BaseException] = []
+    words = iter(range(reads))
+
+    async def reader() -> None:
+        nonlocal good, wrong
+        for word in words:
+            try:
+                r = await session.request(
+                    0x01,
+                    0x01,
+                    read_params(word % 4096),
+                    idempotent=True,
+                    **options,  # type: ignore[arg-type]
+                )
+            except FinsTimeout as exc:
+                errors.append(exc)
+                continue
+            if r.data == expected(word % 4096):
+                good += 1
+            else:
+                wrong += 1
+
+    async with anyio.create_task_group() as tg:
+        for _ in range(tasks):
+            tg.start_soon(reader)
+    return good, wrong, errors
+
+
+# --------------------------------------------------------------------------- SID lifecycle
+
+
+async def test_duplicates_delayed_past_a_sid_wrap_never_reach_another_read() -> None:
+    """Issue #12 (1): 5 % of replies duplicated 0-300 ms late while the 256 SIDs wrap in a
+    fraction of that. With the linger floor above the delay, no duplicate is handed over."""
+    rng = random.Random(12)
+
+    def duplicating(cmd: bytes) -> list[Reply]:
+        good = reply(cmd, 0, word_data(cmd))
+        if rng.random() < 0.05:
+            return [(0.0, good), (rng.uniform(0.0, 0.3), good)]
+        return [(0.0, good)]
+
+    async with (
+        udp_responder(duplicating) as peer,
+        session_for(peer, min_linger=0.35, timeout=5.0) as session,
+    ):
+        with anyio.fail_after(20):
+            good, wrong, errors = await run_readers(session, 20, 2000)
+        assert wrong == 0 and not errors and good == 2000
+        assert session.stats.duplicates > 20
+
+
+async def test_a_late_duplicate_teaches_the_linger(caplog: pytest.LogCaptureFixture) -> None:
+    """Without a floor, the first duplicate seen 0.2 s after its reply makes SIDs linger
+    twice that from then on (logged); later duplicates as late reach no other read."""
+    sent = 0
+
+    def late_duplicates(cmd: bytes) -> list[Reply]:
+        nonlocal sent
+        sent += 1
+        good = reply(cmd, 0, word_data(cmd))
+        return [(0.0, good), (0.2, good)] if sent % 10 == 1 else [(0.0, good)]
+
+    async with udp_responder(late_duplicates) as peer, session_for(peer) as session:
+        with caplog.at_level(logging.WARNING, logger="aiofins.session"):
+            assert (await session.request(0x01, 0x01, read_params(1))).data == expected(1)
+            with anyio.fail_after(5):
+                while session.stats.duplicates == 0:
+                    await anyio.sleep(0.01)
+            good, wrong, errors = await run_readers(session, 10, 600)
+        assert (good, wrong, errors) == (600, 0, [])
+        assert any("SIDs now linger" in r.getMessage() for r in caplog.records)
+        assert session.stats.sid_exhausted > 0  # the linger made requests wait for a SID
+
+
+async def test_sid_exhaustion_is_logged_once_and_counted(caplog: pytest.LogCaptureFixture) -> None:
+    async with (
+        udp_responder(lambda c: []) as peer,
+        session_for(
+            peer, max_in_flight=255, timeout=0.3, breaker_threshold=0, min_quarantine=30
+        ) as session,
+    ):
+        with caplog.at_level(logging.WARNING, logger="aiofins.session"):
+            async with anyio.create_task_group() as tg:
+                for _ in range(258):
+                    tg.start_soon(lambda: _expect_timeout(session))
+        exhausted = [r for r in caplog.records if "all 256 SIDs" in r.getMessage()]
+        assert len(exhausted) == 1
+        assert session.stats.sid_exhausted >= 2
+
+
+async def _expect_timeout(session: Session) -> None:
+    with pytest.raises(FinsTimeout):
+        await session.request(0x01, 0x01, read_params(0), timeout=0.3)
+
+
+async def test_a_fresh_fins_tcp_connection_starts_with_a_clean_sid_space() -> None:
+    silent = False
+
+    def maybe(cmd: bytes) -> bytes | None:
+        return None if silent else reply(cmd, 0, word_data(cmd))
+
+    async with tcp_server(TcpPeer(answer=maybe)) as peer, tcp_session(peer) as session:
+        silent = True
+        for _ in range(3):
+            with pytest.raises(FinsTimeout):
+                await session.request(0x01, 0x01, read_params(0), timeout=0.05)
+        assert len(session._quarantine) == 3
+        silent = False
+        await peer.drop()
+        with anyio.fail_after(5):
+            while session.link_state is LinkState.OPEN:
+                await anyio.sleep(0.01)
+            r = await session.request(0x01, 0x01, read_params(5), timeout=2)
+        assert r.data == expected(5)
+        assert session._quarantine == {}
+        assert session.stats.connects == 2
+
+
+# --------------------------------------------------------------------------- retransmission
+
+
+async def test_a_lossy_link_costs_retransmissions_not_calls() -> None:
+    """Issue #12 (3): ~15 % of round trips lost (drops and late replies), 3,000 reads by 100
+    tasks with timeout=1: at least 99 % succeed, in a few seconds, never a wrong value."""
+    rng = random.Random(15)
+
+    def lossy(cmd: bytes) -> list[Reply]:
+        roll = rng.random()
+        if roll < 0.10:
+            return []  # dropped
+        if roll < 0.15:
+            return [(rng.uniform(0.3, 0.6), reply(cmd, 0, word_data(cmd)))]  # late
+        return answer(cmd)
+
+    async with udp_responder(lossy) as peer, session_for(peer) as session:
+        start = monotonic()
+        with anyio.fail_after(30):
+            good, wrong, errors = await run_readers(session, 100, 3000, timeout=1.0)
+        elapsed = monotonic() - start
+        assert wrong == 0
+        assert good >= 2970, (good, len(errors), session.stats)
+        assert elapsed < 8, elapsed
+        assert session.stats.retries >= 300  # the losses cost retransmissions
+        assert session.stats.timeouts == len(errors)
+
+
+async def test_a_retransmission_is_the_same_frame_and_the_first_reply_answers() -> None:
+    seen: list[RequestRetried] = []
+    copies: dict[bytes, int] = {}
+
+    def second_copy_only(cmd: bytes) -> list[Reply]:
+        copies[cmd] = copies.get(cmd, 0) + 1
+        if copies[cmd] == 1:
+            return [(0.25, reply(cmd, 0, word_data(cmd)))]  # the first reply comes late
+        return answer(cmd)
+
+    hooks = EventHooks(request_retried=[seen.append])
+    async with (
+        udp_responder(second_copy_only) as peer,
+        session_for(peer, hooks=hooks, timeout=1.0) as session,
+    ):
+        r = await session.request(0x01, 0x01, read_params(3), idempotent=True)
+        assert r.data == expected(3)
+        assert len(peer.received) == 2 and peer.received[0] == peer.received[1]
+        with anyio.fail_after(2):
+            while session.stats.duplicates == 0:  # the late first reply: a duplicate
+                await anyio.sleep(0.01)
+        assert [(e.sid, e.attempt) for e in seen] == [(peer.received[0][9], 2)]
+        # The SID lingers: the next read does not get it.
+        await session.request(0x01, 0x01, read_params(4))
+        assert peer.received[-1][9] != peer.received[0][9]
+
+
+# --------------------------------------------------------------------------- deadlines
+
+
+async def test_the_timeout_bounds_the_whole_call_with_its_retransmissions() -> None:
+    async with udp_responder(lambda c: []) as peer, session_for(peer, retries=2) as session:
+        start = anyio.current_time()
+        with pytest.raises(FinsTimeout) as info:
+            await session.request(0x01, 0x01, read_params(0), timeout=0.5, idempotent=True)
+        elapsed = anyio.current_time() - start
+        assert 0.45 <= elapsed < 0.8
+        assert "from 0.1.0 in 3 attempts within 0.5 s" in str(info.value)
+        assert len(peer.received) == 3 and len(set(peer.received)) == 1
+
+
+async def test_attempt_timeout_caps_each_attempt() -> None:
+    async with udp_responder(lambda c: []) as peer, session_for(peer) as session:
+        start = anyio.current_time()
+        with pytest.raises(FinsTimeout, match="in 1 attempt within"):
+            await session.request(0x01, 0x02, read_params(0), timeout=2.0, attempt_timeout=0.1)
+        assert anyio.current_time() - start < 0.5
+
+
+async def test_the_timeout_bounds_the_wait_for_a_slot() -> None:
+    async with (
+        udp_responder(lambda c: []) as peer,
+        session_for(peer, max_in_flight=1, breaker_threshold=0) as session,
+        anyio.create_task_group() as tg,
+    ):
+        tg.start_soon(_expect_timeout_after, session, 1.0)
+        with anyio.fail_after(5):
+            while not peer.received:
+                await anyio.sleep(0.005)
+        start = anyio.current_time()
+        with pytest.raises(SlotTimeout):
+            await session.request(0x01, 0x01, read_params(1), timeout=0.2, idempotent=True)
+        assert 0.15 <= anyio.current_time() - start < 0.5
+
+
+async def _expect_timeout_after(session: Session, timeout: float) -> None:
+    with pytest.raises(FinsTimeout):
+        await session.request(0x01, 0x01, read_params(0), timeout=timeout)
+
+
+async def test_a_plc_silent_for_seconds_answers_the_next_read_at_once() -> None:
+    """Issue #12 (2): no outage after the outage. 5 callers with timeout=0.1 keep reading
+    through 3 s of silence; the first good read comes within 2 x timeout of the PLC
+    answering again (the SIDs given up on do not run out: the breaker sends one probe)."""
+    silent = True
+    back_at = 0.0
+    first_good: list[float] = []
+
+    def maybe(cmd: bytes) -> list[Reply]:
+        return [] if silent else answer(cmd)
+
+    async with udp_responder(maybe) as peer, session_for(peer, timeout=0.1) as session:
+
+        async def caller() -> None:
+            while not first_good:
+                try:
+                    await session.request(0x01, 0x01, read_params(7), idempotent=True)
+                except (FinsTimeout, ConnectionLost):
+                    await anyio.sleep(0)  # a tight loop, as a poller without a pause
+                    continue
+                first_good.append(monotonic())
+
+        with anyio.fail_after(10):
+            async with anyio.create_task_group() as tg:
+                for _ in range(5):
+                    tg.start_soon(caller)
+                await anyio.sleep(3.0)
+                assert session.breaker_state is not BreakerState.CLOSED
+                silent = False
+                back_at = monotonic()
+        assert first_good[0] - back_at < 0.2, first_good[0] - back_at
+        assert session.breaker_state is BreakerState.CLOSED
+        assert session.stats.breaker_rejects > 0
+        assert len(session._quarantine) < 100
+
+
+# --------------------------------------------------------------------------- breaker
+
+
+async def test_the_breaker_opens_fails_fast_and_a_probe_closes_it() -> None:
+    dead = True
+
+    def maybe(cmd: bytes) -> list[Reply]:
+        return [] if dead else answer(cmd)
+
+    async with (
+        udp_responder(maybe) as peer,
+        session_for(peer, breaker_threshold=3, breaker_cooldown=(0.2, 0.2)) as session,
+    ):
+        for _ in range(3):
+            with pytest.raises(FinsTimeout):
+                await session.request(0x01, 0x01, read_params(0), timeout=0.05)
+        assert session.breaker_state is BreakerState.OPEN
+        sent = len(peer.received)
+        start = anyio.current_time()
+        with pytest.raises(CircuitOpen) as info:
+            await session.request(0x01, 0x01, read_params(0), timeout=1.0)
+        assert anyio.current_time() - start < 0.05  # at once, nothing sent
+        assert len(peer.received) == sent
+        assert "failed 3 calls in a row" in str(info.value)
+        assert 0 < info.value.retry_after <= 0.2
+        assert isinstance(info.value, ConnectionLost)
+        dead = False
+        with anyio.fail_after(2):
+            while True:
+                try:
+                    r = await session.request(0x01, 0x01, read_params(9), timeout=0.5)
+                    break
+                except CircuitOpen as exc:
+                    await anyio.sleep(exc.retry_after)
+        assert r.data == expected(9)
+        assert session.breaker_state.name == "CLOSED"
+        assert len(peer.received) == sent + 1  # one probe went, and it closed the breaker
+
+
+async def test_an_end_code_error_is_an_answer_for_the_breaker() -> None:
+    async with (
+        udp_responder(lambda c: [(0.0, reply(c, 0x1103))]) as peer,
+        session_for(peer, breaker_threshold=2) as session,
+    ):
+        for _ in range(5):
+            with pytest.raises(Exception, match=r"1103|address"):
+                await session.request(0x01, 0x01, read_params(0))
+        assert session.breaker_state is BreakerState.CLOSED
+        assert len(peer.received) == 5
+
+
+# --------------------------------------------------------------------------- boundary, states
+
+
+async def test_a_handshake_assigning_node_300_is_a_failed_attempt_never_a_crash(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue #17 (2): a peer's bad handshake ends at the session's boundary: link closed,
+    typed error to the caller, counted, logged, never raised into the caller's task group,
+    never reported as connected first."""
+    seen: list[ConnectionStateChanged] = []
+    hooks = EventHooks(connection_state_changed=[seen.append])
+    async with tcp_server(TcpPeer(assign_node=300)) as peer:
+        session = tcp_session(peer, hooks=hooks)
+        with (
+            caplog.at_level(logging.INFO, logger="aiofins.session"),
+            pytest.raises(ConnectionLost, match="node 300"),
+        ):
+            async with session:
+                pass
+        assert session.stats.connects == 0 and session.stats.connect_failures == 1
+        assert [(e.old, e.new) for e in seen] == [
+            ("CLOSED", "CONNECTING"),
+            ("CONNECTING", "BACKOFF"),
+            ("BACKOFF", "SHUT"),
+        ]
+        assert not any(r.getMessage().startswith("connected") for r in caplog.records)
+        assert any("node 300" in r.getMessage() for r in caplog.records)
+        assert session.transport.is_open is False
+
+
+async def test_link_states_and_request_hooks_on_a_real_link(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    events: list[object] = []
+    hooks = EventHooks(
+        request_sent=[events.append],
+        response_received=[events.append],
+        request_timed_out=[events.append],
+        connection_state_changed=[events.append],
+    )
+    hooks.request_sent.append(lambda e: 1 / 0)  # a broken hook breaks nothing
+    answers = True
+
+    def maybe(cmd: bytes) -> list[Reply]:
+        return answer(cmd) if answers else []
+
+    async with udp_responder(maybe) as peer:
+        session = session_for(peer, hooks=hooks)
+        with caplog.at_level(logging.INFO, logger="aiofins.session"):
+            async with session:
+                assert session.link_state is LinkState.OPEN
+                r = await session.request(0x01, 0x01, read_params(2))
+                assert r.data == expected(2)
+                answers = False
+                with pytest.raises(FinsTimeout):
+                    await session.request(0x01, 0x01, read_params(3), timeout=0.05)
+        assert session.link_state.name == "SHUT"
+    sid = peer.received[0][9]
+    where = session.transport.description
+    assert events[0] == ConnectionStateChanged(where, "CLOSED", "CONNECTING")
+    assert events[1] == ConnectionStateChanged(where, "CONNECTING", "OPEN")
+    assert events[2] == RequestSent(where, PLC, sid, 0x0101)
+    received = events[3]
+    assert isinstance(received, ResponseReceived)
+    assert (received.sid, received.end_code, received.attempts) == (sid, 0, 1)
+    assert received.elapsed > 0
+    assert events[4] == RequestSent(where, PLC, peer.received[1][9], 0x0101)
+    timed_out = events[5]
+    assert isinstance(timed_out, RequestTimedOut) and timed_out.attempts == 1
+    assert events[6] == ConnectionStateChanged(where, "OPEN", "SHUT")
+    assert hooks.errors == 2
+    messages = [r.getMessage() for r in caplog.records if r.name == "aiofins.session"]
+    assert messages[0] == f"connected to {where}"
+    assert messages[-1] == f"session to {where} closed"
