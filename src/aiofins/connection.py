@@ -34,12 +34,12 @@ from .transport.serial import SerialTransport
 from .transport.tcp import DEFAULT_CONNECT_TIMEOUT, TcpTransport
 from .transport.udp import UdpTransport
 
-#: Seconds per attempt of a request when neither ``timeout=`` nor ``?timeout=`` says.
+#: Seconds a request may take in all when neither ``timeout=`` nor ``?timeout=`` says.
 DEFAULT_TIMEOUT = 2.0
 
 
 def request_timeout(endpoint: Endpoint, timeout: float = DEFAULT_TIMEOUT) -> float:
-    """Seconds per attempt of a request to ``endpoint``: its URL's ``?timeout=``, else
+    """Seconds a request to ``endpoint`` may take in all: its URL's ``?timeout=``, else
     ``timeout``."""
     text = endpoint.option("timeout")
     return float(option_value("timeout", text)) if text else timeout
