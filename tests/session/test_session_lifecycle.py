@@ -130,21 +130,27 @@ async def test_sid_exhaustion_is_logged_once_and_counted(caplog: pytest.LogCaptu
     async with (
         udp_responder(lambda c: []) as peer,
         session_for(
-            peer, max_in_flight=255, timeout=0.3, breaker_threshold=0, min_quarantine=30
+            peer, max_in_flight=255, timeout=0.05, breaker_threshold=0, min_quarantine=30
         ) as session,
     ):
         with caplog.at_level(logging.WARNING, logger="aiofins.session"):
-            async with anyio.create_task_group() as tg:
-                for _ in range(258):
-                    tg.start_soon(lambda: _expect_timeout(session))
+            async with anyio.create_task_group() as tg:  # 255 SIDs given up on, quarantined
+                for _ in range(255):
+                    tg.start_soon(_expect_timeout, session)
+            await _expect_timeout(session)  # the 256th
+            assert len(session._quarantine) == 256
+            for _ in range(2):
+                with pytest.raises(SlotTimeout, match="no free SID"):
+                    await session.request(0x01, 0x01, read_params(0), timeout=0.05)
         exhausted = [r for r in caplog.records if "all 256 SIDs" in r.getMessage()]
-        assert len(exhausted) == 1
-        assert session.stats.sid_exhausted >= 2
+        assert len(exhausted) == 1 and exhausted[0].levelno == logging.WARNING
+        assert session.stats.sid_exhausted == 2
+        assert len(peer.received) == 256
 
 
 async def _expect_timeout(session: Session) -> None:
     with pytest.raises(FinsTimeout):
-        await session.request(0x01, 0x01, read_params(0), timeout=0.3)
+        await session.request(0x01, 0x01, read_params(0), timeout=0.05)
 
 
 async def test_a_fresh_fins_tcp_connection_starts_with_a_clean_sid_space() -> None:
