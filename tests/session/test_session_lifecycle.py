@@ -19,7 +19,7 @@ from aiofins.hooks import (
     RequestTimedOut,
     ResponseReceived,
 )
-from aiofins.protocol.errors import CircuitOpen, ConnectionLost, FinsTimeout
+from aiofins.protocol.errors import CircuitOpen, ConnectionLost, FinsError, FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.breaker import BreakerState
@@ -376,7 +376,7 @@ async def test_a_handshake_assigning_node_300_is_a_failed_attempt_never_a_crash(
         session = tcp_session(peer, hooks=hooks)
         with (
             caplog.at_level(logging.INFO, logger="aiofins.session"),
-            pytest.raises(ConnectionLost, match="node 300"),
+            pytest.raises(FinsError, match="node 300"),  # the transport's FrameError
         ):
             async with session:
                 pass
