@@ -1,6 +1,8 @@
-"""``aiofins poll URL TAG... [--interval S] [--count N] [--changes-only] [--json]``.
+"""``aiofins poll URL [TAG...] [--tags FILE] [--interval S] [--count N] [--changes-only] [--json]``.
 
-A tag is ``ADDRESS[:TYPE]`` or ``NAME=ADDRESS[:TYPE]`` (``temp=D100:float32``, ``CIO 0.01``).
+A tag is ``ADDRESS[:TYPE]`` or ``NAME=ADDRESS[:TYPE]`` (``temp=D100:float32``, ``CIO 0.01``);
+``--tags FILE`` adds the tags of a CSV file (``name,address,type`` or a CX-Programmer symbol
+table, see :mod:`aiofins.tagfile`).
 Each scan prints one line (or, with ``--json``, one JSON document per line).
 """
 
@@ -15,6 +17,7 @@ import anyio
 from ..poller import Poller, Snapshot
 from ..pool import Pool
 from ..protocol.errors import CommandError
+from ..tagfile import load_tags
 from .options import add_timeout
 from .plc import warn_of_cpu_errors
 from .text import escape
@@ -23,7 +26,15 @@ from .text import escape
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("poll", help="poll tags periodically and print each scan")
     p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
-    p.add_argument("tags", nargs="+", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
+    p.add_argument("tags", nargs="*", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
+    p.add_argument(
+        "--tags",
+        dest="tag_files",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="CSV of name,address,type or a CX-Programmer symbol table (repeatable)",
+    )
     p.add_argument("--interval", type=float, default=1.0, help="seconds between scans")
     p.add_argument("--count", type=int, default=0, help="stop after N scans (0: run until ^C)")
     p.add_argument("--changes-only", action="store_true", help="print only changed tags")
@@ -77,6 +88,13 @@ def to_json(snap: Snapshot) -> str:
 
 async def poll(args: argparse.Namespace) -> None:
     tags = parse_tags(args.tags)
+    for path in args.tag_files:
+        for name, spec in load_tags(path).items():
+            if name in tags:
+                raise CommandError(f"tag name {name!r} is given twice ({path})")
+            tags[name] = spec
+    if not tags:
+        raise CommandError("no tags: give ADDRESS[:TYPE] arguments or --tags FILE")
     if args.count < 0:
         raise CommandError(f"--count {args.count}: give a number of scans, or 0 to run until ^C")
     options = {
