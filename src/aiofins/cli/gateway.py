@@ -1,0 +1,92 @@
+"""``aiofins gateway CONFIG.toml [--shard I/N] [--check]``: the MQTT polling daemon.
+
+Reads and checks the whole configuration first (every mistake reported with FILE:LINE,
+exit code 2, nothing connected), then runs until SIGINT or SIGTERM. The shard comes from
+``--shard``, else ``AIOFINS_SHARD=I/N`` or ``AIOFINS_SHARDS=N`` with the host name's ordinal
+(see :mod:`aiofins.gateway.sharding`). Needs the ``gateway`` extra (aiomqtt,
+prometheus_client).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+from typing import TYPE_CHECKING, Any
+
+import anyio
+
+from ..protocol.errors import CommandError
+
+if TYPE_CHECKING:
+    SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
+else:
+    SubParsers = Any
+
+
+def add_parser(sub: SubParsers) -> None:
+    p = sub.add_parser(
+        "gateway",
+        help="poll PLCs and publish their tags to MQTT (needs aiofins[gateway])",
+        description="Run the MQTT gateway described by CONFIG (TOML; see docs/gateway.md) "
+        "until SIGINT/SIGTERM.",
+    )
+    p.add_argument("config", help="the gateway's TOML configuration")
+    p.add_argument("--shard", metavar="I/N", help="poll only shard I of N (env AIOFINS_SHARD)")
+    p.add_argument("--check", action="store_true", help="check the configuration and exit")
+    p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..gateway.config import ConfigError, load_config
+    from ..gateway.sharding import parse_shard, shard_from_env
+
+    try:
+        config = load_config(args.config)
+        shard = parse_shard(args.shard) if args.shard else shard_from_env(os.environ)
+    except ConfigError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except CommandError as exc:
+        print(f"aiofins gateway: {exc}", file=sys.stderr)
+        return 2
+    if args.check:
+        mine = len(config.plcs) if shard is None else len(shard.select(p.name for p in config.plcs))
+        print(f"{args.config}: OK, {mine} of {len(config.plcs)} PLCs, {len(config.groups)} groups")
+        return 0
+    try:
+        from ..gateway.daemon import Gateway
+    except ImportError as exc:
+        print(f"aiofins gateway needs: pip install 'aiofins[gateway]' ({exc})", file=sys.stderr)
+        return 2
+    logging.basicConfig(
+        level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+
+    async def main() -> None:
+        gateway = Gateway(config, shard=shard)
+        async with gateway:
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with anyio.create_task_group() as tg:
+
+                    async def stop() -> None:
+                        async for _ in signals:
+                            gateway.close()
+                            return
+
+                    tg.start_soon(stop)
+                    port = gateway.http_port
+                    print(
+                        f"gateway {gateway.name}: {len(gateway.plcs)} PLCs"
+                        + (f", http://{config.http.host}:{port}/metrics" if port else ""),
+                        flush=True,
+                    )
+                    await gateway.wait_closed()
+                    tg.cancel_scope.cancel()
+
+    anyio.run(main, backend="asyncio")
+    return 0

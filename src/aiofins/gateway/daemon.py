@@ -1,0 +1,270 @@
+"""The gateway: PLCs polled by a :class:`~aiofins.Poller`, scans published to MQTT.
+
+::
+
+    config = load_config("gateway.toml")
+    async with Gateway(config, shard=Shard(0, 2)) as gateway:
+        await gateway.wait_closed()        # until gateway.close() (the CLI: SIGINT/SIGTERM)
+
+The gateway sits above the library: one :class:`~aiofins.Pool` and one Poller hold a scan
+group per (PLC, group) pair of its shard; each snapshot becomes a JSON message in that pair's
+outbox (:mod:`.mqtt`), so no scan ever waits for the broker. Runs on asyncio (aiomqtt is
+asyncio only; uvloop works).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from contextlib import AsyncExitStack
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any
+
+import anyio
+from anyio.abc import TaskGroup
+
+from ..poller import Poller, ScanGroup
+from ..pool import Pool
+from .config import GatewayConfig, GroupConfig, PlcConfig, render
+from .http import HttpServer
+from .metrics import CONTENT_TYPE, GatewayMetrics
+from .mqtt import LinkState, MqttLink, Outbox
+from .payload import scan_message, status_message
+from .plcs import PlcState, PlcStatus
+from .sharding import Shard
+from .writes import encode_reply, handle_set, reply_topic
+
+log = logging.getLogger("aiofins.gateway")
+
+#: Set requests carried out at once (the rest wait their turn).
+MAX_CONCURRENT_WRITES = 16
+
+
+@dataclass(eq=False)
+class Route:
+    """One scan group of one PLC and where its snapshots go."""
+
+    plc: str
+    url: str
+    group: GroupConfig
+    topic: str
+    outbox: Outbox
+    scan_group: ScanGroup
+    status: PlcStatus = field(repr=False)
+
+
+class Gateway:
+    """Polls the PLCs of its shard and publishes their scans; see the module docstring."""
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        *,
+        shard: Shard | None = None,
+    ) -> None:
+        self.config = config
+        self.shard = shard or Shard(0, 1)
+        sharded = self.shard.count > 1
+        #: This gateway's name: the configured one, with ``-<index>`` when sharded.
+        self.name = f"{config.name}-{self.shard.index}" if sharded else config.name
+        self.plcs: tuple[PlcConfig, ...] = tuple(p for p in config.plcs if self.shard.owns(p.name))
+        mqtt = config.mqtt
+        self.pool = Pool(**dict(config.connect))
+        self.poller = Poller(self.pool, buffer=max(64, sum(len(p.groups) for p in self.plcs)))
+        self.plc_status: dict[str, PlcStatus] = {p.name: PlcStatus(p.name) for p in self.plcs}
+        self.routes: dict[str, Route] = {}
+        self.write_counts: dict[str, int] = {}
+        self._set_routes: dict[str, Route] = {}  # "{topic}/set/" -> route
+        self.metrics = GatewayMetrics(self)
+        self.link = MqttLink(
+            mqtt,
+            client_id=mqtt.client_id or f"aiofins-gateway-{self.name}",
+            status_topic=render(mqtt.gateway_topic, gateway=self.name),
+            on_message=self._on_message,
+            on_connected=self._on_connected,
+            on_published=self._on_published,
+        )
+        for plc in self.plcs:
+            for group_name in plc.groups:
+                group = config.groups[group_name]
+                topic = render(group.topic, gateway=self.name, plc=plc.name, group=group_name)
+                scan_group = self.poller.add_group(
+                    f"{plc.name}/{group_name}",
+                    plc.url,
+                    group.tags,
+                    interval=group.interval,
+                    timeout=group.timeout,
+                )
+                route = Route(
+                    plc.name,
+                    plc.url,
+                    group,
+                    topic,
+                    self.link.outbox(topic, qos=group.qos, retain=group.retain, limit=group.buffer),
+                    scan_group,
+                    self.plc_status[plc.name],
+                )
+                self.routes[scan_group.name] = route
+                if group.writable:
+                    self._set_routes[f"{topic}/set/"] = route
+                    self.link.subscriptions.append(f"{topic}/set/+")
+        self.http: HttpServer | None = None
+        if config.http.enabled:
+            self.http = HttpServer(
+                config.http.host,
+                config.http.port,
+                {"/healthz": self._healthz, "/readyz": self._readyz, "/metrics": self._metrics},
+            )
+        self._tg: TaskGroup | None = None
+        self._closed = anyio.Event()
+        self._writes = anyio.CapacityLimiter(MAX_CONCURRENT_WRITES)
+        self._consuming = anyio.CancelScope()
+        self._stack = AsyncExitStack()
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    async def __aenter__(self) -> Gateway:
+        log.info(
+            "gateway %s (shard %s): %d of %d PLCs, %d scan groups",
+            self.name,
+            self.shard,
+            len(self.plcs),
+            len(self.config.plcs),
+            len(self.routes),
+        )
+        async with AsyncExitStack() as stack:
+            await stack.enter_async_context(self.pool)
+            await stack.enter_async_context(self.poller)
+            tg = self._tg = await stack.enter_async_context(anyio.create_task_group())
+            if self.http is not None:
+                await tg.start(self.http.serve)
+            tg.start_soon(self.link.run)
+            tg.start_soon(self._consume)
+            self._stack = stack.pop_all()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        assert self._tg is not None
+        self.close()
+        self._consuming.cancel()
+        with anyio.move_on_after(self.config.mqtt.timeout + 1, shield=True):
+            await self.link.done.wait()  # the offline status goes out first
+        self._tg.cancel_scope.cancel()
+        self._tg = None
+        return await self._stack.__aexit__(exc_type, exc, tb)
+
+    def close(self) -> None:
+        """Stop (publishes ``offline`` on the gateway's status topic first)."""
+        self._closed.set()
+        self.link.close()
+
+    async def wait_closed(self) -> None:
+        await self._closed.wait()
+
+    @property
+    def http_port(self) -> int | None:
+        return None if self.http is None else self.http.port
+
+    # -- scans --------------------------------------------------------------------------
+
+    async def _consume(self) -> None:
+        with self._consuming:
+            await self._consume_snapshots()
+
+    async def _consume_snapshots(self) -> None:
+        put = self.link.put
+        async for snap in self.poller:
+            route = self.routes[snap.group]
+            changed = route.status.observe(route.group.name, snap.error)
+            if changed is not None:
+                self._announce(route.status)
+            group = route.group
+            if group.changes_only:
+                names = [n for n in snap.readings if n in snap.changed]
+                if not names:
+                    continue
+            else:
+                names = list(snap.readings)
+            put(route.outbox, scan_message(route.plc, group.name, snap, names), snap.timestamp)
+
+    def _announce(self, status: PlcStatus) -> None:
+        """Queue the PLC's state on its status topic (retained; the newest replaces any
+        still waiting)."""
+        topic = render(self.config.mqtt.plc_status_topic, gateway=self.name, plc=status.name)
+        extra: dict[str, Any] = {"plc": status.name, "gateway": self.name}
+        if status.reason is not None:
+            extra["error"] = status.reason
+        box = self.link.outbox(topic, qos=1, retain=True, limit=1)
+        box.messages.clear()
+        self.link.put(box, status_message(status.state.value, **extra))
+        log.info(
+            "PLC %s is %s%s",
+            status.name,
+            status.state.value,
+            f" ({status.reason})" if status.reason else "",
+        )
+
+    def _on_connected(self) -> None:
+        """After a (re)connect, a broker that lost its retained messages learns the PLCs'
+        states again (those with none waiting already)."""
+        topic_of = self.config.mqtt.plc_status_topic
+        for status in self.plc_status.values():
+            if status.state is PlcState.UNKNOWN:
+                continue
+            box = self.link.outboxes.get(render(topic_of, gateway=self.name, plc=status.name))
+            if box is None or not box.messages:
+                self._announce(status)
+
+    def _on_published(self, stamp: float) -> None:
+        import time
+
+        self.metrics.latency.observe(max(0.0, time.time() - stamp))
+
+    # -- writes -------------------------------------------------------------------------
+
+    def _on_message(self, topic: str, payload: bytes) -> None:
+        prefix, _, tag = topic.rpartition("/")
+        route = self._set_routes.get(prefix + "/")
+        if route is None or self._tg is None:
+            return
+        self._tg.start_soon(self._write, route, topic, tag, payload)
+
+    async def _write(self, route: Route, topic: str, tag: str, payload: bytes) -> None:
+        async with self._writes:
+            outcome, reply = await handle_set(
+                self.pool, route.plc, route.url, route.group, tag, payload
+            )
+        self.write_counts[outcome] = self.write_counts.get(outcome, 0) + 1
+        box = self.link.outbox(reply_topic(topic), qos=1, retain=False, limit=100)
+        self.link.put(box, encode_reply(reply))
+
+    # -- HTTP ---------------------------------------------------------------------------
+
+    def _healthz(self) -> tuple[int, str, bytes]:
+        return 200, "application/json", json.dumps(self.health()).encode()
+
+    def _readyz(self) -> tuple[int, str, bytes]:
+        ready = self.link.state is LinkState.CONNECTED
+        return (200 if ready else 503), "application/json", json.dumps(self.health()).encode()
+
+    def _metrics(self) -> tuple[int, str, bytes]:
+        return 200, CONTENT_TYPE, self.metrics.render()
+
+    def health(self) -> dict[str, Any]:
+        states = [s.state for s in self.plc_status.values()]
+        return {
+            "gateway": self.name,
+            "shard": str(self.shard),
+            "pid": os.getpid(),
+            "mqtt": self.link.state.value,
+            "plcs": {state.value: states.count(state) for state in PlcState},
+            "queued_messages": self.link.queued_messages,
+            "dropped_messages": self.link.dropped,
+        }

@@ -1,0 +1,295 @@
+"""The gateway's link to the MQTT broker (aiomqtt): outboxes, publishers, reconnects.
+
+Scans never wait for the broker: :meth:`MqttLink.put` appends a message to its topic's
+:class:`Outbox` (bounded: when full, the oldest message is dropped and counted) and returns.
+While the link is :attr:`LinkState.CONNECTED`, a few publisher tasks take outboxes in turn,
+one message each, so every topic keeps its order and no topic starves the others. A message
+leaves its outbox only once the broker took it (a publish cut off by a lost link is sent again
+after the reconnect: at least once). A lost or refused connection is tried again after a
+jittered, doubling backoff.
+
+The gateway's own status topic carries ``online`` (published on every connect, retained) and
+``offline`` (the MQTT will, published by the broker if the gateway vanishes, and by the
+gateway itself when it stops).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import random
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import TYPE_CHECKING
+
+import anyio
+from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
+
+from .config import MqttConfig
+from .payload import status_message
+
+if TYPE_CHECKING:
+    import aiomqtt
+
+log = logging.getLogger("aiofins.gateway")
+
+
+class LinkState(Enum):
+    """The broker connection's lifecycle (transitions in :meth:`MqttLink._enter`)."""
+
+    #: Making a connection (the first, or the next after a backoff).
+    CONNECTING = "connecting"
+    #: Connected: outboxes are published, set topics subscribed.
+    CONNECTED = "connected"
+    #: The connection failed or was lost: waiting for the backoff to pass.
+    BACKING_OFF = "backing_off"
+    #: Stopped by the gateway: no more attempts.
+    CLOSED = "closed"
+
+
+_TRANSITIONS: dict[LinkState, frozenset[LinkState]] = {
+    LinkState.CONNECTING: frozenset({LinkState.CONNECTED, LinkState.BACKING_OFF, LinkState.CLOSED}),
+    LinkState.CONNECTED: frozenset({LinkState.BACKING_OFF, LinkState.CLOSED}),
+    LinkState.BACKING_OFF: frozenset({LinkState.CONNECTING, LinkState.CLOSED}),
+    LinkState.CLOSED: frozenset(),
+}
+
+
+@dataclass(eq=False)
+class Outbox:
+    """Messages for one topic waiting for the broker, at most ``limit`` (oldest dropped)."""
+
+    topic: str
+    qos: int
+    retain: bool
+    limit: int
+    #: (payload, Unix time the message's data was read).
+    messages: deque[tuple[bytes, float]] = field(default_factory=deque)
+    published: int = 0
+    dropped: int = 0
+    #: Whether the outbox waits in the publishers' queue.
+    queued: bool = False
+
+
+class MqttLink:
+    """One broker connection for a gateway; :meth:`run` it in a task, :meth:`close` to stop."""
+
+    def __init__(
+        self,
+        config: MqttConfig,
+        *,
+        client_id: str,
+        status_topic: str,
+        subscriptions: Sequence[str] = (),
+        on_message: Callable[[str, bytes], None] | None = None,
+        on_connected: Callable[[], None] | None = None,
+        on_published: Callable[[float], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.client_id = client_id
+        self.status_topic = status_topic
+        self.subscriptions = list(subscriptions)
+        self.on_message = on_message
+        self.on_connected = on_connected
+        self.on_published = on_published
+        self.state = LinkState.CONNECTING
+        self.outboxes: dict[str, Outbox] = {}
+        self.connects = 0
+        self.connect_failures = 0
+        self.disconnects = 0
+        #: Set when the link is :attr:`LinkState.CONNECTED` (cleared when it is not).
+        self.connected = anyio.Event()
+        self._closing = anyio.Event()
+        #: Set once :meth:`run` has ended (after :meth:`close`).
+        self.done = anyio.Event()
+        self._client: aiomqtt.Client | None = None
+        send, receive = anyio.create_memory_object_stream[Outbox](float("inf"))
+        self._ready: MemoryObjectSendStream[Outbox] = send
+        self._ready_out: MemoryObjectReceiveStream[Outbox] = receive
+
+    # -- state ------------------------------------------------------------------------
+
+    def _enter(self, state: LinkState, why: str = "") -> None:
+        """The one place the link changes state."""
+        if state is self.state:
+            return
+        if state not in _TRANSITIONS[self.state]:
+            raise RuntimeError(f"MQTT link cannot go from {self.state.name} to {state.name}")
+        log.info("MQTT link %s -> %s%s", self.state.name, state.name, f": {why}" if why else "")
+        self.state = state
+        if state is LinkState.CONNECTED:
+            self.connected.set()
+        elif self.connected.is_set():
+            self.connected = anyio.Event()
+
+    # -- outboxes ---------------------------------------------------------------------
+
+    def outbox(self, topic: str, *, qos: int = 0, retain: bool = False, limit: int = 100) -> Outbox:
+        box = self.outboxes.get(topic)
+        if box is None:
+            box = self.outboxes[topic] = Outbox(topic, qos, retain, limit)
+        return box
+
+    def put(self, box: Outbox, payload: bytes, stamp: float | None = None) -> None:
+        """Queue a message (never waits; a full outbox drops its oldest, counted)."""
+        messages = box.messages
+        if len(messages) >= box.limit:
+            messages.popleft()
+            box.dropped += 1
+        messages.append((payload, time.time() if stamp is None else stamp))
+        if not box.queued:
+            box.queued = True
+            self._ready.send_nowait(box)
+
+    @property
+    def dropped(self) -> int:
+        return sum(box.dropped for box in self.outboxes.values())
+
+    @property
+    def queued_messages(self) -> int:
+        return sum(len(box.messages) for box in self.outboxes.values())
+
+    # -- running ----------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Connect, publish, reconnect after a backoff, until :meth:`close`."""
+        try:
+            await self._run()
+        finally:
+            self.done.set()
+
+    async def _run(self) -> None:
+        import aiomqtt
+
+        backoff = self.config.backoff_min
+        while not self._closing.is_set():
+            self._enter(LinkState.CONNECTING)
+            try:
+                client = self._new_client(aiomqtt)
+                async with client:
+                    self.connects += 1
+                    backoff = self.config.backoff_min
+                    why = await self._serve(client)
+                self.disconnects += 1
+            except aiomqtt.MqttError as exc:
+                self.connect_failures += 1
+                why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
+            finally:
+                self._client = None
+            if self._closing.is_set():
+                break
+            delay = random.uniform(backoff / 2, backoff)  # jitter: shards do not reconnect in step
+            backoff = min(self.config.backoff_max, backoff * 2)
+            self._enter(LinkState.BACKING_OFF, f"{why}; next attempt in {delay:.2f} s")
+            with anyio.move_on_after(delay):
+                await self._closing.wait()
+        self._enter(LinkState.CLOSED)
+
+    def _new_client(self, aiomqtt_module: object) -> aiomqtt.Client:
+        import aiomqtt
+
+        c = self.config
+        tls = None
+        if c.tls:
+            tls = aiomqtt.TLSParameters(
+                ca_certs=c.ca_file, certfile=c.cert_file, keyfile=c.key_file
+            )
+        return aiomqtt.Client(
+            c.host,
+            c.port,
+            identifier=self.client_id,
+            username=os.environ.get(c.username_env) or None,
+            password=os.environ.get(c.password_env) or None,
+            will=aiomqtt.Will(self.status_topic, status_message("offline"), qos=1, retain=True),
+            keepalive=c.keepalive,
+            timeout=c.timeout,
+            tls_params=tls,
+            logger=logging.getLogger("aiofins.gateway.mqtt"),
+        )
+
+    async def _serve(self, client: aiomqtt.Client) -> str:
+        """Publish and receive until the link breaks or the gateway closes; why it ended."""
+        import aiomqtt
+
+        ended = ["closed"]
+
+        async with anyio.create_task_group() as tg:
+
+            def lost(why: str) -> None:
+                if ended == ["closed"]:
+                    ended[0] = why
+                tg.cancel_scope.cancel()
+
+            try:
+                await client.publish(
+                    self.status_topic, status_message("online"), qos=1, retain=True
+                )
+                for topic in self.subscriptions:
+                    await client.subscribe(topic, qos=1)
+            except aiomqtt.MqttError as exc:
+                return f"lost during setup: {exc}"
+            self._client = client
+            self._enter(LinkState.CONNECTED, f"{self.config.host}:{self.config.port}")
+            if self.on_connected is not None:
+                self.on_connected()
+            tg.start_soon(self._receive, client, lost)
+            for _ in range(self.config.publishers):
+                tg.start_soon(self._publish, client, self._ready_out.clone(), lost)
+            await self._closing.wait()
+            with anyio.move_on_after(self.config.timeout, shield=True):
+                with contextlib.suppress(aiomqtt.MqttError):
+                    await client.publish(
+                        self.status_topic, status_message("offline"), qos=1, retain=True
+                    )
+            tg.cancel_scope.cancel()
+        return ended[0]
+
+    async def _receive(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
+        import aiomqtt
+
+        try:
+            async for message in client.messages:
+                payload = message.payload
+                if self.on_message is not None and isinstance(payload, (bytes, bytearray)):
+                    self.on_message(str(message.topic), bytes(payload))
+        except aiomqtt.MqttError as exc:
+            lost(f"connection lost: {exc}")
+
+    async def _publish(
+        self,
+        client: aiomqtt.Client,
+        ready: MemoryObjectReceiveStream[Outbox],
+        lost: Callable[[str], None],
+    ) -> None:
+        import aiomqtt
+
+        on_published = self.on_published
+        async with ready:
+            async for box in ready:
+                box.queued = False
+                try:
+                    if not box.messages:
+                        continue
+                    entry = box.messages[0]
+                    try:
+                        await client.publish(box.topic, entry[0], box.qos, box.retain)
+                    except aiomqtt.MqttError as exc:
+                        lost(f"publish failed: {exc}")
+                        return
+                    if box.messages and box.messages[0] is entry:
+                        box.messages.popleft()
+                    box.published += 1
+                    if on_published is not None:
+                        on_published(entry[1])
+                finally:  # one message per turn: the outbox goes to the back of the queue
+                    if box.messages and not box.queued:
+                        box.queued = True
+                        self._ready.send_nowait(box)
+
+    def close(self) -> None:
+        """Stop: publish ``offline`` if connected, disconnect, make no more attempts."""
+        self._closing.set()
