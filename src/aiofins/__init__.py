@@ -31,6 +31,7 @@ from .protocol.errors import (
     RelayError,
 )
 from .protocol.header import FinsAddress
+from .tagfile import TagFileError, load_tags
 from .transport.memory import MemoryTransport
 
 try:
@@ -68,6 +69,8 @@ __all__ = [
     "ScanDone",
     "ScanState",
     "Snapshot",
+    "TagFileError",
     "__version__",
     "connect",
+    "load_tags",
 ]
