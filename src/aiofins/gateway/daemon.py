@@ -202,7 +202,6 @@ class Gateway:
         if status.reason is not None:
             extra["error"] = status.reason
         box = self.link.outbox(topic, qos=1, retain=True, limit=1)
-        box.messages.clear()
         self.link.put(box, status_message(status.state.value, **extra))
         log.info(
             "PLC %s is %s%s",

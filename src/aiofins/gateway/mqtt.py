@@ -73,6 +73,8 @@ class Outbox:
     dropped: int = 0
     #: Whether the outbox waits in the publishers' queue.
     queued: bool = False
+    #: The message being published (the head), which a full outbox does not drop.
+    sending: tuple[bytes, float] | None = None
 
 
 class MqttLink:
@@ -138,8 +140,12 @@ class MqttLink:
         """Queue a message (never waits; a full outbox drops its oldest, counted)."""
         messages = box.messages
         if len(messages) >= box.limit:
-            messages.popleft()
-            box.dropped += 1
+            if box.sending is None or messages[0] is not box.sending:
+                messages.popleft()
+                box.dropped += 1
+            elif len(messages) > 1:  # the head may reach the broker: drop the next oldest
+                del messages[1]
+                box.dropped += 1
         messages.append((payload, time.time() if stamp is None else stamp))
         if not box.queued:
             box.queued = True
@@ -274,13 +280,15 @@ class MqttLink:
                 try:
                     if not box.messages:
                         continue
-                    entry = box.messages[0]
+                    entry = box.sending = box.messages[0]
                     try:
                         await client.publish(box.topic, entry[0], box.qos, box.retain)
                     except aiomqtt.MqttError as exc:
                         lost(f"publish failed: {exc}")
                         return
-                    if box.messages and box.messages[0] is entry:
+                    finally:
+                        box.sending = None
+                    if box.messages and box.messages[0] is entry:  # put() kept it
                         box.messages.popleft()
                     box.published += 1
                     if on_published is not None:

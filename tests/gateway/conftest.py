@@ -1,0 +1,180 @@
+"""A real Mosquitto broker on a free loopback port, and an MQTT subscriber that records.
+
+The gateway (aiomqtt) is asyncio only: its async tests run under asyncio and uvloop.
+Tests skip only when the ``mosquitto`` binary is missing (CI installs it).
+"""
+
+from __future__ import annotations
+
+import getpass
+import json
+import shutil
+import socket
+import subprocess
+import time
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import aiomqtt
+import anyio
+import pytest
+
+from ..conftest import Backend
+
+
+@pytest.fixture(params=["asyncio", pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop")])
+def anyio_backend(request: pytest.FixtureRequest) -> Backend:
+    """aiomqtt runs on asyncio only (stock and uvloop)."""
+    backend: Backend = request.param
+    if backend != "asyncio":
+        pytest.importorskip("uvloop")
+    return backend
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Broker:
+    """``mosquitto`` with a config file written here; :meth:`start` returns once it listens."""
+
+    def __init__(self, directory: Path, *, persistence: bool = False) -> None:
+        self.directory = directory
+        self.port = free_port()
+        self.persistence = persistence
+        self.proc: subprocess.Popen[str] | None = None
+
+    def start(self) -> None:
+        conf = self.directory / "mosquitto.conf"
+        lines = [
+            f"listener {self.port} 127.0.0.1",
+            "allow_anonymous true",
+            "log_dest stderr",
+            "log_type error",
+        ]
+        if self.persistence:
+            # Started as root, mosquitto would switch to user "mosquitto", which cannot write
+            # here: stay who we are.
+            lines += [
+                "persistence true",
+                f"persistence_location {self.directory}/",
+                f"user {getpass.getuser()}",
+            ]
+        conf.write_text("\n".join(lines) + "\n")
+        self.proc = subprocess.Popen(
+            ["mosquitto", "-c", str(conf)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        # Its log is block-buffered in a pipe: ready is when the port accepts a connection.
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                assert self.proc.stderr is not None
+                raise AssertionError(f"mosquitto exited: {self.proc.stderr.read()}")
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=1).close()
+                return
+            except OSError:
+                time.sleep(0.01)
+        raise AssertionError("mosquitto did not listen within 10 s")
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            self.proc.terminate()
+            self.proc.wait(timeout=10)
+            if self.proc.stderr is not None:
+                self.proc.stderr.close()
+            self.proc = None
+
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Iterator[Broker]:
+    if shutil.which("mosquitto") is None:
+        pytest.skip("mosquitto is not installed (apt-get install mosquitto)")
+    b = Broker(tmp_path)
+    b.start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+@dataclass
+class Received:
+    topic: str
+    payload: bytes
+    retain: bool
+
+    def json(self) -> Any:
+        return json.loads(self.payload)
+
+
+@dataclass
+class Subscriber:
+    """Records every message of its topic filters; :meth:`wait_for` waits for a condition."""
+
+    messages: list[Received] = field(default_factory=list)
+    _changed: anyio.Event = field(default_factory=anyio.Event)
+
+    def on(self, topic: str) -> list[Any]:
+        return [m.json() for m in self.messages if m.topic == topic]
+
+    def add(self, message: Received) -> None:
+        self.messages.append(message)
+        self._changed.set()
+        self._changed = anyio.Event()
+
+    async def wait_for(self, condition: Callable[[], object], timeout: float = 10.0) -> None:
+        with anyio.fail_after(timeout):
+            while not condition():
+                await self._changed.wait()
+
+
+@asynccontextmanager
+async def subscribe(
+    port: int,
+    *topics: str,
+    identifier: str | None = None,
+    clean: bool = True,
+    into: Subscriber | None = None,
+) -> AsyncIterator[Subscriber]:
+    """A subscriber for the ``async with`` block; a broker that went away meanwhile is no
+    error when it ends."""
+    sub = into or Subscriber()
+    yielded = False
+    try:
+        async with aiomqtt.Client(
+            "127.0.0.1", port, identifier=identifier, clean_session=clean, timeout=2
+        ) as client:
+            for topic in topics:
+                await client.subscribe(topic, qos=1)
+            async with anyio.create_task_group() as tg:
+
+                async def pump() -> None:
+                    try:
+                        async for m in client.messages:
+                            assert isinstance(m.payload, bytes)
+                            sub.add(Received(str(m.topic), m.payload, m.retain))
+                    except aiomqtt.MqttError:  # the broker went away (a test stopped it)
+                        pass
+
+                tg.start_soon(pump)
+                yielded = True
+                yield sub
+                tg.cancel_scope.cancel()
+    except aiomqtt.MqttError:
+        if not yielded:
+            raise
+
+
+@asynccontextmanager
+async def publisher(port: int) -> AsyncIterator[aiomqtt.Client]:
+    async with aiomqtt.Client("127.0.0.1", port) as client:
+        yield client
