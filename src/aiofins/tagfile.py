@@ -146,7 +146,9 @@ def parse_tags_text(text: str, source: str = "<tags>") -> dict[str, str]:
         try:
             parse_tag(name, spec)
         except FinsError as exc:
-            problems.append(f"{where}: {exc}")
+            text = str(exc)
+            named = text if f"tag {name!r}" in text else f"tag {name!r} ({spec}): {text}"
+            problems.append(f"{where}: {named}")
             continue
         tags[name] = spec
         first_line[name] = number

@@ -200,7 +200,9 @@ class _Reader:
         known = {"gateway", "mqtt", "http", "connect", "plcs", "groups"}
         for key in self.data:
             if key not in known:
-                self.problem(self.lines.at("", -1, key), f"unknown section {key!r}")
+                header = (key, -1) in self.lines.tables
+                where = self.lines.at(key) if header else self.lines.at("", -1, key)
+                self.problem(where, f"unknown section {key!r}")
         gateway = self.table("gateway")
         name = self.take(gateway, "gateway", "name", str, "aiofins")
         if not NAME.match(name):
@@ -410,7 +412,7 @@ class _Reader:
             except FinsError as exc:
                 self.problem(
                     at("groups", i, "tags") if "tags" in t else at("groups", i, "tags_file"),
-                    str(exc),
+                    tag_message(tag_name, spec, exc),
                 )
         return GroupConfig(
             name=name,
@@ -523,6 +525,7 @@ class _Reader:
                 self.lines.at("mqtt", -1, "plc_status_topic"), "plc_status_topic needs {plc}"
             )
         owner: dict[str, str] = {}
+        plcs = tuple({plc.name: plc for plc in reversed(plcs)}.values())[::-1]  # first of a name
         for plc in plcs:
             status = render(mqtt.plc_status_topic, gateway=gateway, plc=plc.name)
             owner[status] = f"the status of PLC {plc.name!r}"
@@ -538,6 +541,12 @@ class _Reader:
                         "(give the groups' topic templates {plc} and {group})",
                     )
                 owner[topic] = what
+
+
+def tag_message(name: str, spec: str, exc: Exception) -> str:
+    """``exc`` about the tag ``name`` (``spec``), naming it if the message does not."""
+    text = str(exc)
+    return text if f"tag {name!r}" in text else f"tag {name!r} ({spec}): {text}"
 
 
 def render(template: str, **fields: str) -> str:

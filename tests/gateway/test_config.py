@@ -1,0 +1,206 @@
+"""The gateway's configuration: read whole, every mistake at once with FILE:LINE."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from aiofins.gateway import ConfigError, load_config
+from aiofins.gateway.config import parse_config
+
+ROOT = Path(__file__).resolve().parents[2]
+
+GOOD = """\
+[gateway]
+name = "plant"
+
+[mqtt]
+host = "broker.local"
+port = 8883
+tls = true
+ca_file = "/etc/ssl/ca.pem"
+
+[connect]
+timeout = 0.5
+retries = 1
+
+[[groups]]
+name = "fast"
+interval = 0.25
+tags = { temp = "D100:float32", sp = "D120:int16" }
+writable = ["sp"]
+qos = 1
+
+[[groups]]
+name = "slow"
+interval = 10
+changes_only = true
+retain = true
+tags_file = "tags.csv"
+
+[[plcs]]
+name = "press1"
+url = "udp://10.0.0.5"
+options = { dest = "0.5.0", timeout = 1.5 }
+
+[[plcs]]
+name = "press2"
+url = "tcp://10.0.0.6:9600"
+groups = ["slow"]
+"""
+
+
+def test_a_good_config_reads_whole(tmp_path: Path) -> None:
+    (tmp_path / "tags.csv").write_text("name,address,type\nlevel,D200,uint16\nok,CIO 1.00,\n")
+    path = tmp_path / "gateway.toml"
+    path.write_text(GOOD)
+    cfg = load_config(path)
+    assert cfg.name == "plant" and cfg.mqtt.tls and cfg.mqtt.port == 8883
+    assert dict(cfg.connect) == {"timeout": 0.5, "retries": 1}
+    fast, slow = cfg.groups["fast"], cfg.groups["slow"]
+    assert fast.interval == 0.25 and fast.writable == frozenset({"sp"}) and fast.qos == 1
+    assert dict(slow.tags) == {"level": "D200:uint16", "ok": "CIO 1.00"}
+    assert slow.changes_only and slow.retain and slow.interval == 10.0
+    p1, p2 = cfg.plcs
+    assert p1.groups == ("fast", "slow") and p2.groups == ("slow",)
+    assert p1.url == "udp://10.0.0.5?dest=0.5.0&timeout=1.5"
+
+
+def test_the_example_config_is_good() -> None:
+    cfg = load_config(ROOT / "examples" / "gateway.toml")
+    assert [p.name for p in cfg.plcs] == ["press1"]
+    assert cfg.groups["line"].writable == frozenset({"Setpoint"})
+
+
+BAD = """\
+[gateway]
+name = "has space"
+[mqtt]
+port = 70000
+qos = 1
+backoff_min = 2
+backoff_max = 1
+[connect]
+speed = 3
+[[groups]]
+name = "fast"
+interval = -1
+tags = { temp = "D100:float33", far = "D40000" }
+writable = ["nope"]
+qos = 3
+topic = "fins/{plant}/{group}"
+[[groups]]
+name = "fast"
+tags = { x = "D0" }
+[[groups]]
+name = "empty"
+[[groups]]
+name = "fromfile"
+tags_file = "missing.csv"
+[[plcs]]
+name = "p1"
+url = "ftp://10.0.0.5"
+groups = ["fast", "nosuch"]
+[[plcs]]
+name = "p1"
+url = "udp://10.0.0.6"
+options = { baud = 9 }
+[[plcs]]
+url = "udp://10.0.0.7"
+[extra]
+"""
+
+
+def test_every_mistake_is_reported_at_once_with_its_line() -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config(BAD, "bad.toml")
+    problems = info.value.problems
+    text = "\n".join(problems)
+
+    def line_of(fragment: str) -> int:
+        (hit,) = [p for p in problems if fragment in p]
+        return int(hit.split(":")[1])
+
+    assert line_of("unknown section 'extra'") == 35
+    assert line_of("gateway name 'has space'") == 2
+    assert line_of("port must be a port number") == 4
+    assert line_of("unknown key 'qos'") == 5
+    assert line_of("backoff_max is below backoff_min") == 7
+    assert line_of("speed") == 8  # the [connect] header
+    assert line_of("interval must be a positive number") == 12
+    assert line_of("tag 'temp' (D100:float33)") == 13
+    assert line_of("tag 'far' (D40000)") == 13
+    assert line_of("writable tag 'nope'") == 14
+    assert line_of("qos must be 0, 1 or 2") == 15
+    assert line_of("unknown field(s) plant") == 16
+    assert line_of("group 'fast' is defined twice") == 18
+    assert line_of("group 'empty' has no tags") == 20
+    assert line_of("missing.csv") == 24
+    assert line_of("ftp") == 27
+    assert line_of("no group named 'nosuch'") == 28
+    assert line_of("PLC 'p1' is defined twice") == 30
+    assert line_of("option 'baud'") == 32
+    assert line_of("needs a name and a url") == 33
+    assert all(p.startswith("bad.toml:") for p in problems), text
+
+
+def test_toml_syntax_errors_name_their_line() -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config('[gateway]\nname = "x"\n[[plcs]\n', "syntax.toml")
+    (problem,) = info.value.problems
+    assert problem.startswith("syntax.toml:3: TOML syntax")
+
+
+def test_two_pairs_on_one_topic_are_refused() -> None:
+    text = """
+[[groups]]
+name = "a"
+topic = "fins/{plc}"
+tags = { x = "D0" }
+[[groups]]
+name = "b"
+topic = "fins/{plc}"
+tags = { y = "D1" }
+[[plcs]]
+name = "p"
+url = "udp://127.0.0.1"
+"""
+    with pytest.raises(ConfigError, match="publishes on 'fins/p', the topic of PLC 'p' group 'a'"):
+        parse_config(text)
+    with pytest.raises(ConfigError, match="status"):
+        parse_config(text.replace('topic = "fins/{plc}"\n', 'topic = "fins/{plc}/status"\n', 1))
+
+
+EXAMPLE = str(ROOT / "examples" / "gateway.toml")
+
+
+def test_the_cli_checks_a_config_and_reports_mistakes(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(BAD)
+    result = subprocess.run(
+        [sys.executable, "-m", "aiofins.cli", "gateway", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert len(lines) == 20 and all(line.startswith(f"{bad}:") for line in lines)
+    good = subprocess.run(
+        [sys.executable, "-m", "aiofins.cli", "gateway", "--check", "--shard", "1/2", EXAMPLE],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert good.returncode == 0, good.stderr
+    assert "OK" in good.stdout and "2 groups" in good.stdout
+    bad_shard = subprocess.run(
+        [sys.executable, "-m", "aiofins.cli", "gateway", "--shard", "2/2", EXAMPLE],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert bad_shard.returncode == 2 and "0 <= I < N" in bad_shard.stderr

@@ -1,0 +1,118 @@
+"""Scan messages and set payloads (no broker needed), and the outbox bound."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from aiofins.gateway.config import MqttConfig
+from aiofins.gateway.mqtt import MqttLink
+from aiofins.gateway.payload import SetPayloadError, parse_set, scan_message
+from aiofins.poller import Quality, Snapshot, TagReading
+from aiofins.tags import parse_tag
+
+
+def test_scan_message_carries_values_qualities_and_json_safe_floats() -> None:
+    snap = Snapshot(
+        "p/g",
+        "udp://x",
+        7,
+        100.5,
+        0.0021,
+        {
+            "a": TagReading(1.5, Quality.GOOD, 100.5),
+            "b": TagReading(math.nan, Quality.STALE, 99.5, "FinsTimeout: no reply"),
+            "c": TagReading(None, Quality.ERROR, None, "bad"),
+            "d": TagReading(-math.inf, Quality.GOOD, 100.5),
+        },
+        frozenset({"a"}),
+    )
+    doc = json.loads(scan_message("p", "g", snap, ["a", "b", "c", "d"]))
+    assert doc == {
+        "plc": "p",
+        "group": "g",
+        "scan": 7,
+        "timestamp": 100.5,
+        "duration": 0.0021,
+        "error": None,
+        "values": {
+            "a": {"value": 1.5, "quality": "GOOD", "timestamp": 100.5},
+            "b": {
+                "value": "NaN",
+                "quality": "STALE",
+                "timestamp": 99.5,
+                "error": "FinsTimeout: no reply",
+            },
+            "c": {"value": None, "quality": "ERROR", "timestamp": None, "error": "bad"},
+            "d": {"value": "-Infinity", "quality": "GOOD", "timestamp": 100.5},
+        },
+    }
+    assert json.loads(scan_message("p", "g", snap, ["a"]))["values"].keys() == {"a"}
+
+
+@pytest.mark.parametrize(
+    ("spec", "payload", "value"),
+    [
+        ("D0:int16", b"-5", -5),
+        ("D0:uint32", b'{"value": 70000, "id": 9}', 70000),
+        ("D0:float32", b"2", 2.0),
+        ("D0:float64", b"-1.25", -1.25),
+        ("CIO 0.01", b"true", True),
+        ("CIO 0.01", b"0", False),
+        ("D0:bcd16", b"1234", 1234),
+        ("D0:string:4", b'"AB"', "AB"),
+    ],
+)
+def test_set_payloads_of_each_type(spec: str, payload: bytes, value: object) -> None:
+    got, request_id = parse_set(payload, parse_tag("t", spec))
+    assert got == value and type(got) is type(value)
+    assert request_id == ("9" if b"id" in payload else None)
+
+
+@pytest.mark.parametrize(
+    ("spec", "payload", "why"),
+    [
+        ("D0:int16", b"", "not JSON"),
+        ("D0:int16", b"\xff\xfe", "not JSON"),
+        ("D0:int16", b"40000", "does not fit"),
+        ("D0:int16", b"1.0", "whole number"),
+        ("D0:int16", b"null", "whole number"),
+        ("D0:uint16", b"-1", "does not fit"),
+        ("D0:float32", b"true", "send a number"),
+        ("D0:float32", b'"1"', "send a number"),
+        ("CIO 0.01", b"2", "bit"),
+        ("D0:bcd16", b"10000", "BCD"),
+        ("D0:string:2", b'"ABC"', "t:"),
+        ("D0:string:2", b"5", "JSON string"),
+        ("D0:int16", b'{"id": 1}', '"value"'),
+        ("D0:int16", b'{"value": 1, "id": [1]}', "id must be"),
+        ("D0:int16", b'{"value": 1, "x": 1}', "unknown key"),
+    ],
+)
+def test_bad_set_payloads_say_why(spec: str, payload: bytes, why: str) -> None:
+    with pytest.raises(SetPayloadError, match=None) as info:
+        parse_set(payload, parse_tag("t", spec))
+    assert why in str(info.value)
+
+
+@pytest.mark.anyio
+async def test_a_full_outbox_drops_its_oldest_but_not_the_one_being_sent(
+    anyio_backend: object,
+) -> None:
+    link = MqttLink(MqttConfig(), client_id="x", status_topic="s")
+    box = link.outbox("t", limit=3)
+    for i in range(5):
+        link.put(box, b"%d" % i, 0.0)
+    assert [p for p, _ in box.messages] == [b"2", b"3", b"4"] and box.dropped == 2
+    box.sending = box.messages[0]
+    link.put(box, b"5", 0.0)
+    assert [p for p, _ in box.messages] == [b"2", b"4", b"5"] and box.dropped == 3
+    one = link.outbox("one", limit=1)
+    link.put(one, b"a", 0.0)
+    one.sending = one.messages[0]
+    link.put(one, b"b", 0.0)  # the one being sent stays; the new one waits behind it
+    link.put(one, b"c", 0.0)
+    assert [p for p, _ in one.messages] == [b"a", b"c"] and one.dropped == 1
+    assert link.queued_messages == 5 and link.dropped == 4
