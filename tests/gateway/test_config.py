@@ -69,10 +69,12 @@ def test_a_good_config_reads_whole(tmp_path: Path) -> None:
     assert p1.url == "udp://10.0.0.5?dest=0.5.0&timeout=1.5"
 
 
-def test_the_example_config_is_good() -> None:
+def test_the_example_configs_are_good() -> None:
     cfg = load_config(ROOT / "examples" / "gateway.toml")
     assert [p.name for p in cfg.plcs] == ["press1"]
     assert cfg.groups["line"].writable == frozenset({"Setpoint"})
+    compose = load_config(ROOT / "deploy" / "gateway.toml")
+    assert len(compose.plcs) == 3 and compose.mqtt.host == "mosquitto"
 
 
 BAD = """\
