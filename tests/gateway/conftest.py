@@ -20,7 +20,11 @@ from typing import Any
 
 import aiomqtt
 import anyio
+import anyio.abc
 import pytest
+
+from aiofins.simulator import VirtualPLC, run_simulator
+from aiofins.simulator.runner import Simulator
 
 from ..conftest import Backend
 
@@ -172,6 +176,26 @@ async def subscribe(
     except aiomqtt.MqttError:
         if not yielded:
             raise
+
+
+@asynccontextmanager
+async def simulators(count: int) -> AsyncIterator[list[Simulator]]:
+    """``count`` virtual PLCs on loopback UDP, side by side in one task group (a failure is
+    one error, not a nest of ``count`` groups)."""
+    sims: list[Simulator] = []
+    stop = anyio.Event()
+    async with anyio.create_task_group() as tg:
+
+        async def serve(*, task_status: anyio.abc.TaskStatus[None]) -> None:
+            async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as sim:
+                sims.append(sim)
+                task_status.started()
+                await stop.wait()
+
+        for _ in range(count):
+            await tg.start(serve)
+        yield sims
+        stop.set()
 
 
 @asynccontextmanager

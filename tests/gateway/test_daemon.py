@@ -14,12 +14,12 @@ from aiofins.gateway import Gateway, LinkState, PlcState, Shard
 from aiofins.gateway.config import GatewayConfig, parse_config
 from aiofins.simulator import VirtualPLC, run_simulator
 
-from .conftest import Broker, Subscriber, free_port, publisher, subscribe
+from .conftest import Broker, Subscriber, free_port, publisher, simulators, subscribe
 
 pytestmark = pytest.mark.anyio
 
 
-def config(broker: Broker, body: str, *, http: bool = False) -> GatewayConfig:
+def config(broker: Broker, body: str, *, http: bool = False, timeout: float = 0.2) -> GatewayConfig:
     head = f"""
 [gateway]
 name = "gw"
@@ -32,7 +32,7 @@ timeout = 2
 enabled = {"true" if http else "false"}
 port = 0
 [connect]
-timeout = 0.2
+timeout = {timeout}
 retries = 0
 """
     return parse_config(head + body, "test.toml")
@@ -198,9 +198,9 @@ url = "udp://127.0.0.1:{sim.udp_port}"
                     with anyio.fail_after(10):
                         while gateway.link.state is LinkState.CONNECTED:
                             await anyio.sleep(0.01)
-                    down = route.scan_group.scans
+                    down = route.scans
                     with anyio.fail_after(10):  # the outbox overflows while the broker is away
-                        while route.scan_group.scans < down + 20:
+                        while route.scans < down + 20:
                             await anyio.sleep(0.02)
                     assert route.outbox.dropped >= 10
                     assert len(route.outbox.messages) == 5
@@ -210,7 +210,7 @@ url = "udp://127.0.0.1:{sim.udp_port}"
                 async with subscribe(
                     broker.port, "fins/p1/g", identifier="h8-sub", clean=False, into=received
                 ):
-                    last = route.scan_group.scans
+                    last = route.scans
 
                     def missing() -> set[int]:
                         scans = {m.json()["scan"] for m in received.messages}
@@ -240,17 +240,13 @@ url = "udp://127.0.0.1:{sim.udp_port}"
 async def test_two_shards_publish_every_plc_exactly_once_between_them(broker: Broker) -> None:
     count = 200
     async with AsyncExitStack() as stack:
-        sims = [
-            await stack.enter_async_context(run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)))
-            for _ in range(count)
-        ]
+        sims = await stack.enter_async_context(simulators(count))
         plcs = "".join(
             f'[[plcs]]\nname = "plc{i:03}"\nurl = "udp://127.0.0.1:{sim.udp_port}"\n'
             for i, sim in enumerate(sims)
         )
-        cfg = config(
-            broker, f'[[groups]]\nname = "g"\ninterval = 0.5\ntags = {{ x = "D0" }}\n{plcs}'
-        )
+        group = '[[groups]]\nname = "g"\ninterval = 0.5\ntags = { x = "D0" }\n'
+        cfg = config(broker, group + plcs, timeout=2.0)
         sub = await stack.enter_async_context(subscribe(broker.port, "fins/+/status", "fins/+/g"))
         gateways = [
             await stack.enter_async_context(Gateway(cfg, shard=Shard(i, 2))) for i in range(2)
@@ -264,11 +260,15 @@ async def test_two_shards_publish_every_plc_exactly_once_between_them(broker: Br
         mine = [{p.name for p in gw.plcs} for gw in gateways]
         assert mine[0] | mine[1] == names and not mine[0] & mine[1]
         assert 60 < len(mine[0]) < 140  # rendezvous hashing spreads them
+        # Each PLC's status comes from the gateway that owns it (a PLC slow to answer on this
+        # busy machine may go offline and back: still from its owner only).
         statuses = [m.json() for m in sub.messages if m.topic.endswith("/status")]
-        by_plc = {s["plc"]: s["gateway"] for s in statuses}
-        assert len(statuses) == count and set(by_plc) == names
+        by_plc: dict[str, set[str]] = {}
+        for status in statuses:
+            by_plc.setdefault(status["plc"], set()).add(status["gateway"])
+        assert set(by_plc) == names
         for gw, owned in zip(gateways, mine, strict=True):
-            assert {p for p, g in by_plc.items() if g == gw.name} == owned
+            assert {p for p, g in by_plc.items() if g == {gw.name}} == owned
         first_scans = [(m.topic, m.json()["scan"]) for m in sub.messages if m.topic.endswith("/g")]
         assert len(first_scans) == len(set(first_scans))  # no scan published twice
 
@@ -353,4 +353,4 @@ url = "udp://127.0.0.1:{sim.udp_port}"
             assert gateway.write_counts == {"written": 3, "refused": 1, "failed": 1, "invalid": 9}
             assert sub.on("fins/p1/r/set/sp2/reply") == []
             assert gateway.link.state is LinkState.CONNECTED
-            assert gateway.routes["p1/w"].scan_group.errors == 0
+            assert gateway.routes["p1/w"].errors == 0

@@ -46,13 +46,27 @@ MAX_CONCURRENT_WRITES = 16
 class Route:
     """One scan group of one PLC and where its snapshots go."""
 
+    name: str
     plc: str
     url: str
     group: GroupConfig
     topic: str
     outbox: Outbox
-    scan_group: ScanGroup
     status: PlcStatus = field(repr=False)
+    #: The poller's scan group, from the route's first scan on (see ``Gateway._start_groups``).
+    scan_group: ScanGroup | None = None
+
+    @property
+    def scans(self) -> int:
+        return 0 if self.scan_group is None else self.scan_group.scans
+
+    @property
+    def errors(self) -> int:
+        return 0 if self.scan_group is None else self.scan_group.errors
+
+    @property
+    def missed(self) -> int:
+        return 0 if self.scan_group is None else self.scan_group.missed
 
 
 class Gateway:
@@ -90,23 +104,16 @@ class Gateway:
             for group_name in plc.groups:
                 group = config.groups[group_name]
                 topic = render(group.topic, gateway=self.name, plc=plc.name, group=group_name)
-                scan_group = self.poller.add_group(
-                    f"{plc.name}/{group_name}",
-                    plc.url,
-                    group.tags,
-                    interval=group.interval,
-                    timeout=group.timeout,
-                )
                 route = Route(
+                    f"{plc.name}/{group_name}",
                     plc.name,
                     plc.url,
                     group,
                     topic,
                     self.link.outbox(topic, qos=group.qos, retain=group.retain, limit=group.buffer),
-                    scan_group,
                     self.plc_status[plc.name],
                 )
-                self.routes[scan_group.name] = route
+                self.routes[route.name] = route
                 if group.writable:
                     self._set_routes[f"{topic}/set/"] = route
                     self.link.subscriptions.append(f"{topic}/set/+")
@@ -142,6 +149,7 @@ class Gateway:
                 await tg.start(self.http.serve)
             tg.start_soon(self.link.run)
             tg.start_soon(self._consume)
+            tg.start_soon(self._start_groups)
             self._stack = stack.pop_all()
         return self
 
@@ -173,6 +181,28 @@ class Gateway:
         return None if self.http is None else self.http.port
 
     # -- scans --------------------------------------------------------------------------
+
+    async def _start_groups(self) -> None:
+        """Add the routes' scan groups to the poller, their first scans spread evenly over
+        their interval: a thousand PLCs on one interval are not all read (and published) in
+        the same instant of every second."""
+        by_interval: dict[float, list[Route]] = {}
+        for route in self.routes.values():
+            by_interval.setdefault(route.group.interval, []).append(route)
+        start = anyio.current_time()
+        due = [
+            (start + route.group.interval * i / len(routes), route)
+            for routes in by_interval.values()
+            for i, route in enumerate(routes)
+        ]
+        due.sort(key=lambda item: item[0])
+        for at, route in due:
+            if at > anyio.current_time():
+                await anyio.sleep_until(at)
+            group = route.group
+            route.scan_group = self.poller.add_group(
+                route.name, route.url, group.tags, interval=group.interval, timeout=group.timeout
+            )
 
     async def _consume(self) -> None:
         with self._consuming:

@@ -90,10 +90,9 @@ class _Collector(Collector):
         )
         for route in gw.routes.values():
             key = [route.plc, route.group.name]
-            group = route.scan_group
-            scans.add_metric(key, group.scans)
-            errors.add_metric(key, group.errors)
-            missed.add_metric(key, group.missed)
+            scans.add_metric(key, route.scans)
+            errors.add_metric(key, route.errors)
+            missed.add_metric(key, route.missed)
             published.add_metric(key, route.outbox.published)
             dropped.add_metric(key, route.outbox.dropped)
             queued.add_metric(key, len(route.outbox.messages))

@@ -1,0 +1,225 @@
+"""The gateway under plant-like load: N PLC endpoints x T tags every second into Mosquitto.
+
+Each PLC endpoint is one C responder process (../shared/tools/perf/fins_responder.c, built
+into a temporary directory), the broker a local ``mosquitto``, and ``mosquitto_sub`` records
+every scan message with its arrival time. For one gateway, then for two shards of the same
+configuration, it reports after a warm-up:
+
+* missed scans (the poller's count of scan times skipped) and failed scans;
+* CPU seconds of each gateway process per published scan message;
+* scan-to-delivery latency p50/p99 (the scan's timestamp to ``mosquitto_sub`` receiving it,
+  broker included).
+
+    python benchmarks/bench_gateway.py [--plcs 1000] [--tags 20] [--seconds 30] [--warmup 10]
+
+Needs gcc, mosquitto and mosquitto_sub (Debian: mosquitto mosquitto-clients).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+PERF_TOOLS = Path(
+    os.environ.get("AIOFINS_PERF_TOOLS", Path(__file__).resolve().parents[2] / "shared/tools/perf")
+)
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_port(port: int, proc: subprocess.Popen[bytes], what: str) -> None:
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise SystemExit(f"{what} exited ({proc.returncode})")
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            time.sleep(0.05)
+    raise SystemExit(f"{what} did not listen on {port}")
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS  # utime + stime
+
+
+def metrics(port: int) -> dict[str, float]:
+    """Sum of each aiofins_gateway_* sample over its labels."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as response:
+        text = response.read().decode()
+    out: dict[str, float] = {}
+    for line in text.splitlines():
+        m = re.match(r"^(aiofins_gateway_\w+?)(?:\{.*\})? ([0-9.e+-]+)$", line)
+        if m:
+            out[m.group(1)] = out.get(m.group(1), 0.0) + float(m.group(2))
+    return out
+
+
+def config(broker: int, http_ports: list[int], ports: list[int], tags: int) -> str:
+    kinds = ["uint16", "int16", "float32", "int32"]  # a word apart: one 0101 frame
+    tag_table = ", ".join(f't{i} = "D{i * 2}:{kinds[i % len(kinds)]}"' for i in range(tags))
+    plcs = "".join(
+        f'[[plcs]]\nname = "plc{i:04}"\nurl = "udp://127.0.0.1:{port}"\n'
+        for i, port in enumerate(ports)
+    )
+    return (
+        f'[gateway]\nname = "bench"\n[mqtt]\nport = {broker}\n'
+        f"[http]\nport = {http_ports[0]}\n[connect]\ntimeout = 1.0\n"
+        f'[[groups]]\nname = "g"\ninterval = 1.0\nbuffer = 10\ntags = {{ {tag_table} }}\n{plcs}'
+    )
+
+
+def run_case(
+    shards: int, cfg: Path, broker: int, seconds: float, warmup: float, tmp: Path
+) -> dict[str, object]:
+    http_ports = [free_port() for _ in range(shards)]
+    text = cfg.read_text()
+    procs: list[subprocess.Popen[bytes]] = []
+    for i in range(shards):
+        path = tmp / f"gateway{i}.toml"
+        path.write_text(re.sub(r"\[http\]\nport = \d+", f"[http]\nport = {http_ports[i]}", text))
+        args = [sys.executable, "-m", "aiofins.cli", "gateway", str(path), "--log-level", "WARNING"]
+        if shards > 1:
+            args += ["--shard", f"{i}/{shards}"]
+        procs.append(subprocess.Popen(args, stdout=subprocess.DEVNULL))
+    record = tmp / f"sub{shards}.txt"
+    with record.open("w") as out:
+        sub = subprocess.Popen(
+            ["mosquitto_sub", "-p", str(broker), "-t", "fins/+/g", "-F", "%U %p"], stdout=out
+        )
+        try:
+            for proc, port in zip(procs, http_ports, strict=True):
+                wait_port(port, proc, "gateway")
+            time.sleep(warmup)
+            start = time.time()
+            cpu0 = [cpu_seconds(p.pid) for p in procs]
+            m0 = [metrics(port) for port in http_ports]
+            time.sleep(seconds)
+            end = time.time()
+            cpu1 = [cpu_seconds(p.pid) for p in procs]
+            m1 = [metrics(port) for port in http_ports]
+        finally:
+            for proc in procs:
+                proc.send_signal(signal.SIGINT)
+            for proc in procs:
+                proc.wait(timeout=60)
+            sub.terminate()
+            sub.wait(timeout=10)
+
+    def delta(name: str) -> float:
+        return sum(b.get(name, 0.0) - a.get(name, 0.0) for a, b in zip(m0, m1, strict=True))
+
+    latencies: list[float] = []
+    for line in record.read_text().splitlines():
+        arrived, _, payload = line.partition(" ")
+        try:
+            scan_time = json.loads(payload)["timestamp"]
+        except ValueError:
+            continue
+        if start <= scan_time < end:
+            latencies.append(float(arrived) - scan_time)
+    latencies.sort()
+    published = delta("aiofins_gateway_published_messages_total")
+    cpu = [b - a for a, b in zip(cpu0, cpu1, strict=True)]
+    return {
+        "shards": shards,
+        "scans": delta("aiofins_gateway_scans_total"),
+        "missed": delta("aiofins_gateway_missed_scans_total"),
+        "failed": delta("aiofins_gateway_scan_errors_total"),
+        "published": published,
+        "dropped": delta("aiofins_gateway_dropped_messages_total"),
+        "received": len(latencies),
+        "cpu_per_process": [c / seconds for c in cpu],
+        "cpu_us_per_scan": 1e6 * sum(cpu) / published if published else float("nan"),
+        "p50_ms": 1e3 * statistics.median(latencies) if latencies else float("nan"),
+        "p99_ms": 1e3 * latencies[int(0.99 * (len(latencies) - 1))] if latencies else float("nan"),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--plcs", type=int, default=1000)
+    parser.add_argument("--tags", type=int, default=20)
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--warmup", type=float, default=10.0)
+    parser.add_argument("--shards", default="1,2", help="the cases to run (default 1,2)")
+    args = parser.parse_args()
+    for tool in ("gcc", "mosquitto", "mosquitto_sub"):
+        if shutil.which(tool) is None:
+            raise SystemExit(f"{tool} is needed")
+    with tempfile.TemporaryDirectory(prefix="aiofins-bench-gw-") as name:
+        tmp = Path(name)
+        responder = tmp / "fins_responder"
+        subprocess.run(
+            ["gcc", "-O2", "-o", str(responder), str(PERF_TOOLS / "fins_responder.c")], check=True
+        )
+        broker_port = free_port()
+        (tmp / "mosquitto.conf").write_text(
+            f"listener {broker_port} 127.0.0.1\nallow_anonymous true\nmax_queued_messages 100000\n"
+            "set_tcp_nodelay true\n"
+        )
+        broker = subprocess.Popen(
+            ["mosquitto", "-c", str(tmp / "mosquitto.conf")], stderr=subprocess.DEVNULL
+        )
+        responders: list[subprocess.Popen[bytes]] = []
+        try:
+            wait_port(broker_port, broker, "mosquitto")
+            ports: list[int] = []
+            while len(ports) < args.plcs:
+                port = free_port()
+                if port in ports:
+                    continue
+                command = [str(responder), "-p", str(port), "-q"]
+                responders.append(subprocess.Popen(command, stderr=subprocess.DEVNULL))
+                ports.append(port)
+            for proc, port in zip(responders, ports, strict=True):
+                wait_port(port, proc, f"responder on {port}")
+            cfg = tmp / "gateway.toml"
+            cfg.write_text(config(broker_port, [0], ports, args.tags))
+            print(
+                f"{args.plcs} PLC endpoints x {args.tags} tags every 1 s, "
+                f"{args.seconds:g} s measured after {args.warmup:g} s warm-up"
+            )
+            mosquitto_cpu0 = cpu_seconds(broker.pid)
+            for shards in (int(s) for s in args.shards.split(",")):
+                r = run_case(shards, cfg, broker_port, args.seconds, args.warmup, tmp)
+                per_process = ", ".join(f"{c:.0%}" for c in r["cpu_per_process"])  # type: ignore[attr-defined]
+                print(
+                    f"{shards} gateway(s): scans {r['scans']:.0f}, missed {r['missed']:.0f}, "
+                    f"failed {r['failed']:.0f}, published {r['published']:.0f}, "
+                    f"dropped {r['dropped']:.0f}, received {r['received']}; "
+                    f"CPU per process {per_process} of a core, "
+                    f"{r['cpu_us_per_scan']:.0f} us per published scan; "
+                    f"scan-to-delivery p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms"
+                )
+            print(f"mosquitto CPU over all runs: {cpu_seconds(broker.pid) - mosquitto_cpu0:.1f} s")
+        finally:
+            for proc in responders:
+                proc.terminate()
+            for proc in responders:
+                proc.wait(timeout=10)
+            broker.terminate()
+            broker.wait(timeout=10)
+
+
+if __name__ == "__main__":
+    main()
