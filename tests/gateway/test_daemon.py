@@ -19,7 +19,7 @@ from .conftest import Broker, Subscriber, free_port, publisher, simulators, subs
 pytestmark = pytest.mark.anyio
 
 
-def config(broker: Broker, body: str, *, http: bool = False, timeout: float = 0.2) -> GatewayConfig:
+def config(broker: Broker, body: str, *, http: bool = False, timeout: float = 0.5) -> GatewayConfig:
     head = f"""
 [gateway]
 name = "gw"
