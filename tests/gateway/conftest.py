@@ -12,7 +12,7 @@ import shutil
 import socket
 import subprocess
 import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,28 +47,29 @@ def free_port() -> int:
 class Broker:
     """``mosquitto`` with a config file written here; :meth:`start` returns once it listens."""
 
-    def __init__(self, directory: Path, *, persistence: bool = False) -> None:
+    def __init__(
+        self, directory: Path, *, persistence: bool = False, settings: Sequence[str] = ()
+    ) -> None:
         self.directory = directory
         self.port = free_port()
         self.persistence = persistence
+        #: More mosquitto.conf lines for the listener (TLS files, password file, ...).
+        self.settings = list(settings)
         self.proc: subprocess.Popen[str] | None = None
 
     def start(self) -> None:
         conf = self.directory / "mosquitto.conf"
         lines = [
             f"listener {self.port} 127.0.0.1",
-            "allow_anonymous true",
+            *(self.settings or ["allow_anonymous true"]),
             "log_dest stderr",
             "log_type error",
         ]
+        # Started as root, mosquitto would switch to user "mosquitto", which cannot read or
+        # write here: it stays who we are.
+        lines.append(f"user {getpass.getuser()}")
         if self.persistence:
-            # Started as root, mosquitto would switch to user "mosquitto", which cannot write
-            # here: stay who we are.
-            lines += [
-                "persistence true",
-                f"persistence_location {self.directory}/",
-                f"user {getpass.getuser()}",
-            ]
+            lines += ["persistence true", f"persistence_location {self.directory}/"]
         conf.write_text("\n".join(lines) + "\n")
         self.proc = subprocess.Popen(
             ["mosquitto", "-c", str(conf)],
@@ -98,10 +99,14 @@ class Broker:
             self.proc = None
 
 
-@pytest.fixture
-def broker(tmp_path: Path) -> Iterator[Broker]:
+def need_mosquitto() -> None:
     if shutil.which("mosquitto") is None:
         pytest.skip("mosquitto is not installed (apt-get install mosquitto)")
+
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Iterator[Broker]:
+    need_mosquitto()
     b = Broker(tmp_path)
     b.start()
     try:

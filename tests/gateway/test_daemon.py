@@ -14,7 +14,15 @@ from aiofins.gateway import Gateway, LinkState, PlcState, Shard
 from aiofins.gateway.config import GatewayConfig, parse_config
 from aiofins.simulator import VirtualPLC, run_simulator
 
-from .conftest import Broker, Subscriber, free_port, publisher, simulators, subscribe
+from .conftest import (
+    Broker,
+    Subscriber,
+    free_port,
+    need_mosquitto,
+    publisher,
+    simulators,
+    subscribe,
+)
 
 pytestmark = pytest.mark.anyio
 
@@ -167,7 +175,7 @@ url = "udp://127.0.0.1:{port}"
 async def test_broker_killed_and_restarted_loses_only_what_the_buffer_bound_drops(
     tmp_path: Path,
 ) -> None:
-    pytest.importorskip("aiomqtt")
+    need_mosquitto()
     broker = Broker(tmp_path, persistence=True)
     await anyio.to_thread.run_sync(broker.start)
     try:
