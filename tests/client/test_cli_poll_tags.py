@@ -53,3 +53,12 @@ def test_poll_refuses_a_bad_tag_file_naming_the_line(
     assert code != 0 and "given twice" in err
     code, out, err = run(capsys, "poll", sim_url, "--count", "1")
     assert code != 0 and "no tags" in err
+
+
+def test_tags_may_follow_options(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "poll", sim_url, "a=D1", "--count", "1", "b=D2", "--json")
+    assert code == 0, err
+    assert set(json.loads(out)["tags"]) == {"a", "b"}
+    with pytest.raises(SystemExit):
+        run(capsys, "poll", sim_url, "a=D1", "--count", "1", "--bogus")
+    assert "unrecognized arguments: --bogus" in capsys.readouterr().err

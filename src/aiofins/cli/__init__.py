@@ -87,7 +87,16 @@ def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException],
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (errors go to stderr)."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extras = parser.parse_known_args(argv)
+    # A subcommand whose positionals are optional (``poll URL [TAG...]``) names them in
+    # ``trailing``: argparse takes none of them once an option follows URL, so the rest
+    # arrive here.
+    trailing = getattr(args, "trailing", None)
+    if extras:
+        if trailing is None or any(extra.startswith("-") for extra in extras):
+            parser.error(f"unrecognized arguments: {' '.join(extras)}")
+        getattr(args, trailing).extend(extras)
     handler: Handler = args.func
     logger = logging.getLogger("aiofins")
     level = logger.level

@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
     add_timeout(p, 2.0, "seconds per attempt")
     p.add_argument("--json", action="store_true", help="one JSON document per scan")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, trailing="tags")  # TAGs after options too: see cli.main
 
 
 def parse_tags(texts: list[str]) -> dict[str, str]:
