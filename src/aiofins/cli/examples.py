@@ -71,6 +71,8 @@ EXAMPLES: dict[str, str] = {
   aiofins poll udp://192.168.250.1 temp=D200:float32 --changes-only --json
   # 10 scans, then exit
   aiofins poll udp://192.168.250.1 D0 --count 10
+  # the tags of a CX-Programmer symbol table (or a name,address,type CSV)
+  aiofins poll udp://192.168.250.1 --tags symbols.csv
 """,
     "backup": """
   # the program area (raw bytes), the parameter areas (JSON)
