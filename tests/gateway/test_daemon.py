@@ -7,6 +7,7 @@ from contextlib import AsyncExitStack
 from pathlib import Path
 
 import anyio
+import anyio.abc
 import httpx
 import pytest
 
@@ -152,24 +153,34 @@ name = "p1"
 url = "udp://127.0.0.1:{port}"
 """,
     )
-    async with subscribe(broker.port, "fins/p1/#") as sub, Gateway(cfg) as gateway:
 
-        def scans() -> int:
-            return len(sub.on("fins/p1/g"))
+    async def serve(stop: anyio.Event, *, task_status: anyio.abc.TaskStatus[None]) -> None:
+        async with run_simulator(plc, udp=("127.0.0.1", port)):
+            task_status.started()
+            await stop.wait()
 
-        async with run_simulator(plc, udp=("127.0.0.1", port)):
-            await sub.wait_for(lambda: scans() >= 3)
-        await sub.wait_for(lambda: len(sub.on("fins/p1/status")) >= 2)
-        down_at = scans()
-        await sub.wait_for(lambda: scans() >= down_at + 5)  # several failed scans of each group
-        async with run_simulator(plc, udp=("127.0.0.1", port)):
+    async with anyio.create_task_group() as tg:
+        killed = anyio.Event()
+        await tg.start(serve, killed)  # the PLC answers before the gateway starts
+        async with subscribe(broker.port, "fins/p1/#") as sub, Gateway(cfg) as gateway:
+
+            def scans() -> int:
+                return len(sub.on("fins/p1/g"))
+
+            await sub.wait_for(lambda: scans() >= 3 and sub.on("fins/p1/status"))
+            killed.set()
+            await sub.wait_for(lambda: len(sub.on("fins/p1/status")) >= 2)
+            down_at = scans()
+            await sub.wait_for(lambda: scans() >= down_at + 5)  # failed scans of each group
+            await tg.start(serve, anyio.Event())
             await sub.wait_for(lambda: len(sub.on("fins/p1/status")) >= 3)
             up_at = scans()
             await sub.wait_for(lambda: scans() >= up_at + 5)
-        states = [m["state"] for m in sub.on("fins/p1/status")]
-        assert states == ["online", "offline", "online"]
-        assert gateway.plc_status["p1"].transitions == 3
-        assert gateway.plc_status["p1"].state is PlcState.ONLINE
+        tg.cancel_scope.cancel()  # the restarted PLC
+    states = [m["state"] for m in sub.on("fins/p1/status")]
+    assert states == ["online", "offline", "online"]
+    assert gateway.plc_status["p1"].transitions == 3
+    assert gateway.plc_status["p1"].state is PlcState.ONLINE
 
 
 async def test_broker_killed_and_restarted_loses_only_what_the_buffer_bound_drops(
