@@ -125,6 +125,7 @@ url = "udp://127.0.0.1:{free_port()}"
             assert 'aiofins_gateway_plc_online{plc="gone"} 0.0' in text
             assert "aiofins_gateway_mqtt_connected 1.0" in text
             assert "aiofins_gateway_publish_latency_seconds_count" in text
+            assert "aiofins_request_duration_seconds" in text  # the library's own metrics
         # Stopped: the gateway says so (retained), and it is the last word on its topic.
         async with subscribe(broker.port, "fins/_gateway/#") as late:
             await late.wait_for(lambda: late.messages)

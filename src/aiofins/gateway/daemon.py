@@ -25,6 +25,7 @@ from typing import Any
 import anyio
 from anyio.abc import TaskGroup
 
+from ..metrics import FinsMetrics
 from ..poller import Poller, ScanGroup
 from ..pool import Pool
 from .config import GatewayConfig, GroupConfig, PlcConfig, render
@@ -85,12 +86,16 @@ class Gateway:
         self.name = f"{config.name}-{self.shard.index}" if sharded else config.name
         self.plcs: tuple[PlcConfig, ...] = tuple(p for p in config.plcs if self.shard.owns(p.name))
         mqtt = config.mqtt
-        self.pool = Pool(**dict(config.connect))
+        #: The library's own metrics (sessions, pool, poller), served on /metrics too.
+        self.library_metrics = FinsMetrics(registry=None)
+        self.pool = Pool(hooks=self.library_metrics.hooks, **dict(config.connect))
         self.poller = Poller(self.pool, buffer=max(64, sum(len(p.groups) for p in self.plcs)))
         self.plc_status: dict[str, PlcStatus] = {p.name: PlcStatus(p.name) for p in self.plcs}
         self.routes: dict[str, Route] = {}
         self.write_counts: dict[str, int] = {}
         self._set_routes: dict[str, Route] = {}  # "{topic}/set/" -> route
+        self.library_metrics.watch_pool(self.pool)
+        self.library_metrics.watch_poller(self.poller)
         self.metrics = GatewayMetrics(self)
         self.link = MqttLink(
             mqtt,

@@ -3,8 +3,9 @@
 A collector reads the counters when ``/metrics`` is scraped, so a scan costs nothing extra;
 only the scan-to-publish latency is a histogram fed per published message. Every gateway has
 its own registry (two gateways in one process do not mix their numbers). Names start with
-``aiofins_gateway_``; the library-wide metrics (aiofins/metrics.py, when it exists) can be
-registered next to these.
+``aiofins_gateway_``; the library's own metrics (:class:`aiofins.metrics.FinsMetrics`: the
+pool's endpoints, sessions and request latencies, the poller's groups) are served next to
+them.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ class GatewayMetrics:
             registry=self.registry,
         )
         self.registry.register(_Collector(gateway))
+        self.registry.register(gateway.library_metrics)
 
     def render(self) -> bytes:
         return generate_latest(self.registry)
