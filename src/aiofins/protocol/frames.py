@@ -51,6 +51,16 @@ def command_key(frame: bytes) -> int:
     return (frame[DNA] << 24) | (frame[DNA + 1] << 16) | (frame[DNA + 2] << 8) | frame[SID]
 
 
+def key_address(key: int) -> tuple[int, int, int]:
+    """The ``(network, node, unit)`` a request key (:func:`command_key`) is addressed to."""
+    return key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF
+
+
+def reply_end_code(frame: bytes) -> int:
+    """A reply's 16-bit end code (MRES SRES), flags included."""
+    return (frame[END_CODE] << 8) | frame[END_CODE + 1]
+
+
 def header_prefix(gct: int, dest: tuple[int, int, int], source: tuple[int, int, int]) -> bytes:
     """``ICF RSV GCT DNA DA1 DA2 SNA SA1 SA2``: a command's header before its SID."""
     return bytes((0x80, 0, gct, *dest, *source))

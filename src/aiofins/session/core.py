@@ -44,10 +44,15 @@ from ..protocol.errors import (
 from ..protocol.frames import (
     BUSY_CODES,
     ERROR_BITS,
+    MRC,
+    SID,
+    SRC,
     check_command,
     end_code_error,
     header_prefix,
+    key_address,
     pack_head,
+    reply_end_code,
 )
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
@@ -643,14 +648,14 @@ class Session:
             "%s: %s SID %d command %02X%02X: %s",
             where,
             direction,
-            frame[9],
-            frame[10],
-            frame[11],
+            frame[SID],
+            frame[MRC],
+            frame[SRC],
             frame.hex(" "),
             extra={
                 "endpoint": where,
-                "sid": frame[9],
-                "command": f"{frame[10]:02X}{frame[11]:02X}",
+                "sid": frame[SID],
+                "command": f"{frame[MRC]:02X}{frame[SRC]:02X}",
             },
         )
 
@@ -681,10 +686,10 @@ class Session:
                 hooks.response_received,
                 ResponseReceived(
                     self.transport.description,
-                    FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                    FinsAddress(*key_address(key)),
                     key & 0xFF,
                     (p.mrc << 8) | p.src,
-                    (frame[12] << 8) | frame[13],
+                    reply_end_code(frame),
                     latency,
                     p.attempts,
                 ),
@@ -803,7 +808,7 @@ class Session:
                     hooks.request_timed_out,
                     RequestTimedOut(
                         self.transport.description,
-                        FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                        FinsAddress(*key_address(key)),
                         key & 0xFF,
                         (p.mrc << 8) | p.src,
                         p.attempts,
@@ -821,7 +826,7 @@ class Session:
             return
         where = self.transport.description
         key = p.key
-        dest = FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF)
+        dest = FinsAddress(*key_address(key))
         logger.log(
             logging.WARNING if first else _DEBUG,
             "%s: no reply from %s to SID %d (command %02X%02X) after %d transmission(s) in %.3f s",
@@ -881,7 +886,7 @@ class Session:
                 hooks.request_retried,
                 RequestRetried(
                     self.transport.description,
-                    FinsAddress(key >> 24, (key >> 16) & 0xFF, (key >> 8) & 0xFF),
+                    FinsAddress(*key_address(key)),
                     key & 0xFF,
                     (p.mrc << 8) | p.src,
                     p.attempts,
