@@ -431,14 +431,19 @@ async def test_a_reply_later_than_the_quarantine_factor_never_reaches_the_sids_n
 
 @pytest.mark.anyio
 async def test_a_late_reply_ends_its_sids_quarantine() -> None:
-    def late(cmd: bytes) -> list[Reply]:
-        return [(0.05, reply(cmd, 0, word_data(cmd)))]
+    held: list[bytes] = []
 
-    async with udp_responder(late) as peer, session_for(peer, timeout=0.01) as session:
+    def hold(cmd: bytes) -> list[Reply]:
+        held.append(cmd)
+        return []
+
+    async with udp_responder(hold) as peer, session_for(peer, timeout=0.2) as session:
         with pytest.raises(FinsTimeout):
             await session.request(0x01, 0x01, read_params(0))
         (key,) = session._quarantine
         assert session._quarantine[key] - monotonic() > 14  # min_quarantine: 15 s
+        (cmd,) = held  # answered only now: late, whatever the machine's load
+        peer.send(reply(cmd, 0, word_data(cmd)), client_address(session))
         with anyio.fail_after(5):
             while session.stats.late_replies == 0:
                 await anyio.sleep(0.01)
