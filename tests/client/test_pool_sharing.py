@@ -65,7 +65,7 @@ def _base(sim: Simulator, scheme: str) -> str:
 #: (query, D0 of the PLC it addresses, request timeout)
 BORROWERS = [
     ("?node=1", 100, 2.0),
-    ("?node=7&timeout=0.3", 700, 0.3),
+    ("?node=7&timeout=1.5", 700, 1.5),
     ("?dest=3.5.0", 350, 2.0),
     ("?node=7", 700, 2.0),
     ("", 100, 2.0),  # 127.0.0.1: node 1, the gateway
@@ -101,7 +101,7 @@ async def test_each_borrower_gets_what_connect_with_its_url_gives(
         keys = {key for query, _, _ in BORROWERS for key in pool.stats(base + query)}
         assert keys == {
             f"{base}?node=1",
-            f"{base}?node=7&timeout=0.3",
+            f"{base}?node=7&timeout=1.5",
             f"{base}?dest=3.5.0",
             f"{base}?node=7",
             base,
@@ -110,9 +110,9 @@ async def test_each_borrower_gets_what_connect_with_its_url_gives(
             (stats,) = pool.stats(base + query).values()
             assert (stats.sessions, stats.completed) == (1, 2)
         # One spelling per key: the same options in another order or form share the session.
-        async with pool.client(f"{base}?timeout=0.30&node=07") as plc:
-            assert await _what_it_gives(plc) == alone["?node=7&timeout=0.3"]
-        assert pool.stats(f"{base}?node=7&timeout=0.3")[f"{base}?node=7&timeout=0.3"].sessions == 1
+        async with pool.client(f"{base}?timeout=1.50&node=07") as plc:
+            assert await _what_it_gives(plc) == alone["?node=7&timeout=1.5"]
+        assert pool.stats(f"{base}?node=7&timeout=1.5")[f"{base}?node=7&timeout=1.5"].sessions == 1
 
 
 async def test_udp_sessions_to_one_host_port_have_their_own_source_nodes(site: Simulator) -> None:
@@ -203,7 +203,7 @@ async def test_sessions_to_one_ethernet_unit_do_not_steal_each_others_replies(
     async with anyio.create_task_group() as tg:
         await tg.start(_serve_like_an_ethernet_unit, plcs, ports.append)
         base = f"udp://127.0.0.1:{ports[0]}"
-        async with Pool(timeout=0.5, retries=0) as pool:
+        async with Pool(timeout=2.0, retries=0) as pool:
 
             async def reads(query: str, d0: int) -> None:
                 for _ in range(50):
@@ -236,7 +236,7 @@ async def test_one_ethernet_unit_under_several_names_gets_a_source_node_per_sess
     ports: list[int] = []
     async with anyio.create_task_group() as tg:
         await tg.start(_serve_like_an_ethernet_unit, plcs, ports.append, host)
-        urls = [f"udp://{name}:{ports[0]}?timeout=0.{i + 3}" for i, name in enumerate(spellings)]
+        urls = [f"udp://{name}:{ports[0]}?timeout=1.{i + 3}" for i, name in enumerate(spellings)]
         async with Pool(retries=0) as pool:
             sources = set()
             for url in urls:
