@@ -119,14 +119,15 @@ async def test_reorder_holds_until_next_response() -> None:
 
 @pytest.mark.anyio
 async def test_delay_does_not_hold_up_later_requests() -> None:
-    rule = FaultRule(delay=Delay(0.2, 0.2))
+    # The delay is the margin the marker has to overtake the read, however loaded the machine.
+    rule = FaultRule(delay=Delay(1.0, 1.0))
     async with udp_sim(plan_for_read(rule)) as (sim, sock):
         start = anyio.current_time()
         await send(sim, sock, READ_D100)
         await send(sim, sock, MARKER)
         assert (await recv(sock)).startswith(MARKER_REPLY_HEAD)
         assert await recv(sock) == READ_D100_REPLY
-        assert anyio.current_time() - start >= 0.2
+        assert anyio.current_time() - start >= 1.0
         assert sim.counters.delayed == 1
 
 
@@ -181,7 +182,8 @@ async def test_end_code_relay_and_flags(rule: FaultRule, tail: str) -> None:
 
 @pytest.mark.anyio
 async def test_max_concurrent_answers_2604() -> None:
-    plan = FaultPlan(FaultRule(delay=Delay(0.3, 0.3)), per_command=CLEAN, max_concurrent=2)
+    # The delay keeps the first two in flight while the third arrives, even on a loaded machine.
+    plan = FaultPlan(FaultRule(delay=Delay(1.0, 1.0)), per_command=CLEAN, max_concurrent=2)
     async with udp_sim(plan) as (sim, sock):
         for sid in (1, 2, 3):
             await send(sim, sock, with_sid(READ_D100, sid))
@@ -395,7 +397,7 @@ async def test_frame_log_to_file_and_urls(tmp_path: pathlib.Path) -> None:
 async def test_held_answers_are_bounded_the_rest_dropped_and_counted() -> None:
     """--delay/--late held one task per delayed request without bound (61k requests: RSS
     31 -> 388 MB). At most max_held wait; the rest are dropped and counted."""
-    plan = plan_for_read(FaultRule(delay=Delay(0.2, 0.2)))
+    plan = plan_for_read(FaultRule(delay=Delay(1.0, 1.0)))  # held while the other eight arrive
     plan.max_held = 3
     async with udp_sim(plan) as (sim, sock):
         for sid in range(10):
