@@ -29,14 +29,13 @@ from ..bulk import (
     upload_file,
 )
 from ..client import Client
-from ..connection import connect
 from ..protocol.commands.parameter import ParameterAreaWrite
 from ..protocol.commands.program import ProgramAreaWrite
 from ..protocol.commands.status import CpuMode
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
 from .options import add_read_only, add_timeout, add_yes, confirm, refuse
-from .plc import warn_of_cpu_errors
+from .plc import with_client
 from .text import escape
 
 
@@ -123,23 +122,9 @@ def _sync(handler: Any, question: Any = None) -> Any:
         text = question(args) if question is not None and not args.read_only else None
         if text is not None and not confirm(args, text):
             return refuse(args.command)
-        return int(anyio.run(_with_client, handler, args))
+        return int(anyio.run(with_client, handler, args))
 
     return run
-
-
-async def _with_client(handler: Any, args: argparse.Namespace) -> int:
-    async with connect(
-        args.url,
-        dest=args.dest,
-        src=args.src,
-        timeout=args.timeout,
-        tcp_connect_timeout=args.timeout,  # bounds the FINS/TCP connect and handshake too
-        read_only=args.read_only,
-    ) as plc:
-        code = int(await handler(plc, args))
-        warn_of_cpu_errors(plc.last_end_code)
-        return code
 
 
 async def _backup(plc: Client, args: argparse.Namespace) -> int:

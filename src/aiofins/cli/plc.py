@@ -121,7 +121,7 @@ def _runner(
         text = question(args) if question is not None and not args.read_only else None
         if text is not None and not confirm(args, text):
             return refuse(args.command)
-        result = anyio.run(_with_client, handler, args)
+        result = anyio.run(with_client, handler, args)
         if args.json:
             print(json.dumps(result, default=_json_default, sort_keys=True))
         else:
@@ -131,7 +131,9 @@ def _runner(
     return run
 
 
-async def _with_client(handler: Handler, args: argparse.Namespace) -> Any:
+async def with_client(handler: Handler, args: argparse.Namespace) -> Any:
+    """Connect as the command line's options say, run ``handler(plc, args)``, warn of CPU
+    error flags in the last reply, and return what the handler returned."""
     async with connect(
         args.url,
         dest=args.dest,
