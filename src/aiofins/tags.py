@@ -26,6 +26,7 @@ from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress, check_span
 from .protocol.errors import AddressError, CommandError, DecodeError
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
+from .protocol.wordcodec import NUMBER_CODES
 
 #: Bit area code → the word area code holding the same bits (CS/CJ codes).
 BIT_TO_WORD_AREA: dict[int, int] = {
@@ -205,17 +206,6 @@ class ReadPlan:
 
 # Decoding steps: (tag name, op, index or indices into the flat results, argument).
 _BIT, _FLAG, _UINT16, _NUMBER, _OTHER = "bit", "flag", "uint16", "number", "other"
-#: struct codes of the numeric kinds of :class:`ValueType` (value bytes, most significant first).
-_STRUCT_CODES = {
-    "int16": "h",
-    "uint16": "H",
-    "int32": "i",
-    "uint32": "I",
-    "int64": "q",
-    "uint64": "Q",
-    "float32": "f",
-    "float64": "d",
-}
 _Step = tuple[str, str, Any, Any]
 
 
@@ -258,7 +248,7 @@ def _compile_steps(plan: ReadPlan) -> list[_Step]:
             steps.append((tag.name, _BIT, where[0], tag.address.bit))
         elif vtype.kind == "uint16" and vtype.word_order in _UNSWAPPED:
             steps.append((tag.name, _UINT16, where[0], vtype))
-        elif vtype.kind in _STRUCT_CODES:
+        elif vtype.kind in NUMBER_CODES:
             codec = (*_codec(vtype), tuple(where))
             steps.append((tag.name, _NUMBER, tuple(_value_order(where, vtype)), codec))
         else:
@@ -291,7 +281,7 @@ def _codec(
     n = vtype.words
     swapped = vtype.word_order not in _UNSWAPPED  # bytes swapped inside each word
     pack = struct.Struct(f"{'<' if swapped else '>'}{n}H").pack
-    unpack = struct.Struct(">" + _STRUCT_CODES[vtype.kind]).unpack
+    unpack = struct.Struct(">" + NUMBER_CODES[vtype.kind]).unpack
     return pack, unpack, vtype
 
 

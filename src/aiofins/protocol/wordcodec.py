@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from .values import Value, ValueType
 
 __all__ = [
+    "NUMBER_CODES",
     "numeric_codec",
     "pack_elements",
     "unpack_elements",
@@ -35,7 +36,7 @@ __all__ = [
 #: ``struct`` codes of unsigned elements by size in bytes.
 _ELEMENT_CODES = {1: "B", 2: "H", 4: "I"}
 #: ``struct`` codes of the numeric value kinds.
-_NUMBER_CODES = {
+NUMBER_CODES = {
     "int16": "h",
     "uint16": "H",
     "int32": "i",
@@ -107,7 +108,7 @@ def numeric_codec(vtype: ValueType, count: int) -> tuple[struct.Struct, struct.S
 
 @lru_cache(maxsize=512)
 def _run_codec(vtype: ValueType, count: int) -> tuple[struct.Struct, struct.Struct] | None:
-    code = _NUMBER_CODES.get(vtype.kind) or _BCD_CODES.get(vtype.kind)
+    code = NUMBER_CODES.get(vtype.kind) or _BCD_CODES.get(vtype.kind)
     if code is None:
         return None
     words_order, value_order = _orders(vtype.word_order.value)
