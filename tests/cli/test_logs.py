@@ -10,17 +10,13 @@ import pytest
 
 from aiofins.cli import main
 
-from ..client.test_cli import simulate, udp_url_of
+from ..client.test_cli import simulator_url
 
 
 @pytest.fixture(scope="module")
 def url() -> Iterator[str]:
-    proc = simulate()
-    try:
-        yield udp_url_of(proc)
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+    with simulator_url() as url:
+        yield url
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[str, list[str]]:
@@ -36,9 +32,7 @@ def test_quiet_by_default(url: str, capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_cpu_error_flags_are_said_once_without_v(capsys: pytest.CaptureFixture[str]) -> None:
     """The command warns about them itself; the session's log warning shows with -v."""
-    proc = simulate("--flags", "40")
-    try:
-        url = udp_url_of(proc)
+    with simulator_url("--flags", "40") as url:
         _, err = run(capsys, "read", url, "D0")
         (warning,) = err
         assert "warning: the PLC reports a non-fatal CPU error (end code 0040)" in warning
@@ -50,9 +44,6 @@ def test_cpu_error_flags_are_said_once_without_v(capsys: pytest.CaptureFixture[s
             )
             for line in err
         )
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def test_v_logs_the_lifecycle(url: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import anyio
@@ -34,21 +35,21 @@ def udp_url_of(proc: subprocess.Popen[str]) -> str:
     raise AssertionError("simulator did not report its UDP address")
 
 
-@pytest.fixture(scope="module")
-def sim_url() -> Iterator[str]:
-    proc = simulate("--tcp", "127.0.0.1:0", "--mode", "program")
-    assert proc.stdout is not None
-    url = ""
-    for line in proc.stdout:
-        if line.startswith("listening on udp://"):
-            url = line.split()[-1]
-            break
-    assert url, "simulator did not report its UDP address"
+@contextmanager
+def simulator_url(*options: str) -> Iterator[str]:
+    """The UDP URL of an ``aiofins simulate`` process, stopped on leaving."""
+    proc = simulate(*options)
     try:
-        yield url
+        yield udp_url_of(proc)
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def sim_url() -> Iterator[str]:
+    with simulator_url("--tcp", "127.0.0.1:0", "--mode", "program") as url:
+        yield url
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -168,9 +169,7 @@ def test_backup_restore_and_files(
 def test_cpu_error_flags_succeed_with_a_warning_on_stderr(
     flags: str, said: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    proc = simulate("--flags", flags)
-    try:
-        url = udp_url_of(proc)
+    with simulator_url("--flags", flags) as url:
         code, out, err = run(capsys, "read", url, "D0", "2", "--json")
         assert code == 0 and json.loads(out)["values"] == [0, 0]  # stdout: the JSON, unchanged
         warning = f"warning: the PLC reports {said} CPU error (end code 00{flags})"
@@ -182,9 +181,6 @@ def test_cpu_error_flags_succeed_with_a_warning_on_stderr(
         assert code == 0 and warning in err
         code, _, err = run(capsys, "backup", url, str(tmp_path / "p.bin"))
         assert code == 0 and warning in err
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def test_ping_count_must_be_positive(sim_url: str, capsys: pytest.CaptureFixture[str]) -> None:

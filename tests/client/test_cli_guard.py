@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .test_cli import run, simulate, udp_url_of
+from .test_cli import run, simulator_url
 
 
 class Terminal:
@@ -36,12 +36,8 @@ class Terminal:
 @pytest.fixture
 def url() -> Iterator[str]:
     """A simulator of our own (these tests change its mode), in RUN mode."""
-    proc = simulate()
-    try:
-        yield udp_url_of(proc)
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+    with simulator_url() as url:
+        yield url
 
 
 def mode(capsys: pytest.CaptureFixture[str], url: str) -> str:

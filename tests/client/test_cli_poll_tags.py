@@ -8,19 +8,15 @@ from pathlib import Path
 
 import pytest
 
-from .test_cli import run, simulate, udp_url_of
+from .test_cli import run, simulator_url
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def sim_url() -> Iterator[str]:
-    proc = simulate()
-    try:
-        yield udp_url_of(proc)
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+    with simulator_url() as url:
+        yield url
 
 
 def test_poll_reads_the_tags_of_a_cx_programmer_file_and_arguments(
