@@ -162,7 +162,7 @@ def check_options(options: Mapping[str, Any]) -> None:
             option_value(name, value)
 
 
-#: Checks of :func:`connect`'s numeric options (the same wording as the URL's).
+#: Checks of :func:`connect`'s options (numbers in the same wording as the URL's).
 _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "timeout": lambda v: seconds("timeout", v),
     "retries": lambda v: whole_number("retries", v, 0),
@@ -170,6 +170,8 @@ _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "gct": lambda v: whole_number("gct", v, 0, 255),
     "read_only": lambda v: _flag("read_only", v),
     "hooks": lambda v: _hooks(v),
+    "dest": lambda v: FinsAddress.of(v),
+    "src": lambda v: FinsAddress.of(v),
 }
 
 
@@ -192,7 +194,7 @@ async def connect(
     transport: Transport | None = None,
     dest: FinsAddress | str | None = None,
     src: FinsAddress | str | None = None,
-    timeout: float = DEFAULT_TIMEOUT,
+    timeout: float | None = None,
     retries: int = 2,
     max_in_flight: int | None = None,
     gct: int = 2,
@@ -214,6 +216,12 @@ async def connect(
     handshake (default 5 s; a call waits for it at most its own ``timeout``);
     ``tcp_gather_writes=False`` writes each frame on its own instead of the frames of one
     event-loop step together.
+
+    A keyword argument given here wins over the same option in the URL's query
+    (``connect("udp://h?timeout=0.3", timeout=2)`` waits 2 s); ``?node=N`` and ``?dest=``
+    give way to ``dest=``. The exception is ``read_only``: either one is enough. (A
+    :class:`~aiofins.Pool`'s keyword options are defaults for every endpoint instead: there
+    the URL wins.) ``timeout`` defaults to 2 s.
 
     ``read_only=True`` (or ``?read_only=1`` in the URL; either one is enough) makes a client
     that refuses every command changing the PLC — memory, parameters, program, mode, clock,
@@ -238,6 +246,8 @@ async def connect(
             "gct": gct,
             "read_only": read_only,
             "hooks": hooks,
+            "dest": dest,
+            "src": src,
         }
     )
     check_options(transport_options)
@@ -267,7 +277,13 @@ async def connect(
         dest=d,
         gct=gct,
         max_in_flight=5 if max_in_flight is None else max_in_flight,
-        timeout=timeout if endpoint is None else request_timeout(endpoint, timeout),
+        timeout=(
+            timeout
+            if timeout is not None
+            else DEFAULT_TIMEOUT
+            if endpoint is None
+            else request_timeout(endpoint)
+        ),
         retries=retries,
         hooks=hooks,
     )

@@ -601,6 +601,16 @@ class Pool:
             e for lst in self._entries.values() for e in lst if e.link == link and e.state in _LIVE
         ]
 
+    def _options_for(self, endpoint: Endpoint) -> dict[str, Any]:
+        """The pool's keyword options for a session to ``endpoint``: defaults, so an option
+        its URL sets is left to the URL (``?node=`` and ``?dest=`` both set ``dest``;
+        ``read_only`` is kept: either one is enough)."""
+        options = dict(self.connect_options)
+        for name, _ in endpoint.options:
+            if name != "read_only":
+                options.pop("dest" if name == "node" else name, None)
+        return options
+
     async def _addresses_for(
         self, endpoint: Endpoint, link: str, *, extra: bool
     ) -> tuple[FinsAddress | None, FinsAddress | None]:
@@ -634,12 +644,11 @@ class Pool:
             return None, None
         if endpoint.scheme != "udp":
             return None, None
-        dest, src = await default_addresses(
-            endpoint, self.connect_options.get("dest"), self.connect_options.get("src")
-        )
+        defaults = self._options_for(endpoint)
+        dest, src = await default_addresses(endpoint, defaults.get("dest"), defaults.get("src"))
         used = {e.src.node for e in others if e.src is not None}
         taken = used | {e.dest.node for e in others if e.dest is not None}
-        named = self.connect_options.get("src") or endpoint.option("src")
+        named = endpoint.option("src") or defaults.get("src")
         if named is not None and not extra:
             if src.node in used:
                 raise CommandError(
@@ -661,7 +670,7 @@ class Pool:
     async def _serve(self, entry: _Entry) -> None:
         """Open the entry's session, hold it while it is lent, close it. Ends at a boundary:
         whatever goes wrong becomes a failure of this entry alone."""
-        options = dict(self.connect_options)
+        options = self._options_for(parse_endpoint(entry.url))
         if entry.src is not None:
             options["src"] = entry.src
         try:

@@ -99,3 +99,17 @@ async def test_typed_values_that_overflow_are_refused(url: str, sim: Simulator) 
         with pytest.raises(aiofins.CommandError, match="an integer of 20000 bits does not fit"):
             await plc.write_value("D0", int("f" * 5000, 16), "uint64")
         assert frames(sim) == before
+
+
+async def test_addresses_that_are_not_fins_addresses_are_refused(url: str, sim: Simulator) -> None:
+    """dest=7 (a node number, not an address) raised AttributeError from inside connect()."""
+    before = frames(sim)
+    cases: list[tuple[dict[str, Any], str]] = [
+        ({"dest": 7}, "a FINS address is a FinsAddress or 'NET.NODE.UNIT' text, got 7"),
+        ({"src": "x"}, "FINS address 'x' is not NET.NODE"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(aiofins.CommandError, match=message):
+            async with aiofins.connect(url, **kwargs):
+                pass
+    assert frames(sim) == before

@@ -73,6 +73,9 @@ def _open_descriptors() -> int:
         ({"idle_timeout": "300"}, "idle_timeout must be a positive number"),
         ({"timeout": math.nan}, "timeout must be a positive number of seconds"),
         ({"tcp_connect_timeout": -1}, "tcp_connect_timeout must be a positive number"),
+        ({"dest": "x"}, "FINS address 'x' is not NET.NODE"),
+        ({"src": 7}, "a FINS address is a FinsAddress or 'NET.NODE.UNIT' text, got 7"),
+        ({"dest": "0.300.0"}, "node address 300 out of range"),
     ],
 )
 def test_pool_arguments_are_checked_when_the_pool_is_made(

@@ -294,3 +294,25 @@ async def test_a_fixed_tcp_node_is_refused_for_a_second_session_to_the_plc(
         pool.client(base + "?node=7") as b,
     ):
         assert (await a.read("D0"), await b.read("D0")) == ([100], [700])
+
+
+@pytest.mark.parametrize("scheme", ["udp", "tcp"])
+async def test_connect_keywords_win_over_the_url_and_the_url_over_a_pools(
+    site: Simulator, scheme: str
+) -> None:
+    """connect(): a keyword given wins over the same option in the URL (timeout as dest); a
+    Pool's keyword options are defaults for every endpoint: the URL's own option wins."""
+    base = _base(site, scheme)
+    async with connect(base + "?node=7&timeout=0.3", timeout=1.5, dest="3.5.0") as plc:
+        assert await _what_it_gives(plc) == (FinsAddress(3, 5, 0), 1.5, [350])
+    async with connect(base + "?node=7&timeout=0.3") as plc:
+        assert await _what_it_gives(plc) == (FinsAddress(0, 7, 0), 0.3, [700])
+    async with connect(base, timeout=1.5) as plc:
+        assert (await _what_it_gives(plc))[1:] == (1.5, [100])
+    async with Pool(timeout=1.5, dest="3.5.0") as pool:
+        async with pool.client(base + "?node=7&timeout=0.3") as plc:
+            assert await _what_it_gives(plc) == (FinsAddress(0, 7, 0), 0.3, [700])
+        async with pool.client(base + "?dest=0.1.0") as plc:
+            assert await _what_it_gives(plc) == (FinsAddress(0, 1, 0), 1.5, [100])
+        async with pool.client(base) as plc:
+            assert await _what_it_gives(plc) == (FinsAddress(3, 5, 0), 1.5, [350])

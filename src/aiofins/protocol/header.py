@@ -69,9 +69,16 @@ class FinsAddress:
         return cls(values[0], values[1], values[2])
 
     @classmethod
-    def of(cls, value: FinsAddress | str) -> FinsAddress:
-        """``value`` itself, or parsed from ``"NET.NODE.UNIT"`` text (:meth:`parse`)."""
-        return value if isinstance(value, FinsAddress) else cls.parse(value)
+    def of(cls, value: object) -> FinsAddress:
+        """``value`` itself, or parsed from ``"NET.NODE.UNIT"`` text (:meth:`parse`);
+        :class:`CommandError` for anything else."""
+        if isinstance(value, FinsAddress):
+            return value
+        if not isinstance(value, str):
+            raise CommandError(
+                f"a FINS address is a FinsAddress or 'NET.NODE.UNIT' text, got {value!r}"
+            )
+        return cls.parse(value)
 
     def __str__(self) -> str:
         return f"{self.network}.{self.node}.{self.unit}"
