@@ -28,6 +28,7 @@ from prometheus_client.registry import Collector
 
 from .hooks import OTHER_FAMILY, EventHooks, ResponseReceived, command_family
 from .pool import EndpointStats
+from .session.response import SESSION_COUNTERS
 
 if TYPE_CHECKING:
     from .client import Client
@@ -49,25 +50,6 @@ _POOL_GAUGES = {
     "in_flight": "Requests awaiting a reply",
     "backoff": "Seconds drawn as backoff after the endpoint's last failure",
 }
-#: SessionStats counters exported for a watched client (the pool sums the same ones).
-_SESSION_COUNTERS = (
-    "completed",
-    "timeouts",
-    "cancelled",
-    "late_replies",
-    "duplicates",
-    "unsolicited",
-    "mismatched",
-    "malformed",
-    "retries",
-    "sid_exhausted",
-    "breaker_rejects",
-    "busy_retries",
-    "end_code_errors",
-    "connects",
-    "connect_failures",
-    "disconnects",
-)
 
 
 class FinsMetrics(Collector):
@@ -196,7 +178,7 @@ class FinsMetrics(Collector):
                 f"Session counter {name} (see SessionStats)",
                 labels=("endpoint",),
             )
-            for name in _SESSION_COUNTERS
+            for name in SESSION_COUNTERS
         }
         in_flight = GaugeMetricFamily(
             self._name("session_in_flight"), "Requests awaiting a reply", labels=("endpoint",)

@@ -71,6 +71,7 @@ from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeou
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, whole_number
 from .session import SessionStats
+from .session.response import SESSION_COUNTERS
 from .transport.base import is_asyncio, url_host
 
 
@@ -198,8 +199,18 @@ class EndpointStats:
     in_flight: int = 0
     completed: int = 0
     timeouts: int = 0
+    cancelled: int = 0
     late_replies: int = 0
+    duplicates: int = 0
+    unsolicited: int = 0
+    mismatched: int = 0
+    malformed: int = 0
     retries: int = 0
+    sid_exhausted: int = 0
+    breaker_rejects: int = 0
+    busy_retries: int = 0
+    end_code_errors: int = 0
+    background_errors: int = 0
     connects: int = 0
     connect_failures: int = 0
     disconnects: int = 0
@@ -211,20 +222,8 @@ class EndpointStats:
     latency_p99: float = 0.0
 
 
-#: The session counters an endpoint sums (and keeps when a session closes).
-_SUMMED = (
-    "completed",
-    "timeouts",
-    "late_replies",
-    "retries",
-    "connects",
-    "connect_failures",
-    "disconnects",
-)
-
-
 def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
-    for name in _SUMMED:
+    for name in SESSION_COUNTERS:
         setattr(into, name, getattr(into, name) + getattr(stats, name))
 
 

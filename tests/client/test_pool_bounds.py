@@ -28,6 +28,7 @@ from aiofins.protocol.errors import (
     FinsTimeout,
     FrameError,
 )
+from aiofins.session.response import SESSION_COUNTERS
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
@@ -425,3 +426,24 @@ async def test_a_pool_opened_again_lends_again(sim: Simulator) -> None:
     with pytest.raises(ConnectionLost, match="the pool is closed"):
         async with pool.client(url):
             pass
+
+
+async def test_an_endpoints_stats_sum_every_session_counter(anyio_backend: object) -> None:
+    """pool.stats() summed 7 of the session's counters: duplicates, end-code errors, SIDs
+    exhausted, breaker rejects and background errors were in no endpoint's figures."""
+    faults = FaultPlan(
+        rule=FaultRule(duplicate=1.0), per_command={0x0501: FaultRule(end_code=0x0401)}
+    )
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=faults) as sim:
+        url = f"udp://127.0.0.1:{sim.udp_port}"
+        async with Pool() as pool, pool.client(url) as plc:
+            for _ in range(3):
+                assert await plc.read("D0") == [0]
+            with pytest.raises(aiofins.EndCodeError):
+                await plc.cpu_unit_data_read()
+            await _until(lambda: plc.session.stats.duplicates >= 3)
+            session = plc.session.stats.as_dict()
+            stats = pool.stats(url)[url]
+            assert (stats.duplicates, stats.end_code_errors) == (session["duplicates"], 1)
+            for name in SESSION_COUNTERS:
+                assert getattr(stats, name) == session[name], name

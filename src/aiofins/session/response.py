@@ -146,8 +146,7 @@ class SessionStats:
         return ring[min(len(ring) - 1, int(len(ring) * 0.99))] if ring else 0.0
 
     def as_dict(self) -> dict[str, float]:
-        names = [n for n in self.__slots__ if not n.startswith("_")]
-        out: dict[str, float] = {n: getattr(self, n) for n in sorted(names)}
+        out: dict[str, float] = {n: getattr(self, n) for n in sorted(SESSION_COUNTERS)}
         out["in_flight"] = self.in_flight
         out["latency_mean"] = self.latency_mean
         out["latency_p99"] = self.latency_p99
@@ -156,3 +155,8 @@ class SessionStats:
     def __repr__(self) -> str:
         inner = ", ".join(f"{k}={v:.6g}" for k, v in self.as_dict().items())
         return f"SessionStats({inner})"
+
+
+#: The names of :class:`SessionStats`' counters (what a Pool sums per endpoint and the
+#: Prometheus collector exports).
+SESSION_COUNTERS = tuple(n for n in SessionStats.__slots__ if not n.startswith("_"))
