@@ -25,16 +25,16 @@ from typing import TYPE_CHECKING, NoReturn
 import anyio
 import anyio.lowlevel
 
-from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
+from ..protocol.endcodes import EndCode
 from ..protocol.errors import (
     CommandError,
     ConnectionLost,
     FinsTimeout,
 )
-from ..protocol.frames import BUSY_CODES, ERROR_BITS, check_command, end_code_error, pack_head
+from ..protocol.frames import check_command, end_code_error, pack_head
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
-from .response import Response, _new, _set_data, _set_end_code, _set_frame
-from .slots import DestState, Pending, Plan, Retransmission, SlotTimeout, no_free_sid_message
+from .response import Response
+from .slots import DestState, Pending, Plan, Retransmission
 
 if TYPE_CHECKING:
     from .core import Session
@@ -97,17 +97,8 @@ class BatchPending(Pending):
         if batch.fut.done():
             return
         session = batch.session
-        raw = (frame[12] << 8) | frame[13]
-        if not raw & ERROR_BITS:
-            session.stats.completed += 1
-            response = _new(Response)  # new_response(), inlined
-            if raw:
-                session.cpu_flags_seen(raw)
-                _set_end_code(response, EndCode(raw))
-            else:
-                _set_end_code(response, _NORMAL)
-            _set_data(response, frame[14:])
-            _set_frame(response, frame)
+        response = session.response(frame)
+        if response is not None:
             batch.results[self.index] = response
             remaining = batch.remaining = batch.remaining - 1
             if not remaining:
@@ -124,16 +115,12 @@ class BatchPending(Pending):
             else:
                 batch.slot_free()
             return
-        if (raw & END_CODE_MASK) in BUSY_CODES and self.busy < session.busy_retries:
+        pause = session.busy_pause(frame, self.busy)
+        if pause is not None:
             session.stats.busy_retries += 1
-            batch.later(
-                session.busy_backoff * (2**self.busy), self.index, self.attempt, self.busy + 1
-            )
+            batch.later(pause, self.index, self.attempt, self.busy + 1)
             return
-        session.stats.end_code_errors += 1
-        if raw & CPU_ERROR_FLAGS:
-            session.cpu_flags_seen(raw)
-        batch.finish(end_code_error(frame, self.mrc, self.src))
+        batch.finish(session.end_code_failure(frame, self.mrc, self.src))
 
     def fail(self, exc: BaseException) -> None:
         self.batch.failed(self, exc)
@@ -190,7 +177,7 @@ class Batch:
         self.error: BaseException | None = None
         self.outbox: list[tuple[BatchPending, bytes]] = []
         self.flush_handle: asyncio.Handle | None = None
-        self.fut: asyncio.Future[None] = session._loop.create_future()
+        self.fut: asyncio.Future[None] = session.loop.create_future()
 
     # -- sending ------------------------------------------------------------------------
 
@@ -200,61 +187,29 @@ class Batch:
             return
         session = self.session
         state = self.state
-        pending = session._pending
-        key = state.base | state.cursor
         now = monotonic()
-        if (
-            key in pending
-            or key in session._quarantine
-            or session._lingering.get(key, 0.0) > now
-            or (session._routed and session._sid_taken(key))
-        ):
-            found = session._allocate_sid(state)
-            if found is None:  # every SID in use: try again shortly, keeping the slot
-                since = self.sid_waits.setdefault(index, now)
-                if index == self.next - 1 or len(self.sid_waits) == 1:
-                    session.stats.sid_exhausted += 1
-                if now - since >= self.timeout:
-                    message = no_free_sid_message(
-                        state.address, self.timeout, session._quarantine, len(session._lingering)
-                    )
-                    self.finish(SlotTimeout(message))
-                    return
-                self.later(_SID_WAIT, index, attempt, busy)
+        key = session.sids.take(state, now)
+        if key is None:  # every SID in use: try again shortly, keeping the slot
+            since = self.sid_waits.setdefault(index, now)
+            if index == self.next - 1 or len(self.sid_waits) == 1:
+                session.stats.sid_exhausted += 1
+            if now - since >= self.timeout:
+                self.finish(session.no_free_sid(state, self.timeout))
                 return
+            self.later(_SID_WAIT, index, attempt, busy)
+            return
+        if self.sid_waits:
             self.sid_waits.pop(index, None)
-            key = found
-        else:
-            state.cursor = (key + 1) & 0xFF
         mrc, src, params = self.commands[index]
         p = BatchPending(key, mrc, src, self, index, attempt, busy)
-        p.sent_at = now
         p.rtt = state
         frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
-        retries = self.retries
-        if retries:
-            wait = state.rto or self.timeout / ((2 << retries) - 1)  # as in request()
-            p.plan = (frame, retries, now + self.timeout, None, wait)
-            deadline = p.deadline = now + wait
-        else:
-            deadline = p.deadline = now + self.timeout
-        pending[key] = p
-        fifo = session._fifo
-        if not fifo or deadline >= fifo[-1].deadline:
-            fifo.append(p)
-        else:
-            session._deadlines.add(p)
-        if deadline < session._timer_at:
-            session._arm(deadline)
-        if session._hooks is not None:
-            session._sent(p, state.address)
-        if logger.isEnabledFor(_DEBUG):
-            session._log_frame("sent", frame)
+        session.start(p, frame, self.retries, now, now + self.timeout, None)
         # Sent at the end of this event-loop step, together with the other frames queued in
         # it: the peer then gets a burst instead of a wake-up per frame.
         self.outbox.append((p, frame))
         if self.flush_handle is None:
-            self.flush_handle = session._loop.call_soon(self.flush)
+            self.flush_handle = session.loop.call_soon(self.flush)
 
     def flush(self) -> None:
         """Send the frames queued in this event-loop step."""
@@ -296,7 +251,7 @@ class Batch:
             self.handles.discard(handle)
             self.send(index, attempt, busy)
 
-        handle = self.session._loop.call_later(delay, fire)
+        handle = self.session.loop.call_later(delay, fire)
         self.handles.add(handle)
 
     def start(self) -> None:
@@ -336,7 +291,7 @@ class Batch:
             return
         if isinstance(exc, FinsTimeout):
             exc = FinsTimeout(
-                self.session._timeout_message(self.dest, p.mrc, p.src, self.timeout, p.attempts)
+                self.session.timeout_message(self.dest, p.mrc, p.src, self.timeout, p.attempts)
             )
         self.finish(exc)
 
@@ -349,13 +304,7 @@ class Batch:
 
     def abandon(self, p: BatchPending) -> None:
         """Give up on ``p``: out of the pending table, its SID quarantined."""
-        if not p.done:
-            session = self.session
-            p.done = True
-            p.abandoned = True
-            session._pending.pop(p.key, None)
-            session._quarantine[p.key] = session.quarantine_until(monotonic(), self.timeout)
-            session.stats.cancelled += 1
+        self.session.abandon(p, self.timeout)
 
     def cleanup(self) -> None:
         """After the caller resumed (done, failed or cancelled): nothing of the batch left."""
@@ -371,7 +320,7 @@ class Batch:
         # Sent and not answered: this batch's entries of the pending table (a scan, once).
         mine = [
             p
-            for p in self.session._pending.values()
+            for p in self.session.sids.pending.values()
             if isinstance(p, BatchPending) and p.batch is self
         ]
         for p in mine:
@@ -417,13 +366,13 @@ async def request_many(
     transport = session.transport
     if transport.fast_send is None and not transport.is_open:
         try:
-            await session._ensure_open(timeout)
+            await session.ensure_open(timeout)
         except ConnectionLost as exc:
             await raise_after_a_turn(exc)
-    state = session._dest_state(dest)
+    state = session.dest_state(dest)
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))
-    if not session._asyncio or transport.fast_send is None or len(commands) == 1:
+    if not session.on_asyncio or transport.fast_send is None or len(commands) == 1:
         return await _concurrent(session, commands, dest, timeout, idempotent, retries, width)
     await state.slots.acquire(timeout, f"{dest}")
     batch = Batch(session, commands, state, timeout, retries, width)

@@ -14,9 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import random
 from collections.abc import Callable, Sequence
-from collections.abc import Set as AbstractSet
 from time import monotonic
 from types import TracebackType
 from typing import Any
@@ -25,14 +23,13 @@ import anyio
 from anyio.abc import TaskGroup
 
 from ..hooks import (
-    ConnectionStateChanged,
     EventHooks,
     RequestRetried,
     RequestSent,
     RequestTimedOut,
     ResponseReceived,
 )
-from ..protocol.endcodes import CPU_ERROR_FLAGS, EndCode
+from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
     CircuitOpen,
     CommandError,
@@ -60,71 +57,37 @@ from .background import Background
 from .batch import raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker
 from .deadlines import Deadlines
-from .matching import count_unmatched, match_relay_error, match_wildcard
+from .link import InBackoff, Link
+from .matching import match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
+from .sids import MAX_LINGER, SID_WAIT, SidSpace
 from .slots import (
     AsyncioPending,
     DestState,
     EventPending,
     Pending,
-    Plan,
     Retransmission,
     SlotQueue,
     SlotTimeout,
     no_free_sid_message,
 )
-from .states import LINK_TRANSITIONS, LinkState
+from .states import LinkState
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
 _NORMAL = EndCode(0)
 _CLOSED_BREAKER = BreakerState.CLOSED
-_NONE: frozenset[int] = frozenset()
 #: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
 _SAMPLE_MASK = 7
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
 _POLL_MAX_BACKOFF = 64
-#: Longest pause between two looks for a free SID while all 256 are taken.
-_SID_WAIT = 0.01
-#: A duplicate reply seen ``x`` seconds after its request completed makes SIDs linger
-#: ``LINGER_FACTOR x x`` after a completion from then on (at most :data:`MAX_LINGER`).
-LINGER_FACTOR = 2.0
-MAX_LINGER = 5.0
 
 
 class _Expired(FinsTimeout):
     """A request's deadline passed after every transmission (the caller words the message)."""
-
-
-class _InBackoff(ConnectionLost):
-    """Failed at once during the reconnect backoff (the failed attempt was counted)."""
-
-
-class _Attempt:
-    """One connection attempt, run in the background and shared by every caller that needs
-    the link while it runs; each waits for it at most its own deadline."""
-
-    __slots__ = ("done", "error", "traceback")
-
-    def __init__(self) -> None:
-        self.done = anyio.Event()
-        self.error: BaseException | None = None
-        self.traceback: TracebackType | None = None
-
-    def finish(self, error: BaseException | None) -> None:
-        """The outcome (``None``: connected); the first one counts."""
-        if not self.done.is_set():
-            self.error = error
-            self.traceback = None if error is None else error.__traceback__
-            self.done.set()
-
-    def check(self) -> None:
-        """Raise the attempt's error, if any (to each waiter, as an asyncio future does)."""
-        if self.error is not None:
-            raise self.error.with_traceback(self.traceback)
 
 
 class Session:
@@ -226,22 +189,13 @@ class Session:
         self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
         #: One request on the line at a time across all destinations (serial links).
         self._shared_slots = limit == 1
-        self._pending: dict[int, Pending] = {}
-        #: SID key -> when it may be used again (requests given up on).
-        self._quarantine: dict[int, float] = {}
-        #: SID key -> when it may be used again (answered: a duplicate may follow).
-        self._lingering: dict[int, float] = {}
-        #: The linger after a completion the link has shown necessary (late duplicates).
-        self._linger = min_linger
+        #: The SIDs and the requests in flight of the transport (see :mod:`.sids`).
+        self.sids = SidSpace(min_linger)
+        # The space's tables under the names the receive path and tests use.
+        self._pending = self.sids.pending
+        self._quarantine = self.sids.quarantine
+        self._lingering = self.sids.lingering
         self._linger_logged = 0.001  # the linger last logged (logged again once doubled)
-        #: The same after a retransmission (learnt from replies to earlier transmissions).
-        self._linger_resent = 0.0
-        #: Requests go to more than one destination: a SID is then kept unique across them,
-        #: as a relay error (from the relay point, not the destination) is matched by SID.
-        self._routed = False
-        #: SID key -> when its last request was answered (to count and time duplicates);
-        #: negative after a retransmission.
-        self._recent: dict[int, float] = {}
         self._dests: dict[FinsAddress, DestState] = {}
         self._slots: dict[Any, SlotQueue] = {}
         self._last_dest: FinsAddress | None = None
@@ -255,28 +209,30 @@ class Session:
         self._background: Background | None = None
         self._asyncio = False
         self._loop: Any = None  # the running asyncio loop, if any
-        self._link = LinkState.CLOSED
-        self._link_since = monotonic()
-        self._lost_at: float | None = None  # when an open link was lost (for "reconnected")
-        #: The connection attempt in progress, if any (one at a time, shared by callers).
-        self._connecting: _Attempt | None = None
-        self._backoff = 0.0
-        self._retry_at = 0.0  # no connection attempt before this (monotonic) time
         self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
-        self._sids_short = False  # all SIDs of a destination were taken (logged once)
         self._flags_logged = 0  # CPU error flags (0040/0080) already logged
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
         self.stats = SessionStats(self._pending)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
+        #: The link: its state, connection attempts, the reconnect backoff.
+        self._link = Link(
+            transport,
+            self,
+            self.stats,
+            reconnect_backoff,
+            self._hooks,
+            self._adopt_local_node,
+            self.sids.forget,
+        )
 
     # ----------------------------------------------------------------- link state
 
     @property
     def link_state(self) -> LinkState:
         """Where the link stands (see :class:`LinkState`)."""
-        return self._link
+        return self._link.state
 
     @property
     def breaker_state(self) -> BreakerState:
@@ -285,44 +241,7 @@ class Session:
 
     @property
     def closed(self) -> bool:
-        return self._link is LinkState.SHUT
-
-    def _set_link_state(self, new: LinkState) -> None:
-        """The one place the link state changes: checked, logged, emitted as a hook."""
-        old = self._link
-        if new is old:
-            return
-        assert new in LINK_TRANSITIONS[old], f"link state {old.name} -> {new.name}"
-        self._link = new
-        now = monotonic()
-        self._link_since = now
-        where = self.transport.description
-        if new is LinkState.OPEN:
-            lost = self._lost_at
-            if lost is None:
-                logger.info("connected to %s", where, extra={"endpoint": where})
-            else:
-                logger.info(
-                    "reconnected to %s after %.1f s",
-                    where,
-                    now - lost,
-                    extra={"endpoint": where},
-                )
-            self._lost_at = None
-        elif new is LinkState.CLOSED and old is LinkState.OPEN:
-            self._lost_at = now
-        elif new is LinkState.SHUT:
-            logger.info("session to %s closed", where, extra={"endpoint": where})
-        if logger.isEnabledFor(_DEBUG):
-            logger.debug(
-                "link to %s: %s -> %s", where, old.name, new.name, extra={"endpoint": where}
-            )
-        hooks = self._hooks
-        if hooks is not None and hooks.connection_state_changed:
-            hooks.emit(
-                hooks.connection_state_changed,
-                ConnectionStateChanged(where, old.name, new.name),
-            )
+        return self._link.state is LinkState.SHUT
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -336,10 +255,10 @@ class Session:
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
-        self._background = Background(tg, self._background_failed)
+        self._background = self._link.background = Background(tg, self._background_failed)
         try:
             self._background.start_soon(self._deadline_watcher)
-            await self._ensure_open()
+            await self._link.ensure_open()
         except BaseException as exc:
             await self.aclose()
             self._tg = None
@@ -363,14 +282,8 @@ class Session:
 
     async def aclose(self) -> None:
         """Fail every request in flight or queued with :class:`ConnectionLost`; close."""
-        if self._link is LinkState.SHUT:
+        if not self._link.shut():
             return
-        self._set_link_state(LinkState.SHUT)
-        attempt, self._connecting = self._connecting, None
-        if attempt is not None:  # its waiters fail now; cancel_all() ends the attempt itself
-            attempt.finish(
-                ConnectionLost(f"session to {self.transport.description} closed while connecting")
-            )
         self._fail_all(ConnectionLost(f"session to {self.transport.description} closed"))
         for q in self._slots.values():
             q.fail_waiters(ConnectionLost("session closed"))
@@ -379,123 +292,19 @@ class Session:
         with anyio.CancelScope(shield=True):
             await self.transport.aclose()
 
-    async def _ensure_open(self, timeout: float | None = None) -> None:
-        """Open the transport if it is closed, waiting for it at most ``timeout`` seconds.
-
-        One connection attempt at a time, run in the background (bounded by the transport's
-        own connect timeout) and shared by every caller that comes while it runs. A caller
-        whose ``timeout`` passes first gets :class:`FinsTimeout` and leaves the attempt
-        running: a later call finds the link open or keeps waiting for the same attempt.
-        During the backoff after a failed attempt calls fail at once. ``timeout=None``
-        waits for the attempt's outcome (``async with session``).
-        """
-        if self.transport.is_open:
-            return
-        link = self._link
-        if link is LinkState.SHUT:
-            raise ConnectionLost(f"session to {self.transport.description} is closed")
-        background = self._background
-        if background is None:
-            raise RuntimeError("Session is not running: use 'async with Session(...)'")
-        if link is LinkState.OPEN:  # the transport ended without telling us
-            self._set_link_state(LinkState.CLOSED)
-        elif link is LinkState.BACKOFF:
-            wait = self._retry_at - monotonic()
-            if wait > 0:  # fail fast: no call waits out the backoff beyond its own deadline
-                raise _InBackoff(
-                    f"cannot connect to {self.transport.description}: the last attempt failed; "
-                    f"the next one in {wait:.2f} s (reconnect backoff)"
+    def _adopt_local_node(self) -> None:
+        """The transport is open: take the node the peer assigned us (FINS/TCP), if any, as
+        our source node (a node no FINS header can carry fails the connection attempt)."""
+        node = self.transport.local_node
+        if node is not None and node != self.source.node:
+            if not 1 <= node <= 254:
+                raise ConnectionLost(
+                    f"{self.transport.description} assigned us FINS node {node}: "
+                    "not a node number (1..254)"
                 )
-        attempt = self._connecting
-        if attempt is None:
-            attempt = self._connecting = _Attempt()
-            self._set_link_state(LinkState.CONNECTING)
-            background.start_soon(self._connect, attempt)
-        if timeout is None:
-            await attempt.done.wait()
-        else:
-            with anyio.move_on_after(max(timeout, 0.0)):
-                await attempt.done.wait()
-            if not attempt.done.is_set():
-                raise FinsTimeout(
-                    f"no connection to {self.transport.description} within {timeout:.3g} s: "
-                    "a connection attempt is still in progress (a later call uses it once "
-                    "it succeeds)"
-                )
-        attempt.check()
-
-    async def _connect(self, attempt: _Attempt) -> None:
-        """Run one connection attempt: a background task ending at a boundary. Whatever goes
-        wrong (a refused connection, a peer assigning a node no FINS header can carry, a bug)
-        is a failed attempt: link closed, a typed error to the waiters, counted, logged,
-        never raised into the task group; success is reported only once all is checked."""
-        error: FinsError | None = None
-        where = self.transport.description
-        try:
-            assert self._background is not None
-            await self.transport.open(self, self._background)
-            node = self.transport.local_node
-            if node is not None and node != self.source.node:
-                if not 1 <= node <= 254:
-                    raise ConnectionLost(
-                        f"{where} assigned us FINS node {node}: not a node number (1..254)"
-                    )
-                self.source = FinsAddress(self.source.network, node, self.source.unit)
-                for state in self._dests.values():
-                    state.prefix = self._prefix(state.address)
-        except BaseException as exc:
-            if isinstance(exc, FinsError):
-                error = exc
-            elif isinstance(exc, Exception):
-                error = ConnectionLost(f"cannot connect to {where}: {exc or type(exc).__name__}")
-                error.__cause__ = exc
-            else:  # cancelled: the session is closing
-                error = ConnectionLost(f"session to {where} closed while connecting")
-            with anyio.CancelScope(shield=True):
-                await self.transport.aclose()
-            if self._connecting is attempt:
-                self._connecting = None
-            if isinstance(exc, Exception) and self._link is not LinkState.SHUT:
-                self.stats.connect_failures += 1
-                low, high = self.reconnect_backoff
-                self._backoff = min(high, max(low, self._backoff * 2))
-                wait = self._backoff * random.uniform(0.5, 1.0)  # no lockstep after an outage
-                self._retry_at = monotonic() + wait
-                self._set_link_state(LinkState.BACKOFF)
-                logger.warning(
-                    "%s; next attempt in %.2f s",
-                    # The error names the endpoint already, or is prefixed with it.
-                    error if where in str(error) else f"cannot connect to {where}: {error}",
-                    wait,
-                    exc_info=not isinstance(exc, (OSError, FinsError)),
-                    extra={"endpoint": where},
-                )
-            attempt.finish(error)
-            if not isinstance(exc, Exception):
-                raise
-            return
-        if self._connecting is attempt:
-            self._connecting = None
-        if self._link is LinkState.SHUT:  # closed as the open completed: leave no link behind
-            with anyio.CancelScope(shield=True):
-                await self.transport.aclose()
-            attempt.finish(ConnectionLost(f"session to {where} is closed"))
-            return
-        self._backoff = 0.0
-        self.stats.connects += 1
-        if self.transport.local_node is not None:
-            logger.info(
-                "%s allocated us FINS node %d (its own node: %s)",
-                where,
-                self.transport.local_node,
-                self.transport.remote_node,
-                extra={"endpoint": where, "node": self.transport.local_node},
-            )
-        if self.transport.fresh_sid_space:  # nothing late can reach a new connection
-            self._quarantine.clear()
-            self._lingering.clear()
-        self._set_link_state(LinkState.OPEN)
-        attempt.finish(None)
+            self.source = FinsAddress(self.source.network, node, self.source.unit)
+            for state in self._dests.values():
+                state.prefix = self._prefix(state.address)
 
     # ----------------------------------------------------------------- transport sink
 
@@ -510,7 +319,8 @@ class Session:
             self.stats.malformed += 1
             return
         key = (frame[6] << 24) | (frame[7] << 16) | (frame[8] << 8) | frame[9]
-        pending = self._pending
+        sids = self.sids
+        pending = sids.pending
         p = pending.get(key)
         if p is None:
             p = match_wildcard(pending, key)
@@ -529,7 +339,7 @@ class Session:
         del pending[key]
         p.done = True
         now = monotonic()
-        self._recent[key] = now
+        sids.recent[key] = now
         latency = now - p.sent_at
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         n = stats._lat_count
@@ -538,10 +348,10 @@ class Session:
         stats._lat_ring[n & RING_MASK] = latency
         r = p.rtt
         if r is None:  # sent again: a reply to another transmission may follow
-            linger = self._retransmitted_linger(p, now)
-            self._recent[key] = -now  # (negative: its duplicates teach this linger only)
+            linger = sids.resent_linger(p, now, self.rto_bounds[1])
+            sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
         elif n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
-            linger = self._linger
+            linger = sids.linger
         else:  # RFC 6298 (2.2, 2.3); Karn: only replies to a single send are timed
             srtt = r.srtt
             if srtt:
@@ -554,9 +364,9 @@ class Session:
             rto = srtt + 4 * var
             low, high = self.rto_bounds
             r.rto = low if rto < low else high if rto > high else rto
-            linger = self._linger
+            linger = sids.linger
         if linger:  # before the wake-up: a batch sends its next command inside it
-            self._lingering[key] = now + linger
+            sids.lingering[key] = now + linger
         fut = p.fut
         if fut is None:
             p.wake(frame)
@@ -565,8 +375,16 @@ class Session:
                 fut.set_result(frame)
             except asyncio.InvalidStateError:  # cancelled: the caller cleans up as it resumes
                 pass
-        if self._hooks is not None:
-            self._answered(p, frame, latency)
+        hooks = self._hooks
+        if hooks is not None and hooks.response_received:
+            self._emit(
+                hooks.response_received,
+                ResponseReceived,
+                p,
+                reply_end_code(frame),
+                latency,
+                p.attempts,
+            )
         fifo = self._fifo
         if fifo:
             if fifo[0].done:
@@ -580,46 +398,24 @@ class Session:
         if self._deadlines.heap:
             self._deadlines.prune(len(pending))
 
-    def _retransmitted_linger(self, p: Pending, now: float) -> float:
-        """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
-        one of its other transmissions may still be on its way. At least the largest
-        retransmission timeout (a round trip longer than that counts as lost), twice the
-        time the call took, and the linger the link has shown necessary."""
-        return max(
-            self._linger,
-            self._linger_resent,
-            self.rto_bounds[1],
-            LINGER_FACTOR * (now - p.sent_at),
-        )
-
     def _unmatched(self, key: int, frame: bytes) -> None:
-        """A reply no request waits for: counted (late, duplicate or unsolicited). A
-        duplicate teaches the linger: SIDs then wait twice its lateness after a reply."""
-        kind = count_unmatched(self.stats, self._quarantine, self._recent, key)
+        """A reply no request waits for: counted (late, duplicate or unsolicited; see
+        :meth:`SidSpace.unmatched`), and logged when it says something about the link."""
+        kind, lateness = self.sids.unmatched(self.stats, key)
         if kind == "duplicate":
-            done_at = self._recent.get(key)
-            if done_at is not None and done_at < 0:  # the reply to another transmission
-                lateness = monotonic() + done_at
-                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
-                if linger > self._linger_resent:
-                    self._linger_resent = linger
-            elif done_at is not None:  # the network duplicated a reply
-                lateness = monotonic() - done_at
-                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
-                if linger > self._linger:
-                    logged = self._linger_logged
-                    self._linger = linger
-                    if linger < 2 * logged:
-                        return
-                    self._linger_logged = linger
-                    logger.warning(
-                        "%s: a duplicate reply came %.3f s after its request was answered; "
-                        "SIDs now linger %.3f s after a reply",
-                        self.transport.description,
-                        lateness,
-                        linger,
-                        extra={"endpoint": self.transport.description, "sid": key & 0xFF},
-                    )
+            if lateness:
+                linger = self.sids.linger
+                if linger < 2 * self._linger_logged:
+                    return
+                self._linger_logged = linger
+                logger.warning(
+                    "%s: a duplicate reply came %.3f s after its request was answered; "
+                    "SIDs now linger %.3f s after a reply",
+                    self.transport.description,
+                    lateness,
+                    linger,
+                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
+                )
         elif kind == "late":
             late = self.stats.late_replies
             if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
@@ -678,22 +474,22 @@ class Session:
                     extra={"endpoint": where, "end_code": f"{end_code:04X}"},
                 )
 
-    def _answered(self, p: Pending, frame: bytes, latency: float) -> None:
-        hooks = self._hooks
-        if hooks is not None and hooks.response_received:
-            key = p.key
-            hooks.emit(
-                hooks.response_received,
-                ResponseReceived(
-                    self.transport.description,
-                    FinsAddress(*key_address(key)),
-                    key & 0xFF,
-                    (p.mrc << 8) | p.src,
-                    reply_end_code(frame),
-                    latency,
-                    p.attempts,
-                ),
-            )
+    def _emit(self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any) -> None:
+        """Hand one request event (:class:`RequestSent`, :class:`ResponseReceived`,
+        :class:`RequestRetried`, :class:`RequestTimedOut`) about ``p`` to ``handlers``: the
+        endpoint, destination, SID and command first, then ``more``."""
+        assert self._hooks is not None
+        key = p.key
+        self._hooks.emit(
+            handlers,
+            event(
+                self.transport.description,
+                FinsAddress(*key_address(key)),
+                key & 0xFF,
+                (p.mrc << 8) | p.src,
+                *more,
+            ),
+        )
 
     def frame_dropped(self, reason: str) -> None:
         self.stats.malformed += 1
@@ -702,7 +498,8 @@ class Session:
             logger.debug("%s: frame dropped: %s", where, reason, extra={"endpoint": where})
 
     def connection_lost(self, exc: BaseException | None) -> None:
-        if self._link is LinkState.SHUT:
+        link = self._link
+        if link.state is LinkState.SHUT:
             return
         self.stats.disconnects += 1
         if isinstance(exc, FinsError):
@@ -710,14 +507,14 @@ class Session:
         else:
             err = ConnectionLost(f"connection to {self.transport.description} lost: {exc}")
             err.__cause__ = exc
-        if self._link is LinkState.OPEN:
+        if link.state is LinkState.OPEN:
             logger.info(
                 "connection to %s lost: %s",
                 self.transport.description,
                 err,
                 extra={"endpoint": self.transport.description},
             )
-            self._set_link_state(LinkState.CLOSED)
+            link.lost()
         self._fail_all(err)
 
     def _background_failed(self, exc: Exception) -> None:
@@ -731,21 +528,18 @@ class Session:
         )
         err = ConnectionLost(f"connection to {where} failed: {exc or type(exc).__name__}")
         err.__cause__ = exc
-        if self._link is LinkState.OPEN:
+        if self._link.state is LinkState.OPEN:
             self.stats.disconnects += 1
-            self._set_link_state(LinkState.CLOSED)
+            self._link.lost()
         self._fail_all(err)
 
     def _fail_all(self, exc: BaseException) -> None:
-        pending = list(self._pending.values())
-        self._pending.clear()
         now = monotonic()
-        for p in pending:
-            p.done = True
-            p.abandoned = True
+        sids = self.sids
+        for p in sids.drain():
             # The link is gone; should it come back under the same SID space, a late reply
             # must not reach a newer request.
-            self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
+            sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
             p.fail(exc)
         self._deadlines.clear()
 
@@ -795,26 +589,12 @@ class Session:
                 if plan.left and now < plan.end:
                     self._retransmit(p, plan, now)
                     continue
-            self._pending.pop(p.key, None)
-            p.done = True
-            p.abandoned = True
-            self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
+            self.sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
             self.stats.timeouts += 1
             self._log_timeout(p, now)
             hooks = self._hooks
             if hooks is not None and hooks.request_timed_out:
-                key = p.key
-                hooks.emit(
-                    hooks.request_timed_out,
-                    RequestTimedOut(
-                        self.transport.description,
-                        FinsAddress(*key_address(key)),
-                        key & 0xFF,
-                        (p.mrc << 8) | p.src,
-                        p.attempts,
-                        now - p.sent_at,
-                    ),
-                )
+                self._emit(hooks.request_timed_out, RequestTimedOut, p, p.attempts, now - p.sent_at)
             p.fail(_Expired("request timed out"))
 
     def _log_timeout(self, p: Pending, now: float) -> None:
@@ -882,17 +662,7 @@ class Session:
             )
         hooks = self._hooks
         if hooks is not None and hooks.request_retried:
-            hooks.emit(
-                hooks.request_retried,
-                RequestRetried(
-                    self.transport.description,
-                    FinsAddress(*key_address(key)),
-                    key & 0xFF,
-                    (p.mrc << 8) | p.src,
-                    p.attempts,
-                    now - p.sent_at,
-                ),
-            )
+            self._emit(hooks.request_retried, RequestRetried, p, p.attempts, now - p.sent_at)
         fast_send = self.transport.fast_send
         if fast_send is not None:
             try:
@@ -914,11 +684,8 @@ class Session:
         the caller told why."""
         if p.done:
             return
-        self._pending.pop(p.key, None)
-        p.done = True
-        p.abandoned = True
         now = monotonic()
-        self._quarantine[p.key] = self.quarantine_until(now, now - p.sent_at)
+        self.sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
         if not isinstance(exc, FinsError):
             err = ConnectionLost(f"{self.transport.description}: {exc or type(exc).__name__}")
             err.__cause__ = exc
@@ -964,9 +731,15 @@ class Session:
                 extra={"endpoint": self.transport.description},
             )
 
-    # ----------------------------------------------------------------- requests
+    # ----------------------------------------------------------------- the hot path
+    # One request's steps, used by request() and by request_many()'s batches (batch.py):
+    # dest_state() -> sids.take() -> build the frame -> start() -> send -> frame_received()
+    # -> response() / busy_pause() / end_code_failure(); or abandon() / _expire().
 
-    def _dest_state(self, dest: FinsAddress) -> DestState:
+    def dest_state(self, dest: FinsAddress) -> DestState:
+        """The header prefix, SID cursor, slots and round-trip estimate of ``dest``."""
+        if dest is self._last_dest:
+            return self._last_state  # type: ignore[no-any-return]
         state = self._dests.get(dest)
         if state is None:
             if self._shared_slots:
@@ -976,7 +749,7 @@ class Session:
             else:
                 slots = self._slots[dest] = SlotQueue(self.max_in_flight)
             state = self._dests[dest] = DestState(dest, self._prefix(dest), slots)
-            self._routed = len(self._dests) > 1
+            self.sids.routed = len(self._dests) > 1
         self._last_dest, self._last_state = dest, state
         return state
 
@@ -987,41 +760,122 @@ class Session:
             self.gct, (dest.network, dest.node, dest.unit), (s.network, s.node, s.unit)
         )
 
-    def _sid_taken(self, key: int) -> bool:
-        """Whether ``key``'s SID is in flight to another destination."""
-        sid = key & 0xFF
-        return any(k & 0xFF == sid for k in self._pending)
+    def start(
+        self,
+        p: Pending,
+        frame: bytes,
+        retries: int,
+        now: float,
+        end: float,
+        cap: float | None,
+    ) -> None:
+        """Register ``p`` (its SID taken, ``p.rtt`` its destination) as sent ``now`` with
+        ``frame``: in the pending table under its SID, its first deadline in the deadline
+        structure, the hooks and the log told. The caller sends the frame.
 
-    def _sid_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
-        """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
-        flight to other destinations, when routing), quarantined or lingering. Ends a
-        quarantine or linger that is over."""
-        if key in self._pending or (key & 0xFF) in taken:
-            return False
-        for table in (self._quarantine, self._lingering):
-            until = table.get(key)
-            if until is not None:
-                if until > now:
-                    return False
-                del table[key]
-        return True
+        The first wait: the destination's RTO once measured, else the share of the call's
+        time (until ``end``) that lets every attempt go out, the wait doubling each time;
+        never more than the caller's per-attempt ``cap``."""
+        if retries:
+            wait = p.rtt.rto or (end - now) / ((2 << retries) - 1)  # type: ignore[union-attr]
+            if cap is not None and wait > cap:
+                wait = cap
+            p.plan = (frame, retries, end, cap, wait)
+            deadline = now + wait
+            if deadline > end:
+                deadline = end
+        else:
+            deadline = end
+            if cap is not None and now + cap < end:
+                deadline = now + cap
+        p.deadline = deadline
+        p.sent_at = now
+        self._pending[p.key] = p
+        fifo = self._fifo
+        if not fifo or deadline >= fifo[-1].deadline:
+            fifo.append(p)
+        else:
+            self._deadlines.add(p)
+        if deadline < self._timer_at:
+            self._arm(deadline)
+        hooks = self._hooks
+        if hooks is not None and hooks.request_sent:
+            self._emit(hooks.request_sent, RequestSent, p)
+        if logger.isEnabledFor(_DEBUG):
+            self._log_frame("sent", frame)
 
-    def _allocate_sid(self, state: DestState) -> int | None:
-        """The next free SID of ``state`` in round-robin order (``None``: all 256 taken)."""
-        base, sid = state.base, state.cursor
-        now = monotonic()
-        taken: AbstractSet[int] = {k & 0xFF for k in self._pending} if self._routed else _NONE
-        for _ in range(256):
-            key = base | sid
-            sid = (sid + 1) & 0xFF
-            if self._sid_free(key, now, taken):
-                state.cursor = sid
-                return key
+    def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None:
+        """Give up on ``p`` before its reply (cancelled, or its send failed; ``timed_out``:
+        the send timed out): out of the table, its SID quarantined, counted."""
+        if p.done:
+            return
+        self.sids.abandon(p, self.quarantine_until(monotonic(), timeout))
+        if timed_out:
+            self.stats.timeouts += 1
+        else:
+            self.stats.cancelled += 1
+
+    def response(self, frame: bytes) -> Response | None:
+        """The response a reply carries if its end code is a normal completion (counted;
+        CPU error flags logged), else ``None`` (see :meth:`busy_pause`)."""
+        raw = (frame[12] << 8) | frame[13]
+        if raw & ERROR_BITS:
+            return None
+        self.stats.completed += 1
+        if not raw:
+            return new_response(_NORMAL, frame[14:], frame)
+        self.cpu_flags_seen(raw)
+        return new_response(EndCode(raw), frame[14:], frame)
+
+    def busy_pause(self, frame: bytes, busy: int) -> float | None:
+        """For a reply with an error end code: the pause before sending the command again
+        if the PLC was too busy to execute it (2604/2605) and ``busy`` retries of it were
+        made so far, fewer than ``busy_retries``; ``None`` otherwise."""
+        raw = (frame[12] << 8) | frame[13]
+        if raw & CPU_ERROR_FLAGS:
+            self.cpu_flags_seen(raw)
+        if (raw & END_CODE_MASK) in BUSY_CODES and busy < self.busy_retries:
+            return self.busy_backoff * (1 << busy)
         return None
 
-    def make_frame(self, state: DestState, key: int, mrc: int, src: int, params: bytes) -> bytes:
-        """The command frame of ``state``'s destination with ``key``'s SID."""
-        return pack_head(state.prefix, key & 0xFF, mrc, src) + params
+    def end_code_failure(self, frame: bytes, mrc: int, src: int) -> FinsError:
+        """The error a reply's end code means (counted)."""
+        self.stats.end_code_errors += 1
+        return end_code_error(frame, mrc, src)
+
+    def timeout_message(
+        self, dest: FinsAddress, mrc: int, src: int, timeout: float, attempts: int = 1
+    ) -> str:
+        s = self.source
+        tries = "1 attempt" if attempts == 1 else f"{attempts} attempts"
+        return (
+            f"no response to command {mrc:02X}{src:02X} from {dest} in {tries} within "
+            f"{timeout} s via {self.transport.description}. Check the destination node "
+            f"(DA1={dest.node}) and unit (DA2={dest.unit}) match the PLC, that our source node "
+            f"(SA1={s.node}) is not used by another client and is allowed by the PLC's node "
+            f"settings, the port, and that the PLC is reachable"
+        )
+
+    @property
+    def loop(self) -> Any:
+        """The running asyncio event loop (``None`` under other backends)."""
+        return self._loop
+
+    @property
+    def on_asyncio(self) -> bool:
+        """Whether the session runs under asyncio (set on entry)."""
+        return self._asyncio
+
+    async def ensure_open(self, timeout: float | None = None) -> None:
+        """Open the link if it is closed, waiting at most ``timeout`` (see :class:`Link`)."""
+        await self._link.ensure_open(timeout)
+
+    def no_free_sid(self, state: DestState, timeout: float) -> SlotTimeout:
+        """The error of a call that found no free SID of ``state`` within ``timeout``."""
+        sids = self.sids
+        return SlotTimeout(
+            no_free_sid_message(state.address, timeout, sids.quarantine, len(sids.lingering))
+        )
 
     async def request(
         self,
@@ -1070,68 +924,30 @@ class Session:
                 try:
                     transport = self.transport
                     if transport.fast_send is None and not transport.is_open:
-                        await self._ensure_open(end - monotonic())
-                    state = self._last_state if dest is self._last_dest else self._dest_state(dest)
+                        await self._link.ensure_open(end - monotonic())
+                    state = self.dest_state(dest)
                     slots = state.slots
                     if slots.in_flight < slots.limit and not slots.waiters:
                         slots.in_flight += 1
                     else:
                         await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
                     try:
-                        pending = self._pending
                         now = monotonic()
-                        key = state.base | state.cursor
-                        if (
-                            key in pending
-                            or key in self._quarantine
-                            or self._lingering.get(key, 0.0) > now
-                            or (self._routed and self._sid_taken(key))
-                        ):
+                        key = self.sids.take(state, now)
+                        if key is None:
                             key = await self._wait_for_sid(state, end, timeout)
                             now = monotonic()
-                        else:
-                            state.cursor = (key + 1) & 0xFF
                         # Built before the request is registered: bad parameters (not bytes)
                         # raise here and leave nothing behind.
                         frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
-                        # The first wait: the destination's RTO once measured, else the share
-                        # of the call's time that lets every attempt go out, the wait doubling
-                        # each time; never more than the caller's cap.
-                        if retries:
-                            wait = state.rto or (end - now) / ((2 << retries) - 1)
-                            if attempt_timeout is not None and wait > attempt_timeout:
-                                wait = attempt_timeout
-                            plan: Plan | None = (frame, retries, end, attempt_timeout, wait)
-                            deadline = now + wait
-                            if deadline > end:
-                                deadline = end
-                        else:
-                            plan = None
-                            deadline = end
-                            if attempt_timeout is not None and now + attempt_timeout < end:
-                                deadline = now + attempt_timeout
                         fut: asyncio.Future[bytes] | None = None
                         if self._asyncio:
                             fut = self._loop.create_future()
-                            p = AsyncioPending(key, mrc, src, fut, now, deadline, state, plan)
+                            p = AsyncioPending(key, mrc, src, fut, rtt=state)
                         else:
                             p = EventPending(key, mrc, src)
-                            p.sent_at = now
-                            p.deadline = deadline
                             p.rtt = state
-                            p.plan = plan
-                        pending[key] = p
-                        fifo = self._fifo
-                        if not fifo or deadline >= fifo[-1].deadline:
-                            fifo.append(p)
-                        else:
-                            self._deadlines.add(p)
-                        if deadline < self._timer_at:
-                            self._arm(deadline)
-                        if self._hooks is not None:
-                            self._sent(p, dest)
-                        if logger.isEnabledFor(_DEBUG):
-                            self._log_frame("sent", frame)
+                        self.start(p, frame, retries, now, end, attempt_timeout)
                         try:
                             fast_send = transport.fast_send
                             if fast_send is not None:
@@ -1139,7 +955,7 @@ class Session:
                             else:
                                 await transport.send(frame, end - now)
                             # Read-after-send (see _polled): for a request alone in flight.
-                            if len(pending) == 1:
+                            if len(self._pending) == 1:
                                 poll = transport.poll_now
                                 if poll is not None:
                                     if self._poll_skip:
@@ -1155,15 +971,8 @@ class Session:
                                 self._poll_skip = _POLL_MAX_BACKOFF
                             frame = await (p.wait() if fut is None else fut)
                         except BaseException as exc:
-                            if not p.done:  # cancelled or failed to send: a reply may come
-                                p.done = True
-                                p.abandoned = True
-                                pending.pop(key, None)
-                                self._quarantine[key] = self.quarantine_until(monotonic(), timeout)
-                                if isinstance(exc, FinsTimeout):  # the send timed out (trio TCP)
-                                    self.stats.timeouts += 1
-                                else:
-                                    self.stats.cancelled += 1
+                            # Cancelled or failed to send: a reply may still come.
+                            self.abandon(p, timeout, isinstance(exc, FinsTimeout))
                             raise
                     finally:
                         if slots.waiters:
@@ -1173,35 +982,26 @@ class Session:
                 except _Expired:
                     assert p is not None
                     raise FinsTimeout(
-                        self._timeout_message(dest, mrc, src, timeout, p.attempts)
+                        self.timeout_message(dest, mrc, src, timeout, p.attempts)
                     ) from None
                 except ConnectionLost as exc:
                     await raise_after_a_turn(exc)
-                raw = (frame[12] << 8) | frame[13]
-                if not raw & ERROR_BITS:
-                    self.stats.completed += 1
+                response = self.response(frame)
+                if response is not None:
                     if self._breaker.failures:
                         self._call_answered()
-                    if not raw:
-                        return new_response(_NORMAL, frame[14:], frame)
-                    self.cpu_flags_seen(raw)
-                    return new_response(EndCode(raw), frame[14:], frame)
-                if raw & CPU_ERROR_FLAGS:
-                    self.cpu_flags_seen(raw)
-                left = end - monotonic()
-                if (raw & 0x7F3F) in BUSY_CODES and busy < self.busy_retries:
-                    pause = self.busy_backoff * (2**busy)
-                    if pause < left:
-                        self.stats.busy_retries += 1
-                        await anyio.sleep(pause)
-                        busy += 1
-                        continue
-                self.stats.end_code_errors += 1
+                    return response
+                pause = self.busy_pause(frame, busy)
+                if pause is not None and pause < end - monotonic():
+                    self.stats.busy_retries += 1
+                    await anyio.sleep(pause)
+                    busy += 1
+                    continue
                 if self._breaker.failures:
                     self._call_answered()
-                raise end_code_error(frame, mrc, src)
+                raise self.end_code_failure(frame, mrc, src)
         except (FinsTimeout, ConnectionLost) as exc:
-            if not isinstance(exc, (SlotTimeout, CircuitOpen, _InBackoff)):
+            if not isinstance(exc, (SlotTimeout, CircuitOpen, InBackoff)):
                 self._call_failed(timeout)
             else:
                 self._breaker.released()
@@ -1209,14 +1009,6 @@ class Session:
         except BaseException:
             self._breaker.released()
             raise
-
-    def _sent(self, p: Pending, dest: FinsAddress) -> None:
-        hooks = self._hooks
-        if hooks is not None and hooks.request_sent:
-            hooks.emit(
-                hooks.request_sent,
-                RequestSent(self.transport.description, dest, p.key & 0xFF, (p.mrc << 8) | p.src),
-            )
 
     def _polled(self, answered: bool) -> None:
         """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
@@ -1285,7 +1077,7 @@ class Session:
                 window=window,
             )
         except (FinsTimeout, ConnectionLost) as exc:
-            if not isinstance(exc, (SlotTimeout, CircuitOpen, _InBackoff)):
+            if not isinstance(exc, (SlotTimeout, CircuitOpen, InBackoff)):
                 self._call_failed(self.timeout if timeout is None else timeout)
             else:
                 self._breaker.released()
@@ -1304,21 +1096,22 @@ class Session:
         """A free SID; while all 256 are in flight, quarantined or lingering, wait for the
         first to come free, up to the call's deadline ``end`` (then :class:`SlotTimeout`).
         Running out is counted and logged (once until SIDs are free again)."""
-        key = self._allocate_sid(state)
+        sids = self.sids
+        key = sids.allocate(state)
         if key is not None:
-            self._sids_short = False
+            sids.short = False
             return key
         self.stats.sid_exhausted += 1
-        if not self._sids_short:
-            self._sids_short = True
+        if not sids.short:
+            sids.short = True
             logger.warning(
                 "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, %d lingering): "
                 "requests wait for one; lower the rate or the linger",
                 self.transport.description,
                 state.address,
-                len(self._pending),
-                len(self._quarantine),
-                len(self._lingering),
+                len(sids.pending),
+                len(sids.quarantine),
+                len(sids.lingering),
                 extra={"endpoint": self.transport.description, "dest": str(state.address)},
             )
         # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
@@ -1328,37 +1121,10 @@ class Session:
             lock = state.sid_lock = anyio.Lock()
         with anyio.move_on_after(max(end - monotonic(), 0.0)):
             async with lock:
-                key = self._allocate_sid(state)
+                key = sids.allocate(state)
                 while key is None:
-                    now = monotonic()
-                    await anyio.sleep(min(_SID_WAIT, self._sid_free_in(state, now)))
-                    key = self._allocate_sid(state)
+                    await anyio.sleep(min(SID_WAIT, sids.free_in(state, monotonic())))
+                    key = sids.allocate(state)
         if key is None:
-            raise SlotTimeout(
-                no_free_sid_message(state.address, timeout, self._quarantine, len(self._lingering))
-            )
+            raise self.no_free_sid(state, timeout)
         return key
-
-    def _sid_free_in(self, state: DestState, now: float) -> float:
-        """Seconds until the next quarantine or linger of ``state``'s SIDs ends (at least
-        1 ms; at most :data:`_SID_WAIT`, e.g. when all 256 are in flight)."""
-        base = state.base
-        soonest = now + _SID_WAIT
-        for table in (self._quarantine, self._lingering):
-            for key, until in table.items():
-                if now < until < soonest and key & ~0xFF == base:
-                    soonest = until
-        return max(soonest - now, 0.001)
-
-    def _timeout_message(
-        self, dest: FinsAddress, mrc: int, src: int, timeout: float, attempts: int = 1
-    ) -> str:
-        s = self.source
-        tries = "1 attempt" if attempts == 1 else f"{attempts} attempts"
-        return (
-            f"no response to command {mrc:02X}{src:02X} from {dest} in {tries} within "
-            f"{timeout} s via {self.transport.description}. Check the destination node "
-            f"(DA1={dest.node}) and unit (DA2={dest.unit}) match the PLC, that our source node "
-            f"(SA1={s.node}) is not used by another client and is allowed by the PLC's node "
-            f"settings, the port, and that the PLC is reachable"
-        )

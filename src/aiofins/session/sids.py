@@ -1,0 +1,184 @@
+"""One SID space: the SIDs of one socket or connection, and the requests in flight on it.
+
+A reply carries back the 32-bit key ``SNA SA1 SA2 SID`` of its request (the destination's
+network, node and unit, and the SID), so the requests in flight of one transport are a dict
+keyed by it. A SID may carry a new request only when no reply to its previous use can still
+arrive:
+
+- **in flight** (in :attr:`SidSpace.pending`): its reply is awaited;
+- **quarantined** (in :attr:`SidSpace.quarantine`): its request was given up on (timed out,
+  cancelled, the link failed); free again when its late reply comes (plus a short grace for
+  a duplicate of it) or the quarantine ends;
+- **lingering** (in :attr:`SidSpace.lingering`): answered, and a duplicate of its reply (the
+  network's, or the reply to a retransmission) could still come.
+
+A fresh socket or connection starts a clean space (:meth:`SidSpace.forget`): nothing late
+can reach it. A session owns one space per transport; a destination with several sockets
+or connections would own one per socket.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Set as AbstractSet
+from time import monotonic
+
+from .matching import count_unmatched
+from .response import SessionStats
+from .slots import DestState, Pending
+
+_NONE: frozenset[int] = frozenset()
+#: A duplicate reply seen ``x`` seconds after its request completed makes SIDs linger
+#: ``LINGER_FACTOR x x`` after a completion from then on (at most :data:`MAX_LINGER`).
+LINGER_FACTOR = 2.0
+MAX_LINGER = 5.0
+#: Longest pause between two looks for a free SID while all 256 are taken.
+SID_WAIT = 0.01
+
+
+class SidSpace:
+    """The SIDs and the in-flight table of one transport (see the module's docstring).
+
+    ``min_linger`` is the linger after a completion before the link has shown any late
+    duplicate; :meth:`unmatched` raises it from what the link shows.
+    """
+
+    __slots__ = (
+        "linger",
+        "linger_resent",
+        "lingering",
+        "pending",
+        "quarantine",
+        "recent",
+        "routed",
+        "short",
+    )
+
+    def __init__(self, min_linger: float = 0.0) -> None:
+        #: SID key -> the request in flight under it.
+        self.pending: dict[int, Pending] = {}
+        #: SID key -> when it may be used again (requests given up on).
+        self.quarantine: dict[int, float] = {}
+        #: SID key -> when it may be used again (answered: a duplicate may follow).
+        self.lingering: dict[int, float] = {}
+        #: SID key -> when its last request was answered (to count and time duplicates);
+        #: negative after a retransmission.
+        self.recent: dict[int, float] = {}
+        #: The linger after a completion the link has shown necessary (late duplicates).
+        self.linger = min_linger
+        #: The same after a retransmission (learnt from replies to earlier transmissions).
+        self.linger_resent = 0.0
+        #: Requests go to more than one destination: a SID is then kept unique across them,
+        #: as a relay error (from the relay point, not the destination) is matched by SID.
+        self.routed = False
+        #: All SIDs of a destination were taken (logged once until one is free again).
+        self.short = False
+
+    # -- taking a SID ---------------------------------------------------------------------
+
+    def take(self, state: DestState, now: float) -> int | None:
+        """The key of a free SID for ``state``'s destination, next in round-robin order
+        (``None``: all 256 are in flight, quarantined or lingering). Cheap when the next
+        one is free, as it nearly always is."""
+        key = state.base | state.cursor
+        if (
+            key in self.pending
+            or key in self.quarantine
+            or self.lingering.get(key, 0.0) > now
+            or (self.routed and self.sid_taken(key))
+        ):
+            return self.allocate(state)
+        state.cursor = (key + 1) & 0xFF
+        return key
+
+    def sid_taken(self, key: int) -> bool:
+        """Whether ``key``'s SID is in flight to another destination."""
+        sid = key & 0xFF
+        return any(k & 0xFF == sid for k in self.pending)
+
+    def is_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
+        """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
+        flight to other destinations, when routing), quarantined or lingering. Ends a
+        quarantine or linger that is over."""
+        if key in self.pending or (key & 0xFF) in taken:
+            return False
+        for table in (self.quarantine, self.lingering):
+            until = table.get(key)
+            if until is not None:
+                if until > now:
+                    return False
+                del table[key]
+        return True
+
+    def allocate(self, state: DestState) -> int | None:
+        """The next free SID of ``state`` in round-robin order (``None``: all 256 taken);
+        a scan of up to 256 keys."""
+        base, sid = state.base, state.cursor
+        now = monotonic()
+        taken: AbstractSet[int] = {k & 0xFF for k in self.pending} if self.routed else _NONE
+        for _ in range(256):
+            key = base | sid
+            sid = (sid + 1) & 0xFF
+            if self.is_free(key, now, taken):
+                state.cursor = sid
+                return key
+        return None
+
+    def free_in(self, state: DestState, now: float) -> float:
+        """Seconds until the next quarantine or linger of ``state``'s SIDs ends (at least
+        1 ms; at most :data:`SID_WAIT`, e.g. when all 256 are in flight)."""
+        base = state.base
+        soonest = now + SID_WAIT
+        for table in (self.quarantine, self.lingering):
+            for key, until in table.items():
+                if now < until < soonest and key & ~0xFF == base:
+                    soonest = until
+        return max(soonest - now, 0.001)
+
+    # -- ending a request -----------------------------------------------------------------
+
+    def abandon(self, p: Pending, until: float) -> None:
+        """Give up on ``p``: out of the table, its SID quarantined until ``until`` (unless
+        its late reply comes first)."""
+        p.done = True
+        p.abandoned = True
+        self.pending.pop(p.key, None)
+        self.quarantine[p.key] = until
+
+    def drain(self) -> list[Pending]:
+        """Every request in flight, taken out of the table (the link failed)."""
+        pending = list(self.pending.values())
+        self.pending.clear()
+        return pending
+
+    def forget(self) -> None:
+        """A fresh socket or connection: no late reply can reach it, every SID is free."""
+        self.quarantine.clear()
+        self.lingering.clear()
+
+    def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:
+        """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
+        one of its other transmissions may still be on its way. At least the largest
+        retransmission timeout ``rto_max`` (a round trip longer than that counts as lost),
+        twice the time the call took, and the linger the link has shown necessary."""
+        return max(self.linger, self.linger_resent, rto_max, LINGER_FACTOR * (now - p.sent_at))
+
+    def unmatched(self, stats: SessionStats, key: int) -> tuple[str, float]:
+        """A reply no request waits for: counted (late, duplicate or unsolicited). A late
+        reply ends its SID's quarantine; a duplicate teaches the linger (SIDs then wait
+        twice its lateness after a reply). Returns which (``"late"``, ``"duplicate"`` or
+        ``"unsolicited"``), and for a duplicate of a reply
+        the network repeated that made :attr:`linger` grow, how late it came (else 0.0)."""
+        kind = count_unmatched(stats, self.quarantine, self.recent, key)
+        if kind == "duplicate":
+            done_at = self.recent.get(key)
+            if done_at is not None and done_at < 0:  # the reply to another transmission
+                linger = min(MAX_LINGER, LINGER_FACTOR * (monotonic() + done_at))
+                if linger > self.linger_resent:
+                    self.linger_resent = linger
+            elif done_at is not None:  # the network duplicated a reply
+                lateness = monotonic() - done_at
+                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
+                if linger > self.linger:
+                    self.linger = linger
+                    return kind, lateness
+        return kind, 0.0
