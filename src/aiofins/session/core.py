@@ -24,9 +24,7 @@ from anyio.abc import TaskGroup
 
 from ..hooks import (
     EventHooks,
-    RequestRetried,
     RequestSent,
-    RequestTimedOut,
     ResponseReceived,
 )
 from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
@@ -56,7 +54,6 @@ from ..transport.base import Transport, is_asyncio
 from .background import Background
 from .batch import raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker
-from .deadlines import Deadlines
 from .link import InBackoff, Link
 from .matching import match_relay_error, match_wildcard
 from .response import RING_MASK, Response, SessionStats, new_response
@@ -66,12 +63,12 @@ from .slots import (
     DestState,
     EventPending,
     Pending,
-    Retransmission,
     SlotQueue,
     SlotTimeout,
     no_free_sid_message,
 )
 from .states import LinkState
+from .watcher import DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
@@ -84,10 +81,6 @@ _SAMPLE_MASK = 7
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
 _POLL_MAX_BACKOFF = 64
-
-
-class _Expired(FinsTimeout):
-    """A request's deadline passed after every transmission (the caller words the message)."""
 
 
 class Session:
@@ -200,16 +193,15 @@ class Session:
         self._slots: dict[Any, SlotQueue] = {}
         self._last_dest: FinsAddress | None = None
         self._last_state: Any = None
-        self._deadlines = Deadlines()
-        self._fifo = self._deadlines.fifo  # the in-order part, appended to inline
-        self._timer_at = math.inf
-        self._timer_scope: anyio.CancelScope | None = None
-        self._clock: Callable[[], float] = monotonic  # the backend's clock, set on entry
         self._tg: TaskGroup | None = None
         self._background: Background | None = None
         self._asyncio = False
         self._loop: Any = None  # the running asyncio loop, if any
         self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
+        #: The one timer: retransmits or gives up the requests that are due.
+        self._watcher = DeadlineWatcher(self, self._breaker, self._hooks)
+        self._deadlines = self._watcher.deadlines
+        self._fifo = self._watcher.fifo  # the in-order part, appended to inline
         self._flags_logged = 0  # CPU error flags (0040/0080) already logged
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
@@ -249,15 +241,16 @@ class Session:
         self._asyncio = is_asyncio()
         if self._asyncio:
             self._loop = asyncio.get_running_loop()
-            self._clock = self._loop.time
+            self._watcher.clock = self._loop.time
         else:
-            self._clock = anyio.current_time
+            self._watcher.clock = anyio.current_time
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
-        self._background = self._link.background = Background(tg, self._background_failed)
+        background = Background(tg, self._background_failed)
+        self._background = self._link.background = self._watcher.background = background
         try:
-            self._background.start_soon(self._deadline_watcher)
+            background.start_soon(self._watcher.run)
             await self._link.ensure_open()
         except BaseException as exc:
             await self.aclose()
@@ -284,7 +277,7 @@ class Session:
         """Fail every request in flight or queued with :class:`ConnectionLost`; close."""
         if not self._link.shut():
             return
-        self._fail_all(ConnectionLost(f"session to {self.transport.description} closed"))
+        self.fail_all(ConnectionLost(f"session to {self.transport.description} closed"))
         for q in self._slots.values():
             q.fail_waiters(ConnectionLost("session closed"))
         if self._background is not None:
@@ -377,7 +370,7 @@ class Session:
                 pass
         hooks = self._hooks
         if hooks is not None and hooks.response_received:
-            self._emit(
+            self.emit(
                 hooks.response_received,
                 ResponseReceived,
                 p,
@@ -474,7 +467,7 @@ class Session:
                     extra={"endpoint": where, "end_code": f"{end_code:04X}"},
                 )
 
-    def _emit(self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any) -> None:
+    def emit(self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any) -> None:
         """Hand one request event (:class:`RequestSent`, :class:`ResponseReceived`,
         :class:`RequestRetried`, :class:`RequestTimedOut`) about ``p`` to ``handlers``: the
         endpoint, destination, SID and command first, then ``more``."""
@@ -515,7 +508,7 @@ class Session:
                 extra={"endpoint": self.transport.description},
             )
             link.lost()
-        self._fail_all(err)
+        self.fail_all(err)
 
     def _background_failed(self, exc: Exception) -> None:
         """A background task (the transport's reader, a retransmission) raised: the link is
@@ -531,9 +524,9 @@ class Session:
         if self._link.state is LinkState.OPEN:
             self.stats.disconnects += 1
             self._link.lost()
-        self._fail_all(err)
+        self.fail_all(err)
 
-    def _fail_all(self, exc: BaseException) -> None:
+    def fail_all(self, exc: BaseException) -> None:
         now = monotonic()
         sids = self.sids
         for p in sids.drain():
@@ -545,152 +538,11 @@ class Session:
 
     # ----------------------------------------------------------------- deadlines
 
-    async def _deadline_watcher(self) -> None:
-        """The only timer: sleeps until the earliest deadline, retransmits or expires what is
-        due. A boundary: an error here fails the requests in flight, never the task group."""
-        while True:
-            try:
-                self._expire(monotonic())
-            except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
-                where = self.transport.description
-                logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
-                self._fail_all(ConnectionLost(f"session error: {exc!r}"))
-            at = self._deadlines.earliest()
-            with anyio.CancelScope() as scope:
-                self._timer_scope = scope
-                self._timer_at = at
-                if at != math.inf:
-                    scope.deadline = anyio.current_time() + (at - monotonic())
-                await anyio.sleep_forever()
-            self._timer_scope = None
-
-    def _arm(self, deadline: float) -> None:
-        """Wake the watcher at ``deadline`` (monotonic) if that is earlier than planned. Runs
-        in receive callbacks too (a batch sends from there), so the backend's clock is read
-        directly rather than through ``anyio.current_time()``, which needs a task."""
-        scope = self._timer_scope
-        if deadline < self._timer_at and scope is not None:
-            self._timer_at = deadline
-            scope.deadline = self._clock() + (deadline - monotonic())
-
     def quarantine_until(self, now: float, timeout: float) -> float:
         """When a SID given up on ``now`` (its request timed out or was cancelled) may be used
         again, unless its late reply comes first: ``max(quarantine_factor x timeout,
         min_quarantine)`` from now."""
         return now + max(self.quarantine_factor * timeout, self.min_quarantine)
-
-    def _expire(self, now: float) -> None:
-        for p in self._deadlines.due(now):
-            plan = p.plan
-            if plan is not None:
-                if type(plan) is tuple:  # the first retransmission: now an object
-                    plan = p.plan = Retransmission(*plan)
-                assert isinstance(plan, Retransmission)
-                if plan.left and now < plan.end:
-                    self._retransmit(p, plan, now)
-                    continue
-            self.sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
-            self.stats.timeouts += 1
-            self._log_timeout(p, now)
-            hooks = self._hooks
-            if hooks is not None and hooks.request_timed_out:
-                self._emit(hooks.request_timed_out, RequestTimedOut, p, p.attempts, now - p.sent_at)
-            p.fail(_Expired("request timed out"))
-
-    def _log_timeout(self, p: Pending, now: float) -> None:
-        """A request got no reply after its last transmission: a WARNING for the first
-        such call after an answered one (a dead PLC warns once, not per request), DEBUG for
-        the next ones."""
-        first = not self._breaker.failures
-        if not first and not logger.isEnabledFor(_DEBUG):
-            return
-        where = self.transport.description
-        key = p.key
-        dest = FinsAddress(*key_address(key))
-        logger.log(
-            logging.WARNING if first else _DEBUG,
-            "%s: no reply from %s to SID %d (command %02X%02X) after %d transmission(s) in %.3f s",
-            where,
-            dest,
-            key & 0xFF,
-            p.mrc,
-            p.src,
-            p.attempts,
-            now - p.sent_at,
-            extra={
-                "endpoint": where,
-                "node": dest.node,
-                "sid": key & 0xFF,
-                "command": f"{p.mrc:02X}{p.src:02X}",
-            },
-        )
-
-    def _retransmit(self, p: Pending, resend: Retransmission, now: float) -> None:
-        """Send ``p`` again: the same frame and SID, still registered, so whichever reply
-        comes first answers it. The wait doubles (RFC 6298 5.5); the last attempt waits
-        until the call's deadline (or the caller's per-attempt cap)."""
-        resend.left -= 1
-        p.attempts += 1
-        p.rtt = None  # Karn: a reply can no longer be timed
-        wait = min(2 * resend.wait, self.rto_bounds[1])
-        cap = resend.cap
-        if cap is not None and wait > cap:
-            wait = cap
-        resend.wait = wait
-        if resend.left:
-            deadline = now + wait
-        else:
-            deadline = resend.end if cap is None else now + cap
-        p.deadline = min(deadline, resend.end)
-        self._deadlines.add(p)
-        self.stats.retries += 1
-        key = p.key
-        if logger.isEnabledFor(_DEBUG):
-            logger.debug(
-                "%s: no reply to SID %d (command %02X%02X) within %.3f s: sent again (attempt %d)",
-                self.transport.description,
-                key & 0xFF,
-                p.mrc,
-                p.src,
-                now - p.sent_at,
-                p.attempts,
-                extra={
-                    "endpoint": self.transport.description,
-                    "sid": key & 0xFF,
-                    "command": f"{p.mrc:02X}{p.src:02X}",
-                },
-            )
-        hooks = self._hooks
-        if hooks is not None and hooks.request_retried:
-            self._emit(hooks.request_retried, RequestRetried, p, p.attempts, now - p.sent_at)
-        fast_send = self.transport.fast_send
-        if fast_send is not None:
-            try:
-                fast_send(resend.frame)
-            except Exception as exc:
-                self._give_up(p, exc)
-        elif self._background is not None:
-            self._background.start_soon(self._resend, p, resend)
-
-    async def _resend(self, p: Pending, resend: Retransmission) -> None:
-        """A retransmission through an awaited send (trio, FINS/TCP under anyio)."""
-        try:
-            await self.transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
-        except Exception as exc:  # a boundary: the request fails, nothing else
-            self._give_up(p, exc)
-
-    def _give_up(self, p: Pending, exc: BaseException) -> None:
-        """``p`` cannot go on (its retransmission failed): out of the table, SID quarantined,
-        the caller told why."""
-        if p.done:
-            return
-        now = monotonic()
-        self.sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
-        if not isinstance(exc, FinsError):
-            err = ConnectionLost(f"{self.transport.description}: {exc or type(exc).__name__}")
-            err.__cause__ = exc
-            exc = err
-        p.fail(exc)
 
     # ----------------------------------------------------------------- circuit breaker
 
@@ -796,11 +648,12 @@ class Session:
             fifo.append(p)
         else:
             self._deadlines.add(p)
-        if deadline < self._timer_at:
-            self._arm(deadline)
+        watcher = self._watcher
+        if deadline < watcher.at:
+            watcher.arm(deadline)
         hooks = self._hooks
         if hooks is not None and hooks.request_sent:
-            self._emit(hooks.request_sent, RequestSent, p)
+            self.emit(hooks.request_sent, RequestSent, p)
         if logger.isEnabledFor(_DEBUG):
             self._log_frame("sent", frame)
 
@@ -979,7 +832,7 @@ class Session:
                             slots.release()  # hands the slot to the first waiter
                         else:
                             slots.in_flight -= 1
-                except _Expired:
+                except Expired:
                     assert p is not None
                     raise FinsTimeout(
                         self.timeout_message(dest, mrc, src, timeout, p.attempts)

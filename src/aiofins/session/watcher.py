@@ -1,0 +1,206 @@
+"""The deadline watcher: the session's one timer for every request in flight.
+
+Each request in flight has a deadline (:attr:`Pending.deadline`) in one
+:class:`~aiofins.session.deadlines.Deadlines` structure. One background task sleeps until the
+earliest; when it wakes, each request that is due is either sent again (same frame, same SID,
+still registered: whichever reply comes first answers it; RFC 6298's doubling wait) or given
+up on (its SID quarantined, the caller failed with a timeout). No task and no timer per
+request: a new request only moves the watcher's wake-up earlier when its deadline is the
+earliest (:meth:`DeadlineWatcher.arm`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from time import monotonic
+from typing import TYPE_CHECKING
+
+import anyio
+
+from ..hooks import EventHooks, RequestRetried, RequestTimedOut
+from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout
+from ..protocol.frames import key_address
+from ..protocol.header import FinsAddress
+from .background import Background
+from .breaker import CircuitBreaker
+from .deadlines import Deadlines
+from .slots import Pending, Retransmission
+
+if TYPE_CHECKING:
+    from .core import Session
+
+logger = logging.getLogger("aiofins.session")
+_DEBUG = logging.DEBUG
+
+
+class Expired(FinsTimeout):
+    """A request's deadline passed after every transmission (the caller words the message)."""
+
+
+class DeadlineWatcher:
+    """Retransmits or gives up the requests of ``session`` whose deadline is due."""
+
+    def __init__(self, session: Session, breaker: CircuitBreaker, hooks: EventHooks | None) -> None:
+        self.session = session
+        self.breaker = breaker
+        self.hooks = hooks
+        self.deadlines = Deadlines()
+        #: The in-order part of the deadlines, appended to inline by the session.
+        self.fifo = self.deadlines.fifo
+        #: When the watcher wakes next (monotonic; ``inf``: not before a request is added).
+        self.at = math.inf
+        self.scope: anyio.CancelScope | None = None
+        #: The backend's clock (set by the session on entry).
+        self.clock: Callable[[], float] = monotonic
+        self.background: Background | None = None
+
+    async def run(self) -> None:
+        """The only timer: sleeps until the earliest deadline, retransmits or expires what is
+        due. A boundary: an error here fails the requests in flight, never the task group."""
+        while True:
+            try:
+                self.expire(monotonic())
+            except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
+                where = self.session.transport.description
+                logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
+                self.session.fail_all(ConnectionLost(f"session error: {exc!r}"))
+            at = self.deadlines.earliest()
+            with anyio.CancelScope() as scope:
+                self.scope = scope
+                self.at = at
+                if at != math.inf:
+                    scope.deadline = anyio.current_time() + (at - monotonic())
+                await anyio.sleep_forever()
+            self.scope = None
+
+    def arm(self, deadline: float) -> None:
+        """Wake the watcher at ``deadline`` (monotonic) if that is earlier than planned. Runs
+        in receive callbacks too (a batch sends from there), so the backend's clock is read
+        directly rather than through ``anyio.current_time()``, which needs a task."""
+        scope = self.scope
+        if deadline < self.at and scope is not None:
+            self.at = deadline
+            scope.deadline = self.clock() + (deadline - monotonic())
+
+    def expire(self, now: float) -> None:
+        """Send again or give up every request due at ``now``."""
+        session = self.session
+        for p in self.deadlines.due(now):
+            plan = p.plan
+            if plan is not None:
+                if type(plan) is tuple:  # the first retransmission: now an object
+                    plan = p.plan = Retransmission(*plan)
+                assert isinstance(plan, Retransmission)
+                if plan.left and now < plan.end:
+                    self.retransmit(p, plan, now)
+                    continue
+            session.sids.abandon(p, session.quarantine_until(now, now - p.sent_at))
+            session.stats.timeouts += 1
+            self._log_timeout(p, now)
+            hooks = self.hooks
+            if hooks is not None and hooks.request_timed_out:
+                session.emit(
+                    hooks.request_timed_out, RequestTimedOut, p, p.attempts, now - p.sent_at
+                )
+            p.fail(Expired("request timed out"))
+
+    def _log_timeout(self, p: Pending, now: float) -> None:
+        """A request got no reply after its last transmission: a WARNING for the first
+        such call after an answered one (a dead PLC warns once, not per request), DEBUG for
+        the next ones."""
+        first = not self.breaker.failures
+        if not first and not logger.isEnabledFor(_DEBUG):
+            return
+        where = self.session.transport.description
+        key = p.key
+        dest = FinsAddress(*key_address(key))
+        logger.log(
+            logging.WARNING if first else _DEBUG,
+            "%s: no reply from %s to SID %d (command %02X%02X) after %d transmission(s) in %.3f s",
+            where,
+            dest,
+            key & 0xFF,
+            p.mrc,
+            p.src,
+            p.attempts,
+            now - p.sent_at,
+            extra={
+                "endpoint": where,
+                "node": dest.node,
+                "sid": key & 0xFF,
+                "command": f"{p.mrc:02X}{p.src:02X}",
+            },
+        )
+
+    def retransmit(self, p: Pending, resend: Retransmission, now: float) -> None:
+        """Send ``p`` again: the same frame and SID, still registered, so whichever reply
+        comes first answers it. The wait doubles (RFC 6298 5.5); the last attempt waits
+        until the call's deadline (or the caller's per-attempt cap)."""
+        session = self.session
+        resend.left -= 1
+        p.attempts += 1
+        p.rtt = None  # Karn: a reply can no longer be timed
+        wait = min(2 * resend.wait, session.rto_bounds[1])
+        cap = resend.cap
+        if cap is not None and wait > cap:
+            wait = cap
+        resend.wait = wait
+        if resend.left:
+            deadline = now + wait
+        else:
+            deadline = resend.end if cap is None else now + cap
+        p.deadline = min(deadline, resend.end)
+        self.deadlines.add(p)
+        session.stats.retries += 1
+        key = p.key
+        transport = session.transport
+        if logger.isEnabledFor(_DEBUG):
+            logger.debug(
+                "%s: no reply to SID %d (command %02X%02X) within %.3f s: sent again (attempt %d)",
+                transport.description,
+                key & 0xFF,
+                p.mrc,
+                p.src,
+                now - p.sent_at,
+                p.attempts,
+                extra={
+                    "endpoint": transport.description,
+                    "sid": key & 0xFF,
+                    "command": f"{p.mrc:02X}{p.src:02X}",
+                },
+            )
+        hooks = self.hooks
+        if hooks is not None and hooks.request_retried:
+            session.emit(hooks.request_retried, RequestRetried, p, p.attempts, now - p.sent_at)
+        fast_send = transport.fast_send
+        if fast_send is not None:
+            try:
+                fast_send(resend.frame)
+            except Exception as exc:
+                self.give_up(p, exc)
+        elif self.background is not None:
+            self.background.start_soon(self._resend, p, resend)
+
+    async def _resend(self, p: Pending, resend: Retransmission) -> None:
+        """A retransmission through an awaited send (trio, FINS/TCP under anyio)."""
+        try:
+            await self.session.transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
+        except Exception as exc:  # a boundary: the request fails, nothing else
+            self.give_up(p, exc)
+
+    def give_up(self, p: Pending, exc: BaseException) -> None:
+        """``p`` cannot go on (its retransmission failed): out of the table, SID quarantined,
+        the caller told why."""
+        if p.done:
+            return
+        session = self.session
+        now = monotonic()
+        session.sids.abandon(p, session.quarantine_until(now, now - p.sent_at))
+        if not isinstance(exc, FinsError):
+            where = session.transport.description
+            err = ConnectionLost(f"{where}: {exc or type(exc).__name__}")
+            err.__cause__ = exc
+            exc = err
+        p.fail(exc)
