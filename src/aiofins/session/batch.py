@@ -31,15 +31,16 @@ from ..protocol.errors import (
     ConnectionLost,
     FinsTimeout,
 )
-from ..protocol.frames import check_command, end_code_error, pack_head
+from ..protocol.frames import check_command, end_code_error
 from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
 from .response import Response
-from .slots import DestState, Pending, Plan, Retransmission
+from .slots import DestState, Pending
 
 if TYPE_CHECKING:
     from .core import Session
 
 _NORMAL = EndCode(0)
+_new_pending = object.__new__
 _DEBUG = logging.DEBUG
 logger = logging.getLogger("aiofins.session")
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
@@ -66,28 +67,17 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
 
 
 class BatchPending(Pending):
-    """One command of a batch on the wire; the receive callback hands its reply to the batch."""
+    """One command of a batch on the wire; the receive callback hands its reply to the batch.
+
+    Made with ``__new__`` alone (no ``__init__`` call per command): :meth:`Batch.send` sets
+    the batch's fields, :meth:`Session.start` the rest."""
 
     __slots__ = ("attempt", "batch", "busy", "index")
 
-    def __init__(
-        self, key: int, mrc: int, src: int, batch: Batch, index: int, attempt: int, busy: int
-    ) -> None:
-        self.key = key
-        self.mrc = mrc
-        self.src = src
-        self.done = False
-        self.fut = None
-        self.batch = batch
-        self.index = index
-        self.attempt = attempt
-        self.busy = busy
-        self.deadline = 0.0
-        self.sent_at = 0.0
-        self.attempts = 1
-        self.plan: Plan | Retransmission | None = None
-        self.rtt: DestState | None = None
-        self.abandoned = False
+    batch: Batch
+    index: int
+    attempt: int
+    busy: int
 
     def wake(self, frame: bytes) -> None:
         """The receive callback matched a reply to this command (already out of the pending
@@ -188,8 +178,16 @@ class Batch:
         session = self.session
         state = self.state
         now = monotonic()
-        key = session.sids.take(state, now)
-        if key is None:  # every SID in use: try again shortly, keeping the slot
+        mrc, src, params = self.commands[index]
+        p = _new_pending(BatchPending)  # session.start() sets the fields of every request
+        p.fut = None
+        p.batch = self
+        p.index = index
+        p.attempt = attempt
+        p.busy = busy
+        end = now + self.timeout
+        frame = session.start(p, state, mrc, src, params, self.retries, now, end, None)
+        if frame is None:  # every SID in use: try again shortly, keeping the slot
             since = self.sid_waits.setdefault(index, now)
             if index == self.next - 1 or len(self.sid_waits) == 1:
                 session.stats.sid_exhausted += 1
@@ -200,11 +198,6 @@ class Batch:
             return
         if self.sid_waits:
             self.sid_waits.pop(index, None)
-        mrc, src, params = self.commands[index]
-        p = BatchPending(key, mrc, src, self, index, attempt, busy)
-        p.rtt = state
-        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
-        session.start(p, frame, self.retries, now, now + self.timeout, None)
         # Sent at the end of this event-loop step, together with the other frames queued in
         # it: the peer then gets a burst instead of a wake-up per frame.
         self.outbox.append((p, frame))

@@ -56,7 +56,15 @@ from .batch import raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker
 from .link import InBackoff, Link
 from .matching import match_relay_error, match_wildcard
-from .response import RING_MASK, Response, SessionStats, new_response
+from .response import (
+    RING_MASK,
+    Response,
+    SessionStats,
+    _new,
+    _set_data,
+    _set_end_code,
+    _set_frame,
+)
 from .sids import MAX_LINGER, SID_WAIT, SidSpace
 from .slots import (
     AsyncioPending,
@@ -72,6 +80,9 @@ from .watcher import DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
+#: The answers ``logger.isEnabledFor`` caches (cleared by logging on every level change): a
+#: cached ``False`` spares the hot path that call, once per frame sent and received.
+_LEVELS: dict[int, bool] = getattr(logger, "_cache", {})
 
 _NORMAL = EndCode(0)
 _CLOSED_BREAKER = BreakerState.CLOSED
@@ -242,6 +253,7 @@ class Session:
         if self._asyncio:
             self._loop = asyncio.get_running_loop()
             self._watcher.clock = self._loop.time
+            self._watcher.loop = self._loop
         else:
             self._watcher.clock = anyio.current_time
         tg = anyio.create_task_group()
@@ -306,7 +318,7 @@ class Session:
 
         (The unused second argument lets asyncio call this as ``datagram_received``.)
         """
-        if logger.isEnabledFor(_DEBUG):
+        if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
             self._log_frame("received", frame)
         if len(frame) < 14:
             self.stats.malformed += 1
@@ -615,21 +627,54 @@ class Session:
     def start(
         self,
         p: Pending,
-        frame: bytes,
+        state: DestState,
+        mrc: int,
+        src: int,
+        params: bytes,
         retries: int,
         now: float,
         end: float,
         cap: float | None,
-    ) -> None:
-        """Register ``p`` (its SID taken, ``p.rtt`` its destination) as sent ``now`` with
-        ``frame``: in the pending table under its SID, its first deadline in the deadline
-        structure, the hooks and the log told. The caller sends the frame.
+    ) -> bytes | None:
+        """Put ``p``, command ``mrc src params`` to ``state``'s destination, on the books:
+        take a free SID (``p.key``), build the frame, register ``p`` under its SID as sent
+        ``now`` with its first deadline, tell the hooks and the log. Returns the frame for
+        the caller to send, or ``None`` (nothing registered) when all 256 SIDs of the
+        destination are in flight, quarantined or lingering.
+
+        Every field of :class:`Pending` is set here (``p`` may come from ``__new__``
+        alone: the hot path spares itself an ``__init__`` call).
 
         The first wait: the destination's RTO once measured, else the share of the call's
         time (until ``end``) that lets every attempt go out, the wait doubling each time;
-        never more than the caller's per-attempt ``cap``."""
+        never more than the caller's per-attempt ``cap``. (One call for all of this: a call
+        costs as much as the rest of the steps, and this runs once per request.)"""
+        sids = self.sids
+        pending = sids.pending
+        key = state.base | state.cursor
+        if (
+            key in pending
+            or key in sids.quarantine
+            or sids.lingering.get(key, 0.0) > now
+            or (sids.routed and sids.sid_taken(key))
+        ):
+            found = sids.allocate(state)
+            if found is None:
+                return None
+            key = found
+        else:
+            state.cursor = (key + 1) & 0xFF
+        # Built before the request is registered: bad parameters (not bytes) raise here and
+        # leave nothing behind.
+        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
+        p.key = key
+        p.mrc = mrc
+        p.src = src
+        p.rtt = state
+        p.done = p.abandoned = False
+        p.attempts = 1
         if retries:
-            wait = p.rtt.rto or (end - now) / ((2 << retries) - 1)  # type: ignore[union-attr]
+            wait = state.rto or (end - now) / ((2 << retries) - 1)
             if cap is not None and wait > cap:
                 wait = cap
             p.plan = (frame, retries, end, cap, wait)
@@ -637,12 +682,13 @@ class Session:
             if deadline > end:
                 deadline = end
         else:
+            p.plan = None
             deadline = end
             if cap is not None and now + cap < end:
                 deadline = now + cap
         p.deadline = deadline
         p.sent_at = now
-        self._pending[p.key] = p
+        pending[key] = p
         fifo = self._fifo
         if not fifo or deadline >= fifo[-1].deadline:
             fifo.append(p)
@@ -654,8 +700,9 @@ class Session:
         hooks = self._hooks
         if hooks is not None and hooks.request_sent:
             self.emit(hooks.request_sent, RequestSent, p)
-        if logger.isEnabledFor(_DEBUG):
+        if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
             self._log_frame("sent", frame)
+        return frame
 
     def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None:
         """Give up on ``p`` before its reply (cancelled, or its send failed; ``timed_out``:
@@ -675,10 +722,15 @@ class Session:
         if raw & ERROR_BITS:
             return None
         self.stats.completed += 1
-        if not raw:
-            return new_response(_NORMAL, frame[14:], frame)
-        self.cpu_flags_seen(raw)
-        return new_response(EndCode(raw), frame[14:], frame)
+        response: Response = _new(Response)  # new_response(), inlined
+        if raw:
+            self.cpu_flags_seen(raw)
+            _set_end_code(response, EndCode(raw))
+        else:
+            _set_end_code(response, _NORMAL)
+        _set_data(response, frame[14:])
+        _set_frame(response, frame)
+        return response
 
     def busy_pause(self, frame: bytes, busy: int) -> float | None:
         """For a reply with an error end code: the pause before sending the command again
@@ -778,29 +830,33 @@ class Session:
                     transport = self.transport
                     if transport.fast_send is None and not transport.is_open:
                         await self._link.ensure_open(end - monotonic())
-                    state = self.dest_state(dest)
+                    state = self._last_state if dest is self._last_dest else self.dest_state(dest)
                     slots = state.slots
                     if slots.in_flight < slots.limit and not slots.waiters:
                         slots.in_flight += 1
                     else:
                         await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
                     try:
-                        now = monotonic()
-                        key = self.sids.take(state, now)
-                        if key is None:
-                            key = await self._wait_for_sid(state, end, timeout)
-                            now = monotonic()
-                        # Built before the request is registered: bad parameters (not bytes)
-                        # raise here and leave nothing behind.
-                        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
                         fut: asyncio.Future[bytes] | None = None
                         if self._asyncio:
                             fut = self._loop.create_future()
-                            p = AsyncioPending(key, mrc, src, fut, rtt=state)
+                            p = _new(AsyncioPending)  # start() sets every field
+                            p.fut = fut
                         else:
-                            p = EventPending(key, mrc, src)
-                            p.rtt = state
-                        self.start(p, frame, retries, now, end, attempt_timeout)
+                            p = EventPending(0, mrc, src)
+                        now = monotonic()
+                        sent = self.start(
+                            p, state, mrc, src, params, retries, now, end, attempt_timeout
+                        )
+                        if sent is None:
+                            # The SID found is free and stays so until start() takes it.
+                            state.cursor = await self._wait_for_sid(state, end, timeout) & 0xFF
+                            now = monotonic()
+                            sent = self.start(
+                                p, state, mrc, src, params, retries, now, end, attempt_timeout
+                            )
+                            assert sent is not None
+                        frame = sent
                         try:
                             fast_send = transport.fast_send
                             if fast_send is not None:

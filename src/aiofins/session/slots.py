@@ -100,26 +100,14 @@ class AsyncioPending(Pending):
 
     fut: asyncio.Future[bytes]
 
-    def __init__(
-        self,
-        key: int,
-        mrc: int,
-        src: int,
-        fut: asyncio.Future[bytes],
-        sent_at: float = 0.0,
-        deadline: float = 0.0,
-        rtt: DestState | None = None,
-        plan: Plan | None = None,
-    ) -> None:
-        self.key = key
+    def __init__(self, mrc: int, src: int, fut: asyncio.Future[bytes]) -> None:
+        # Pending.__init__ inlined; the key, times and plan are set by Session.start().
+        self.key = 0
         self.mrc = mrc
         self.src = src
         self.done = False
         self.fut = fut
-        self.sent_at = sent_at
-        self.deadline = deadline
-        self.rtt = rtt
-        self.plan = plan
+        self.plan: Plan | Retransmission | None = None
         self.attempts = 1
         self.abandoned = False
 

@@ -11,11 +11,12 @@ earliest (:meth:`DeadlineWatcher.arm`).
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 from collections.abc import Callable
 from time import monotonic
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import anyio
 
@@ -51,7 +52,14 @@ class DeadlineWatcher:
         self.fifo = self.deadlines.fifo
         #: When the watcher wakes next (monotonic; ``inf``: not before a request is added).
         self.at = math.inf
+        #: The watcher's sleep under anyio's other backends (trio): a cancel scope's deadline.
         self.scope: anyio.CancelScope | None = None
+        #: Under asyncio: the loop, the future the watcher sleeps on, and the timer that
+        #: resolves it (a bare future and ``call_at``: a wake-up costs one task step, not a
+        #: cancellation).
+        self.loop: Any = None
+        self.waiter: asyncio.Future[None] | None = None
+        self.timer: asyncio.TimerHandle | None = None
         #: The backend's clock (set by the session on entry).
         self.clock: Callable[[], float] = monotonic
         self.background: Background | None = None
@@ -59,6 +67,7 @@ class DeadlineWatcher:
     async def run(self) -> None:
         """The only timer: sleeps until the earliest deadline, retransmits or expires what is
         due. A boundary: an error here fails the requests in flight, never the task group."""
+        loop = self.loop
         while True:
             try:
                 self.expire(monotonic())
@@ -67,9 +76,21 @@ class DeadlineWatcher:
                 logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
                 self.session.fail_all(ConnectionLost(f"session error: {exc!r}"))
             at = self.deadlines.earliest()
+            self.at = at
+            if loop is not None:
+                waiter = self.waiter = loop.create_future()
+                if at != math.inf:
+                    self.timer = loop.call_at(loop.time() + (at - monotonic()), _wake, waiter)
+                try:
+                    await waiter
+                finally:
+                    self.waiter = None
+                    timer, self.timer = self.timer, None
+                    if timer is not None:
+                        timer.cancel()
+                continue
             with anyio.CancelScope() as scope:
                 self.scope = scope
-                self.at = at
                 if at != math.inf:
                     scope.deadline = anyio.current_time() + (at - monotonic())
                 await anyio.sleep_forever()
@@ -79,8 +100,18 @@ class DeadlineWatcher:
         """Wake the watcher at ``deadline`` (monotonic) if that is earlier than planned. Runs
         in receive callbacks too (a batch sends from there), so the backend's clock is read
         directly rather than through ``anyio.current_time()``, which needs a task."""
+        if deadline >= self.at:
+            return
+        waiter = self.waiter
+        if waiter is not None:
+            self.at = deadline
+            timer = self.timer
+            if timer is not None:
+                timer.cancel()
+            self.timer = self.loop.call_at(self.clock() + (deadline - monotonic()), _wake, waiter)
+            return
         scope = self.scope
-        if deadline < self.at and scope is not None:
+        if scope is not None:
             self.at = deadline
             scope.deadline = self.clock() + (deadline - monotonic())
 
@@ -204,3 +235,9 @@ class DeadlineWatcher:
             err.__cause__ = exc
             exc = err
         p.fail(exc)
+
+
+def _wake(waiter: asyncio.Future[None]) -> None:
+    """The asyncio timer's callback: wake the watcher."""
+    if not waiter.done():
+        waiter.set_result(None)
