@@ -1,9 +1,10 @@
 """The session's lifecycles, named: the link's and a request's.
 
-:class:`LinkState` has one place where it changes, :meth:`Session._set_link_state`, which
-checks each move against :data:`LINK_TRANSITIONS`, logs it and emits
-:class:`~aiofins.hooks.ConnectionStateChanged`. :class:`RequestState` names the stages a
-request goes through; :attr:`Pending.state` reads it off the request in flight.
+:class:`LinkState` has one place where it changes,
+:meth:`Link.set_state <aiofins.session.link.Link.set_state>`, which checks each move against
+:data:`LINK_TRANSITIONS`, logs it and emits :class:`~aiofins.hooks.ConnectionStateChanged`.
+:class:`RequestState` names the stages a request goes through; :attr:`Pending.state` reads it
+off the request in flight.
 """
 
 from __future__ import annotations

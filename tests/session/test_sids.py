@@ -1,0 +1,100 @@
+"""SidSpace: the SIDs and requests in flight of one transport, without a session."""
+
+from __future__ import annotations
+
+from time import monotonic
+
+from aiofins.protocol.header import FinsAddress
+from aiofins.session.matching import LATE_REPLY_GRACE
+from aiofins.session.response import SessionStats
+from aiofins.session.sids import MAX_LINGER, SidSpace
+from aiofins.session.slots import DestState, Pending, SlotQueue
+
+PLC = FinsAddress(0, 1, 0)
+OTHER = FinsAddress(0, 2, 0)
+
+
+def dest(address: FinsAddress = PLC) -> DestState:
+    return DestState(address, b"", SlotQueue(5))
+
+
+def in_flight(space: SidSpace, key: int) -> Pending:
+    p = Pending(key, 0x01, 0x01)
+    p.sent_at = monotonic()
+    space.pending[key] = p
+    return p
+
+
+def test_sids_go_round_robin_and_skip_those_in_flight_quarantined_or_lingering() -> None:
+    space, state = SidSpace(), dest()
+    now = monotonic()
+    assert [space.take(state, now) for _ in range(3)] == [0x10000, 0x10001, 0x10002]
+    in_flight(space, 0x10003)
+    space.quarantine[0x10004] = now + 10
+    space.lingering[0x10005] = now + 10
+    assert space.take(state, now) == 0x10006
+    state.cursor = 0xFF
+    assert space.take(state, now) == 0x100FF
+    assert space.take(state, now) == 0x10000  # wraps after 255
+
+
+def test_a_quarantine_or_linger_that_is_over_frees_its_sid() -> None:
+    space, state = SidSpace(), dest()
+    past = monotonic() - 1
+    space.quarantine[0x10000] = past
+    space.lingering[0x10001] = past
+    in_flight(space, 0x10002)
+    state.cursor = 0x02  # in flight: allocate() scans on and frees the ended ones
+    assert space.take(state, monotonic()) == 0x10003
+    state.cursor = 0x00
+    assert space.allocate(state) == 0x10000
+    assert space.allocate(state) == 0x10001
+    assert space.quarantine == {} and space.lingering == {}
+
+
+def test_no_sid_when_all_256_are_taken_and_how_long_until_one_is_free() -> None:
+    space, state = SidSpace(), dest()
+    now = monotonic()
+    for sid in range(255):
+        space.quarantine[0x10000 | sid] = now + 60
+    space.lingering[0x100FF] = now + 0.005
+    assert space.take(state, now) is None
+    assert 0.001 <= space.free_in(state, now) <= 0.005
+    space.forget()  # a fresh connection: nothing late can reach it
+    assert space.take(state, monotonic()) is not None
+
+
+def test_routed_sids_stay_unique_across_destinations() -> None:
+    space, first, second = SidSpace(), dest(PLC), dest(OTHER)
+    space.routed = True
+    now = monotonic()
+    key = space.take(first, now)
+    assert key == 0x10000
+    in_flight(space, key)  # SID 0 to node 1
+    assert space.take(second, now) == 0x20001  # SID 0 is in flight to node 1
+
+
+def test_abandon_quarantines_and_drain_empties_the_table() -> None:
+    space = SidSpace()
+    p = in_flight(space, 0x10007)
+    space.abandon(p, monotonic() + 15)
+    assert p.done and p.abandoned and 0x10007 not in space.pending
+    assert space.quarantine[0x10007] > monotonic() + 14
+    q = in_flight(space, 0x10008)
+    assert space.drain() == [q] and space.pending == {}
+
+
+def test_unmatched_replies_are_counted_and_a_duplicate_teaches_the_linger() -> None:
+    space, stats = SidSpace(min_linger=0.01), SessionStats({})
+    space.quarantine[0x10001] = monotonic() + 15
+    assert space.unmatched(stats, 0x10001) == ("late", 0.0)
+    assert space.quarantine[0x10001] <= monotonic() + LATE_REPLY_GRACE  # its reply has come
+    space.recent[0x10002] = monotonic() - 0.1  # answered 0.1 s ago: the network duplicated it
+    kind, lateness = space.unmatched(stats, 0x10002)
+    assert kind == "duplicate" and 0.1 <= lateness < 1
+    assert 0.2 <= space.linger <= MAX_LINGER
+    space.recent[0x10003] = -(monotonic() - 0.2)  # answered after a retransmission
+    assert space.unmatched(stats, 0x10003) == ("duplicate", 0.0)
+    assert space.linger_resent >= 0.4
+    assert space.unmatched(stats, 0x10009) == ("unsolicited", 0.0)
+    assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 2, 1)
