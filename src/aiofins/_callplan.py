@@ -61,6 +61,8 @@ class ReadFrames:
     commands: tuple[tuple[int, int, bytes], ...]
     #: Data bytes each reply must carry.
     sizes: tuple[int, ...]
+    #: Elements each frame reads.
+    counts: tuple[int, ...]
     element_size: int
     #: The unpacker of a one-frame read's data.
     unpack: Callable[[bytes], tuple[int, ...]] | None
@@ -101,6 +103,7 @@ def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
         requests,
         tuple((r.MRC, r.SRC, r.encode()) for r in requests),
         tuple(r.count * size for r in requests),
+        tuple(r.count for r in requests),
         size,
         struct.Struct(f">{count}{code}").unpack if len(requests) == 1 else None,
     )

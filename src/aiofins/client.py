@@ -13,10 +13,7 @@ import struct
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar, overload
 
-import anyio
-
 from ._callplan import (
-    ReadFrames,
     cacheable,
     read_frames,
     start_address,
@@ -182,15 +179,37 @@ class Client(CommandMethods):
         """
         if retries is not None or (
             timeout is not None and (type(timeout) is not float or not timeout > 0.0)
-        ):  # checked unless a positive float (NaN is not > 0): one comparison per call
+        ):
             timeout, retries = _call_options(timeout, retries)
         if self.read_only:
             for mrc, src, params in commands:
                 _check_read_only(mrc, src, params)
+        return await self._execute_many(commands, dest, timeout, retries, None, idempotent)
+
+    async def _execute_many(
+        self,
+        commands: Sequence[tuple[int, int, bytes]],
+        dest: FinsAddress | str | None,
+        timeout: float | None,
+        retries: int | None,
+        on_response: Callable[[int, Response], object] | None,
+        idempotent: bool = True,
+    ) -> list[Response]:
+        """:meth:`execute_many` without the read-only check (reads call it directly), with
+        the session's ``on_response``."""
+        if retries is not None or (
+            timeout is not None and (type(timeout) is not float or not timeout > 0.0)
+        ):  # checked unless a positive float (NaN is not > 0): one comparison per call
+            timeout, retries = _call_options(timeout, retries)
         target = self._target(dest)
         try:
             responses = await self.session.request_many(
-                commands, dest=target, timeout=timeout, idempotent=idempotent, retries=retries
+                commands,
+                dest=target,
+                timeout=timeout,
+                idempotent=idempotent,
+                retries=retries,
+                on_response=on_response,
             )
         except EndCodeError as exc:
             self._add_addressing_hint(exc, target)
@@ -256,8 +275,9 @@ class Client(CommandMethods):
 
         Transfers over the route's limit go as several 0101 frames, sent pipelined (up to the
         session's in-flight cap) and reassembled in order. ``progress(done, total)`` is called
-        with the elements read so far as the replies come in (after each batch of as many
-        frames as the session keeps in flight).
+        with the elements read so far as each frame's reply comes in (under asyncio from the
+        session's receive callback: keep it short); an exception it raises ends the read
+        and is raised here.
         """
         if type(count) is not int or count < 0:
             count = whole_number("count", count, 0)
@@ -287,65 +307,19 @@ class Client(CommandMethods):
             if progress is not None:
                 progress(count, count)
             return plan.one(response.data)
-        if progress is not None and commands:
-            return plan.values(
-                await self._read_reporting(plan, count, dest, timeout, retries, progress)
-            )
-        responses = await self.execute_many(
-            commands, dest=dest, timeout=timeout, retries=retries, idempotent=True
-        )
-        return plan.values([response.data for response in responses])
-
-    async def _read_reporting(
-        self,
-        plan: ReadFrames,
-        total: int,
-        dest: FinsAddress | str | None,
-        timeout: float | None,
-        retries: int | None,
-        progress: Progress,
-    ) -> list[bytes]:
-        """The frames of ``plan`` in batches of the session's in-flight cap, two batches
-        under way at once (one fills the wire while the other's caller reports), so the read
-        stays pipelined; ``progress`` is called after each batch. The first error cancels
-        the rest and is raised."""
-        commands = plan.commands
-        counts = [r.count for r in plan.requests]
-        step = self.session.max_in_flight
-        data: list[bytes] = [b""] * len(commands)
-        batches = iter(range(0, len(commands), step))
+        if progress is None:
+            responses = await self._execute_many(commands, dest, timeout, retries, None)
+            return plan.values([response.data for response in responses])
+        counts = plan.counts
         done = 0
-        errors: list[Exception] = []
 
-        async def worker(scope: anyio.CancelScope) -> None:
+        def report(index: int, _response: Response) -> None:
             nonlocal done
-            try:
-                for first in batches:
-                    last = first + step
-                    responses = await self.execute_many(
-                        commands[first:last],
-                        dest=dest,
-                        timeout=timeout,
-                        retries=retries,
-                        idempotent=True,
-                    )
-                    if errors:  # another batch failed: report no more
-                        return
-                    data[first:last] = [response.data for response in responses]
-                    done += sum(counts[first:last])
-                    progress(done, total)
-            except Exception as exc:
-                if not errors:
-                    errors.append(exc)
-                scope.cancel()
+            done += counts[index]
+            progress(done, count)
 
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(worker, tg.cancel_scope)
-            if len(commands) > step:
-                tg.start_soon(worker, tg.cancel_scope)
-        if errors:
-            raise errors[0]
-        return data
+        responses = await self._execute_many(commands, dest, timeout, retries, report)
+        return plan.values([response.data for response in responses])
 
     async def write(
         self,

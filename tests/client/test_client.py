@@ -320,6 +320,9 @@ async def test_progress_of_a_multi_frame_read_and_write(sim: Simulator, url: str
         dones = [done for done, _ in read]
         assert dones == sorted(set(dones)) and dones[-1] == 5000
         assert all(done % 999 in (0, 5) for done in dones)  # whole frames, as they come
+        # Once per frame: the steps are the frames' sizes (five of 999 words, one of 5).
+        steps = [b - a for a, b in zip([0, *dones], dones, strict=False)]
+        assert sorted(steps) == [5] + [999] * 5
         assert {total for _, total in read} == {5000}
         one: list[tuple[int, int]] = []
         assert await plc.read("D100", 3, progress=lambda *a: one.append(a)) == data[:3]
@@ -338,6 +341,7 @@ async def test_an_error_in_a_reported_read_is_raised_as_itself(sim: Simulator, u
         with pytest.raises(RuntimeError, match="stop here"):
             await plc.read("D0", 9000, progress=progress)
         assert len(calls) == 2
+        assert plc.session.stats.in_flight == 0  # the rest of the read abandoned
         assert await plc.read("D0", 2000) == [0] * 2000  # the client still works
         sim.plan.per_command[0x0101] = FaultRule(end_code=0x1103)
         with pytest.raises(EndCodeError) as info:

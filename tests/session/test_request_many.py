@@ -271,3 +271,52 @@ async def test_other_callers_share_the_destinations_slots_with_a_batch() -> None
         assert [r.data for r in results] == [expected(w) for w in range(300)]
         assert singles == {w: expected(w) for w in range(1000, 1020)}
         assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_on_response_reports_each_reply_once_as_it_arrives() -> None:
+    held: list[bytes] = []
+
+    def reverse_in_fours(cmd: bytes) -> list[Reply]:
+        held.append(cmd)
+        if len(held) < 4:
+            return []
+        batch = [(0.0, reply(c, 0, word_data(c))) for c in reversed(held)]
+        held.clear()
+        return batch
+
+    seen: list[tuple[int, bytes]] = []
+    async with udp_responder(reverse_in_fours) as peer, session_for(peer, max_in_flight=4) as s:
+        results = await s.request_many(
+            reads(range(500, 540)),
+            timeout=5,
+            on_response=lambda i, r: seen.append((i, r.data)),
+        )
+        assert [r.data for r in results] == [expected(w) for w in range(500, 540)]
+        assert sorted(seen) == [(i, expected(500 + i)) for i in range(40)]
+        if s._asyncio:  # the receive callback reports in arrival order: last of four first
+            assert [i for i, _ in seen] == [4 * g + k for g in range(10) for k in (3, 2, 1, 0)]
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_an_exception_in_on_response_ends_the_batch_and_is_raised() -> None:
+    calls: list[int] = []
+
+    def stop_at_third(index: int, _response: object) -> None:
+        calls.append(index)
+        if len(calls) == 3:
+            raise RuntimeError("the caller's callback failed")
+
+    async with (
+        udp_responder() as peer,
+        session_for(peer, max_in_flight=4, quarantine_factor=50.0) as s,
+    ):
+        with pytest.raises(RuntimeError, match="callback failed"):
+            await s.request_many(reads(range(30)), timeout=5, on_response=stop_at_third)
+        assert len(calls) == 3  # nothing reported after the failure
+        assert len(peer.received) < 30  # the rest was not sent
+        assert_idle(s)
+        results = await s.request_many(reads(range(60, 70)))
+        assert [r.data for r in results] == [expected(w) for w in range(60, 70)]
+        assert_idle(s)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from time import monotonic
 from typing import TYPE_CHECKING, NoReturn
 
@@ -48,6 +48,8 @@ _SID_WAIT = 0.01
 
 #: One command of a batch: (MRC, SRC, parameter bytes).
 Command = tuple[int, int, bytes]
+#: ``on_response(index, response)``: called as each command's normal response arrives.
+OnResponse = Callable[[int, Response], object]
 
 __all__ = ["check_command", "end_code_error", "raise_after_a_turn", "request_many"]
 
@@ -90,6 +92,12 @@ class BatchPending(Pending):
         response = session.response(frame)
         if response is not None:
             batch.results[self.index] = response
+            if batch.on_response is not None:
+                try:
+                    batch.on_response(self.index, response)
+                except BaseException as exc:  # the caller's: raised to it, not to the transport
+                    batch.finish(exc)
+                    return
             remaining = batch.remaining = batch.remaining - 1
             if not remaining:
                 batch.finish(None)
@@ -129,6 +137,7 @@ class Batch:
         "handles",
         "held",
         "next",
+        "on_response",
         "outbox",
         "remaining",
         "results",
@@ -148,8 +157,10 @@ class Batch:
         timeout: float,
         retries: int,
         window: int,
+        on_response: OnResponse | None = None,
     ) -> None:
         self.session = session
+        self.on_response = on_response
         self.commands = commands
         self.count = len(commands)
         self.state = state
@@ -333,6 +344,7 @@ async def request_many(
     idempotent: bool,
     retries: int | None,
     window: int | None,
+    on_response: OnResponse | None = None,
 ) -> list[Response]:
     """See :meth:`Session.request_many`."""
     if dest is None:
@@ -366,9 +378,11 @@ async def request_many(
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))
     if not session.on_asyncio or transport.fast_send is None or len(commands) == 1:
-        return await _concurrent(session, commands, dest, timeout, idempotent, retries, width)
+        return await _concurrent(
+            session, commands, dest, timeout, idempotent, retries, width, on_response
+        )
     await state.slots.acquire(timeout, f"{dest}")
-    batch = Batch(session, commands, state, timeout, retries, width)
+    batch = Batch(session, commands, state, timeout, retries, width, on_response)
     batch.held = 1
     try:
         batch.start()
@@ -392,14 +406,17 @@ async def _concurrent(
     idempotent: bool,
     retries: int,
     width: int,
+    on_response: OnResponse | None,
 ) -> list[Response]:
     """The portable path: ``width`` loops of :meth:`Session.request`; the first error wins."""
     results: list[Response | None] = [None] * len(commands)
     if width == 1:
         for i, (mrc, src, params) in enumerate(commands):
-            results[i] = await session.request(
+            response = results[i] = await session.request(
                 mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent, retries=retries
             )
+            if on_response is not None:
+                on_response(i, response)
         return results  # type: ignore[return-value]
     errors: list[Exception] = []
     cursor = iter(range(len(commands)))
@@ -408,7 +425,7 @@ async def _concurrent(
         try:
             for i in cursor:
                 mrc, src, params = commands[i]
-                results[i] = await session.request(
+                response = results[i] = await session.request(
                     mrc,
                     src,
                     params,
@@ -417,6 +434,8 @@ async def _concurrent(
                     idempotent=idempotent,
                     retries=retries,
                 )
+                if on_response is not None and not errors:  # none after the first error
+                    on_response(i, response)
         except Exception as exc:
             if not errors:
                 errors.append(exc)

@@ -963,6 +963,7 @@ class Session:
         idempotent: bool = False,
         retries: int | None = None,
         window: int | None = None,
+        on_response: Callable[[int, Response], object] | None = None,
     ) -> list[Response]:
         """Send many commands ``(mrc, src, params)`` pipelined; their responses in order.
 
@@ -971,7 +972,10 @@ class Session:
         sends the next command, so the caller wakes once for the whole batch. Each command
         keeps the guarantees of :meth:`request` (``timeout`` bounds each command's exchange,
         retransmission, busy end codes); the first error is raised after the rest are
-        abandoned (SIDs quarantined).
+        abandoned (SIDs quarantined). ``on_response(index, response)`` is called as each
+        command's normal response arrives, in the order they arrive (under asyncio from
+        the receive callback: keep it short); an exception it raises ends the batch the
+        same way and is raised to the caller.
         """
         if self._breaker.state is not _CLOSED_BREAKER:
             await self._admit(dest or self.dest)
@@ -984,6 +988,7 @@ class Session:
                 idempotent=idempotent,
                 retries=retries,
                 window=window,
+                on_response=on_response,
             )
         except (FinsTimeout, ConnectionLost) as exc:
             if not isinstance(exc, (SlotTimeout, CircuitOpen, InBackoff)):
