@@ -347,3 +347,30 @@ async def test_an_error_in_a_reported_read_is_raised_as_itself(sim: Simulator, u
         with pytest.raises(EndCodeError) as info:
             await plc.read("D0", 3000, progress=progress, retries=0)
         assert info.value.end_code.code == 0x1103
+
+
+async def test_a_reported_read_cancelled_from_its_callback_leaves_nothing_behind(
+    sim: Simulator, url: str
+) -> None:
+    data = [(7 * i) & 0xFFFF for i in range(6000)]
+    calls: list[int] = []
+    async with connect(url, timeout=2) as plc:
+        await plc.write("D0", data, allow_split=True)
+        with anyio.CancelScope() as scope:
+
+            def progress(done: int, total: int) -> None:
+                calls.append(done)
+                scope.cancel()  # from the receive path under asyncio, a task under trio
+
+            await plc.read("D0", 6000, progress=progress)
+        assert scope.cancelled_caught
+        if plc.session._asyncio:  # the batch ends at once: nothing reported after the cancel
+            assert len(calls) == 1
+        else:  # a worker task already resumed with its reply may still report it
+            assert 1 <= len(calls) < 7
+        assert plc.session.stats.in_flight == 0
+        assert all(s.slots.in_flight == 0 for s in plc.session._dests.values())
+        reported: list[int] = []
+        words = await plc.read("D0", 6000, progress=lambda done, _: reported.append(done))
+        assert words == data
+        assert len(reported) == 7 and reported[-1] == 6000
