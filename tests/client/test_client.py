@@ -364,7 +364,7 @@ async def test_a_reported_read_cancelled_from_its_callback_leaves_nothing_behind
 
             await plc.read("D0", 6000, progress=progress)
         assert scope.cancelled_caught
-        if plc.session._asyncio:  # the batch ends at once: nothing reported after the cancel
+        if plc.session.on_asyncio:  # the batch ends at once: nothing reported after the cancel
             assert len(calls) == 1
         else:  # a worker task already resumed with its reply may still report it
             assert 1 <= len(calls) < 7

@@ -294,7 +294,7 @@ async def test_on_response_reports_each_reply_once_as_it_arrives() -> None:
         )
         assert [r.data for r in results] == [expected(w) for w in range(500, 540)]
         assert sorted(seen) == [(i, expected(500 + i)) for i in range(40)]
-        if s._asyncio:  # the receive callback reports in arrival order: last of four first
+        if s.on_asyncio:  # the receive callback reports in arrival order: last of four first
             assert [i for i, _ in seen] == [4 * g + k for g in range(10) for k in (3, 2, 1, 0)]
         assert_idle(s)
 
