@@ -48,7 +48,7 @@ from .tags import ReadPlan, parse_tag
 from .transport.base import is_asyncio
 
 if TYPE_CHECKING:
-    from .pool import Pool
+    from .pool import Pool, _Lease
 
 logger = logging.getLogger("aiofins.poller")
 
@@ -155,6 +155,8 @@ class ScanGroup:
     _missed_logged_at: float = -math.inf
     #: ``missed`` when the last ScanDone was emitted (the next one says how many since).
     _missed_reported: int = 0
+    #: The pool lease the group's scans borrow the endpoint's client with (kept between scans).
+    _lease: _Lease | None = field(default=None, repr=False)
 
     def _enter(self, state: ScanState) -> None:
         """The one place a group changes state."""
@@ -396,8 +398,14 @@ class Poller:
         values: dict[str, Value] = {}
         bad: dict[str, str] = {}  # tags whose words are no value of their type
         try:
-            # Borrowed without ``async with``: a ready session is lent with no coroutine.
-            lease = self.pool._lease(group.url, group.timeout)
+            # Borrowed without ``async with``: a ready session is lent with no coroutine. The
+            # group keeps its lease between scans (taken while in use: scan_once may run
+            # beside the group's own scan).
+            lease = group._lease
+            if lease is None:
+                lease = self.pool._lease(group.url, group.timeout)
+            else:
+                group._lease = None
             client = lease.borrow_ready() or await lease.borrow()
             try:
                 plan = group.plan
@@ -406,6 +414,7 @@ class Poller:
                 values = await client.read_tags(plan, timeout=group.timeout, errors=bad)
             finally:
                 lease.release()
+                group._lease = lease
         except FinsError as exc:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
@@ -434,11 +443,12 @@ class Poller:
         if error is None and not bad:  # the usual scan: every tag read, in the tag list's order
             before = group._last_good
             if before is not None:  # so was the last one: compare values only
-                changed = {
-                    name
-                    for name, read in values.items()
-                    if not ((old := before.get(name, _NONE)) is read or old == read)
-                }
+                if values != before:  # (equal dicts: nothing changed, found in one C call)
+                    changed = {
+                        name
+                        for name, read in values.items()
+                        if not ((old := before.get(name, _NONE)) is read or old == read)
+                    }
             else:
                 for name, read in values.items():
                     previous = last.get(name)
@@ -494,7 +504,7 @@ class Poller:
             stamp,
             group.last_duration,
             readings,
-            frozenset(changed),
+            frozenset(changed) if changed else _UNCHANGED,
             error,
         )
 
@@ -504,6 +514,7 @@ _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR
 #: that fires a little early must not make the timer task spin until the exact time.
 _TIMER_SLACK = 0.001
 _NONE = object()
+_UNCHANGED: frozenset[str] = frozenset()
 
 
 class GoodReadings(Mapping[str, TagReading]):

@@ -145,10 +145,11 @@ class ReadPlan:
         steps: list[_Step] | None = cache.get("steps")
         if steps is None:
             steps = cache["steps"] = _compile_steps(self)
-            cache["lengths"] = (
+            cache["lengths"] = lengths = (
                 tuple(run.count for run in self.runs),
                 tuple(len(frame) for frame in self.multiple),
             )
+            cache["bulk"] = _compile_bulk(steps, sum(lengths[0]) + sum(lengths[1]))
         # Every scan decodes here: compare the frames' lengths in one step and check each
         # frame only to say which one is wrong.
         run_lengths, multiple_lengths = cache["lengths"]
@@ -162,7 +163,29 @@ class ReadPlan:
             flat = run_words[0]
         else:
             flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
-        out: dict[str, Value] = {}
+        bulk: _Bulk | None = cache["bulk"]
+        if bulk is not None:
+            template, pack, unpack, names, rest = bulk
+            try:
+                numbers = unpack(pack(*flat))
+            except struct.error:  # a word out of range (not from a reply): tag by tag below
+                pass
+            else:
+                out = template.copy()  # every name, in the tag list's order
+                out.update(zip(names, numbers, strict=True))
+                return self._run_steps(out, rest, flat, errors, True)
+        return self._run_steps({}, steps, flat, errors, False)
+
+    def _run_steps(
+        self,
+        out: dict[str, Value],
+        steps: list[_Step],
+        flat: Sequence[int],
+        errors: dict[str, str] | None,
+        listed: bool,
+    ) -> dict[str, Value]:
+        """Decode the tags of ``steps`` into ``out`` (``listed``: ``out`` has a key for each
+        already, which a tag that is no value of its type gives up)."""
         for name, op, at, arg in steps:
             if op is _BIT:
                 out[name] = bool((flat[at] >> arg) & 1)
@@ -187,6 +210,8 @@ class ReadPlan:
                     if errors is None:
                         raise DecodeError(message) from None
                     errors[name] = message
+                    if listed:
+                        del out[name]
         return out
 
     def _length_error(
@@ -257,6 +282,59 @@ def _compile_steps(plan: ReadPlan) -> list[_Step]:
 
 
 _UNSWAPPED = (WordOrder.LOW_FIRST, WordOrder.HIGH_FIRST)
+
+#: The numbers of a plan decoded in two ``struct`` calls: (every tag name -> None, in the tag
+#: list's order; the flat words -> their bytes, each word little-endian; those bytes -> the
+#: numbers; the numbers' tag names; the steps left for the other tags).
+_Bulk = tuple[
+    dict[str, Value], Callable[..., bytes], Callable[[bytes], tuple[Any, ...]], tuple[str, ...],
+    list[_Step],
+]  # fmt: skip
+
+
+def _compile_bulk(steps: list[_Step], words: int) -> _Bulk | None:
+    """The bulk decoder of ``steps`` over ``words`` flat words, or None if it would decode
+    no tag.
+
+    Written little-endian word by word, the words of a value in Omron's order (least
+    significant word first, each word big-endian) are that value's little-endian bytes: one
+    ``struct`` format reads every such number (and every plain 16-bit word) of the plan,
+    pad bytes between them. Numbers in the other word orders, tags sharing words with an
+    earlier one, bits, BCD and strings keep their own step.
+    """
+    spans: list[tuple[int, int, str, str]] = []  # (first word, words, struct code, tag)
+    rest: list[_Step] = []
+    for step in steps:
+        name, op, at, arg = step
+        if op is _UINT16:
+            spans.append((at, 1, "H", name))
+            continue
+        if op is _NUMBER:
+            vtype: ValueType = arg[2]
+            where: tuple[int, ...] = arg[3]
+            plain = vtype.word_order is WordOrder.LOW_FIRST or (
+                vtype.words == 1 and vtype.word_order in _UNSWAPPED
+            )
+            if plain and where == tuple(range(where[0], where[0] + len(where))):
+                spans.append((where[0], len(where), NUMBER_CODES[vtype.kind], name))
+                continue
+        rest.append(step)
+    fmt, names, cursor = ["<"], [], 0
+    for first, count, code, name in sorted(spans):
+        if first < cursor:  # overlaps the last one read in bulk: its own step
+            rest.append(next(step for step in steps if step[0] == name))
+            continue
+        fmt.append("x" * (2 * (first - cursor)) + code)
+        names.append(name)
+        cursor = first + count
+    if not names:
+        return None
+    template: dict[str, Value] = dict.fromkeys((step[0] for step in steps), 0)
+    pack = struct.Struct(f"<{words}H").pack
+    unpack = struct.Struct("".join(fmt)).unpack_from
+    order = {step[0]: i for i, step in enumerate(steps)}
+    rest.sort(key=lambda step: order[step[0]])
+    return template, pack, unpack, tuple(names), rest
 
 
 def _not_in_plan(tag: Tag, word: int) -> DecodeError:

@@ -120,6 +120,30 @@ async def test_poller_keeps_healthy_plcs_on_schedule_and_marks_quality(
         assert poller.groups["slow"].missed >= 1
 
 
+async def test_scans_of_one_group_at_once_each_borrow_and_give_back(sim: Simulator) -> None:
+    """A group keeps its pool lease between scans; scan_once beside another scan of the same
+    group (its lease in use) borrows with a lease of its own, and both give the client back."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool(max_per_endpoint=2) as pool:
+        poller = Poller(pool)
+        group = poller.add_group("g", url, {"a": "D0", "b": "D1:int32"}, interval=1)
+        async with pool.client(url) as plc:
+            await plc.write("D0", [7, 0xFFFF, 0xFFFF])
+        snaps = []
+
+        async def scan() -> None:
+            snaps.append(await poller.scan_once(group))
+
+        for _ in range(2):
+            async with anyio.create_task_group() as tg:
+                for _ in range(3):
+                    tg.start_soon(scan)
+        assert [s.values if s else None for s in snaps] == [{"a": 7, "b": -1}] * 6
+        (stats,) = pool.stats(url).values()
+        assert stats.in_use == 0 and stats.completed == 7
+        assert group.scans == 6 and group._lease is not None
+
+
 async def test_poller_stale_quality_and_changes_only(sim: Simulator) -> None:
     url = f"udp://127.0.0.1:{sim.udp_port}"
     async with Pool(timeout=0.2, retries=0) as pool:
