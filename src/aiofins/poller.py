@@ -30,6 +30,7 @@ import logging
 import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from enum import Enum
 from types import TracebackType
@@ -437,8 +438,7 @@ class Poller:
                     extra={"group": group.name, "endpoint": group.url},
                 )
         group.last_duration = now() - started
-        readings: dict[str, TagReading] = {}
-        changed: set[str] = set()
+        changed: AbstractSet[str] = _UNCHANGED
         last = group._last
         if error is None and not bad:  # the usual scan: every tag read, in the tag list's order
             before = group._last_good
@@ -450,6 +450,7 @@ class Poller:
                         if not ((old := before.get(name, _NONE)) is read or old == read)
                     }
             else:
+                changed = set()
                 for name, read in values.items():
                     previous = last.get(name)
                     if (
@@ -461,6 +462,8 @@ class Poller:
             good = GoodReadings(values, stamp)  # a reading is made when asked for
             group._last, group._last_good = good, values
             return self._deliver(group, stamp, good, changed, error)
+        readings: dict[str, TagReading] = {}
+        changed = set()
         for name in group.tags:
             previous = last.get(name)
             failed = error if error is not None else bad.get(name)
@@ -489,7 +492,7 @@ class Poller:
         group: ScanGroup,
         stamp: float,
         readings: Mapping[str, TagReading],
-        changed: set[str],
+        changed: AbstractSet[str],
         error: str | None,
     ) -> Snapshot | None:
         """The scan's snapshot (with ``changes_only``: its changed tags, None if none)."""

@@ -141,31 +141,23 @@ class ReadPlan:
         encoding) raises :class:`DecodeError` naming it, or, given ``errors``, is left out and
         ``errors[name]`` says why (the other tags are decoded all the same).
         """
-        cache = self.cache
-        steps: list[_Step] | None = cache.get("steps")
-        if steps is None:
-            steps = cache["steps"] = _compile_steps(self)
-            cache["lengths"] = lengths = (
-                tuple(run.count for run in self.runs),
-                tuple(len(frame) for frame in self.multiple),
-            )
-            cache["bulk"] = _compile_bulk(steps, sum(lengths[0]) + sum(lengths[1]))
+        decoder: _Decoder | None = self.cache.get("decoder")
+        if decoder is None:
+            decoder = self.cache["decoder"] = self._compile_decoder()
+        steps, lengths, one_frame, bulk = decoder
         # Every scan decodes here: compare the frames' lengths in one step and check each
         # frame only to say which one is wrong.
-        run_lengths, multiple_lengths = cache["lengths"]
-        if (
-            tuple(map(len, run_words)) != run_lengths
-            or tuple(map(len, multiple_values)) != multiple_lengths
-        ):
-            raise self._length_error(run_words, multiple_values)
         flat: Sequence[int]
-        if len(run_words) == 1 and not multiple_values:  # one frame: index its words as they are
+        if one_frame:  # one 0101 frame: index its words as they are
+            if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
+                raise self._length_error(run_words, multiple_values)
             flat = run_words[0]
         else:
+            if (tuple(map(len, run_words)), tuple(map(len, multiple_values))) != lengths:
+                raise self._length_error(run_words, multiple_values)
             flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
-        bulk: _Bulk | None = cache["bulk"]
         if bulk is not None:
-            template, pack, unpack, names, rest = bulk
+            template, pack, unpack, names, bits, rest = bulk
             try:
                 numbers = unpack(pack(*flat))
             except struct.error:  # a word out of range (not from a reply): tag by tag below
@@ -173,8 +165,20 @@ class ReadPlan:
             else:
                 out = template.copy()  # every name, in the tag list's order
                 out.update(zip(names, numbers, strict=True))
-                return self._run_steps(out, rest, flat, errors, True)
+                for name, at, mask in bits:
+                    out[name] = flat[at] & mask != 0
+                return self._run_steps(out, rest, flat, errors, True) if rest else out
         return self._run_steps({}, steps, flat, errors, False)
+
+    def _compile_decoder(self) -> _Decoder:
+        steps = _compile_steps(self)
+        lengths = (
+            tuple(run.count for run in self.runs),
+            tuple(len(frame) for frame in self.multiple),
+        )
+        one_frame = self.runs[0].count if len(self.runs) == 1 and not self.multiple else 0
+        bulk = _compile_bulk(steps, sum(lengths[0]) + sum(lengths[1]))
+        return steps, lengths, one_frame, bulk
 
     def _run_steps(
         self,
@@ -283,13 +287,19 @@ def _compile_steps(plan: ReadPlan) -> list[_Step]:
 
 _UNSWAPPED = (WordOrder.LOW_FIRST, WordOrder.HIGH_FIRST)
 
-#: The numbers of a plan decoded in two ``struct`` calls: (every tag name -> None, in the tag
-#: list's order; the flat words -> their bytes, each word little-endian; those bytes -> the
-#: numbers; the numbers' tag names; the steps left for the other tags).
+#: The numbers of a plan decoded in two ``struct`` calls: (every tag name, in the tag list's
+#: order; the flat words -> their bytes, each word little-endian; those bytes -> the
+#: numbers; the numbers' tag names; the bits as (name, word's index, mask); the steps left
+#: for the other tags).
 _Bulk = tuple[
     dict[str, Value], Callable[..., bytes], Callable[[bytes], tuple[Any, ...]], tuple[str, ...],
-    list[_Step],
+    tuple[tuple[str, int, int], ...], list[_Step],
 ]  # fmt: skip
+
+
+#: A plan's decoder: its steps, its frames' lengths (0101 runs, 0104 frames), the words of
+#: its one 0101 frame (0 if it has other frames) and its bulk decoder.
+_Decoder = tuple[list[_Step], tuple[tuple[int, ...], tuple[int, ...]], int, "_Bulk | None"]
 
 
 def _compile_bulk(steps: list[_Step], words: int) -> _Bulk | None:
@@ -299,13 +309,17 @@ def _compile_bulk(steps: list[_Step], words: int) -> _Bulk | None:
     Written little-endian word by word, the words of a value in Omron's order (least
     significant word first, each word big-endian) are that value's little-endian bytes: one
     ``struct`` format reads every such number (and every plain 16-bit word) of the plan,
-    pad bytes between them. Numbers in the other word orders, tags sharing words with an
-    earlier one, bits, BCD and strings keep their own step.
+    pad bytes between them; bits are masks of their words. Numbers in the other word
+    orders, tags sharing words with an earlier one, BCD and strings keep their own step.
     """
     spans: list[tuple[int, int, str, str]] = []  # (first word, words, struct code, tag)
+    bits: list[tuple[str, int, int]] = []
     rest: list[_Step] = []
     for step in steps:
         name, op, at, arg = step
+        if op is _BIT:
+            bits.append((name, at, 1 << arg))
+            continue
         if op is _UINT16:
             spans.append((at, 1, "H", name))
             continue
@@ -327,14 +341,14 @@ def _compile_bulk(steps: list[_Step], words: int) -> _Bulk | None:
         fmt.append("x" * (2 * (first - cursor)) + code)
         names.append(name)
         cursor = first + count
-    if not names:
+    if not names and not bits:
         return None
     template: dict[str, Value] = dict.fromkeys((step[0] for step in steps), 0)
     pack = struct.Struct(f"<{words}H").pack
     unpack = struct.Struct("".join(fmt)).unpack_from
     order = {step[0]: i for i, step in enumerate(steps)}
     rest.sort(key=lambda step: order[step[0]])
-    return template, pack, unpack, tuple(names), rest
+    return template, pack, unpack, tuple(names), tuple(bits), rest
 
 
 def _not_in_plan(tag: Tag, word: int) -> DecodeError:
