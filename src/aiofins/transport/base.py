@@ -58,6 +58,13 @@ class Transport(ABC):
     #: Whether each :meth:`open` starts a link no reply to an earlier one can reach (a new
     #: FINS/TCP connection): the session then forgets its quarantined and lingering SIDs.
     fresh_sid_space: bool = False
+    #: Whether each socket of this medium needs a FINS source node (SA1) of its own: a UDP
+    #: peer replies to the last port it saw for a node, so two sockets sharing SA1 steal each
+    #: other's replies. (A FINS/TCP connection gets its node from its handshake.)
+    own_source_node: bool = False
+    #: SID spaces (sockets or connections to the peer, see :meth:`another`) a session opens
+    #: at most by default: 1 where the medium has a single link.
+    default_sid_spaces: int = 1
     #: A synchronous send the session may call instead of ``await send()`` (set while open
     #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
     fast_send: Callable[[bytes], None] | None = None
@@ -93,6 +100,13 @@ class Transport(ABC):
     @abstractmethod
     async def aclose(self) -> None:
         """Close the link and release the socket (idempotent)."""
+
+    def another(self) -> Transport | None:
+        """A new, closed transport to the same peer with a socket or connection of its own:
+        another SID space, which nothing sent through this one can reach (a session opens
+        one when all 256 SIDs of this one are taken). ``None`` where the medium has a single
+        link (a serial line)."""
+        return None
 
 
 #: What :func:`replies_awaited` answers for a sink without ``replies_awaited``: never empty.

@@ -63,6 +63,10 @@ class MemoryTransport(Transport):
     def description(self) -> str:
         return f"memory://{self.name}"
 
+    def another(self) -> MemoryTransport:
+        """Another transport to the same handler (another SID space, for tests of them)."""
+        return MemoryTransport(self.handler, name=self.name)
+
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self._sink is not None:
             return

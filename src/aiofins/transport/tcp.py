@@ -57,6 +57,9 @@ from .base import (
 
 #: Seconds a connection attempt (TCP connect and node-address handshake) may take.
 DEFAULT_CONNECT_TIMEOUT = 5.0
+#: FINS/TCP connections a session opens to one PLC at most by default (each holds one of
+#: the Ethernet unit's client nodes: a CS1W/CJ1W-ETN21 has 16, 239-254, for all its clients).
+DEFAULT_SID_SPACES = 2
 #: Bytes asked of one read-after-send recv(): a few replies of the largest FINS frame.
 _RECV_SIZE = 65536
 
@@ -249,6 +252,7 @@ class TcpTransport(Transport):
 
     reconnectable = True
     fresh_sid_space = True
+    default_sid_spaces = DEFAULT_SID_SPACES
 
     def __init__(
         self,
@@ -285,6 +289,16 @@ class TcpTransport(Transport):
     @property
     def description(self) -> str:
         return f"tcp://{url_host(self.host)}:{self.port}"
+
+    def another(self) -> TcpTransport:
+        """Another FINS/TCP connection to the same PLC, its node allocated by the PLC (a fixed
+        ``node`` is held by this connection: the PLC would refuse it to a second one)."""
+        return TcpTransport(
+            self.host,
+            self.port,
+            connect_timeout=self.connect_timeout,
+            gather_writes=self.gather_writes,
+        )
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:

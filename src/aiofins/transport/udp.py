@@ -42,6 +42,9 @@ DEFAULT_PORT = 9600
 DEFAULT_RCVBUF = 4 * 1024 * 1024
 
 
+#: SID spaces (sockets, each with its own source node) a session opens at most by default.
+DEFAULT_SID_SPACES = 4
+
 #: Bytes asked of recv(): above the largest FINS frame, so a longer datagram shows as such.
 _RECV_SIZE = 4096
 #: Datagrams read per readiness callback before yielding to the event loop.
@@ -208,6 +211,8 @@ class UdpTransport(Transport):
     """FINS/UDP to ``host:port`` from an ephemeral local port."""
 
     reconnectable = True
+    own_source_node = True
+    default_sid_spaces = DEFAULT_SID_SPACES
 
     def __init__(
         self,
@@ -242,6 +247,24 @@ class UdpTransport(Transport):
             return None
         host, port = sock.getsockname()[:2]
         return str(host), int(port)
+
+    @property
+    def peer_link(self) -> str | None:
+        """``udp://address:port`` of the peer as the socket is connected to it (a host name
+        resolved), while open: what tells two transports' peers apart."""
+        sock = self._aio.sock if self._aio is not None else self._sock
+        if sock is None:
+            return None
+        try:
+            host, port = sock.getpeername()[:2]
+        except OSError:
+            return None
+        return f"udp://{url_host(str(host))}:{port}"
+
+    def another(self) -> UdpTransport:
+        """A UDP transport to the same peer from a socket of its own (another local port):
+        its replies come to it alone, once it sends with a source node of its own."""
+        return UdpTransport(self.host, self.port, local_host=self.local_host, rcvbuf=self.rcvbuf)
 
     async def _socket(self) -> socket.socket:
         """A non-blocking UDP socket, bound to an ephemeral port and connected to the PLC."""
