@@ -71,6 +71,7 @@ from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeou
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, whole_number
 from .session import SessionStats
+from .session.nodes import SOURCE_NODES
 from .session.response import SESSION_COUNTERS
 from .transport.base import is_asyncio, url_host
 
@@ -536,6 +537,8 @@ class Pool:
         dest, src = await self._addresses_for(endpoint, link, extra=extra)
         key = endpoint.key
         entry = _Entry(key, link, url, src, dest)
+        if src is not None:  # held from now on: no session's extra SID space takes it
+            SOURCE_NODES.hold(link, src.node)
         entries = self._entries.setdefault(key, [])
         entries.append(entry)
         urls = self._urls.setdefault(key, [])
@@ -645,14 +648,14 @@ class Pool:
             return None, None
         defaults = self._options_for(endpoint)
         dest, src = await default_addresses(endpoint, defaults.get("dest"), defaults.get("src"))
-        used = {e.src.node for e in others if e.src is not None}
+        used = {e.src.node for e in others if e.src is not None} | SOURCE_NODES.in_use(link)
         taken = used | {e.dest.node for e in others if e.dest is not None}
         named = endpoint.option("src") or defaults.get("src")
         if named is not None and not extra:
             if src.node in used:
                 raise CommandError(
                     f"{endpoint.key}: source node {src.node} is used by another session to "
-                    f"{link} in this pool; the PLC would send each one's replies to "
+                    f"{link} in this pool or process; the PLC would send each one's replies to "
                     "the other. Name another src, or leave it out"
                 )
             return dest, src
@@ -732,6 +735,8 @@ class Pool:
         lst = self._entries.get(key)
         if lst is not None and entry in lst:
             lst.remove(entry)
+            if entry.src is not None:
+                SOURCE_NODES.release(entry.link, entry.src.node)
         if entry.client is not None:  # its counters stay with the endpoint
             _add_counters(self._stats[key], entry.client.session.stats)
         if lst is not None and not lst:

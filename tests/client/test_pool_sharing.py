@@ -18,6 +18,7 @@ from aiofins.poller import Poller, Quality
 from aiofins.pool import Pool
 from aiofins.protocol.errors import CommandError, DecodeError
 from aiofins.protocol.header import CommandFrame, FinsAddress
+from aiofins.session.nodes import SOURCE_NODES
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
 
@@ -137,6 +138,28 @@ async def test_udp_sessions_to_one_host_port_have_their_own_source_nodes(site: S
         with pytest.raises(CommandError, match="source node 200 is used by another session"):
             async with pool.client(f"{base}?dest=3.5.0&src=0.200.0"):
                 pass
+
+
+async def test_a_pool_session_avoids_source_nodes_held_outside_the_pool(site: Simulator) -> None:
+    """Nodes held in the process's registry (by another session's extra SID spaces, or a
+    session of another pool) are not given to a pool's sessions, and a pool's sessions hold
+    theirs there while they live."""
+    base = _base(site, "udp")
+    link = f"udp://127.0.0.1:{site.udp_port}"
+    SOURCE_NODES.hold(link, 254)  # what connect() would give (127.0.0.1: node 254)
+    try:
+        async with Pool() as pool:
+            async with pool.client(base) as plc:
+                assert await plc.read("D0") == [100]
+                assert plc.session.source.node == 253
+                assert SOURCE_NODES.in_use(link) == {253, 254}
+            with pytest.raises(CommandError, match=r"source node 254 is used .* or process"):
+                async with pool.client(f"{base}?src=0.254.0&node=7"):
+                    pass
+        assert SOURCE_NODES.in_use(link) == {254}
+    finally:
+        SOURCE_NODES.release(link, 254)
+    assert SOURCE_NODES.in_use(link) == frozenset()
 
 
 @pytest.mark.parametrize("scheme", ["udp", "tcp"])

@@ -1,0 +1,74 @@
+"""Which FINS source nodes (SA1) are in use towards each UDP peer of this process.
+
+An Ethernet unit replies to the last UDP port it saw for a source node, so every socket
+talking to one peer needs a node of its own: two sockets sharing SA1 steal each other's
+replies. A :class:`~aiofins.pool.Pool` gives each of its sessions to one peer its own node,
+and a session gives each extra SID space (another socket, see docs/session.md) its own
+node; both take them from :data:`SOURCE_NODES`, so neither collides with the other.
+
+A node given back stays out of use for a while (``cool_until``): a late reply to its last
+socket's requests would otherwise go to the next socket using it, which would then no longer
+be a fresh SID space.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Iterable
+from time import monotonic
+
+
+class SourceNodes:
+    """Source nodes held per peer (``udp://address:port``), counted: a node held twice (two
+    sessions told to use it) is free again only once both gave it back."""
+
+    def __init__(self, clock: Callable[[], float] = monotonic) -> None:
+        self._held: dict[str, Counter[int]] = {}
+        #: peer -> node -> until when a node given back stays out of use.
+        self._cooling: dict[str, dict[int, float]] = {}
+        self._clock = clock
+
+    def in_use(self, peer: str) -> frozenset[int]:
+        """The nodes held towards ``peer``, or given back and still cooling."""
+        held = self._held.get(peer)
+        cooling = self._cooling.get(peer)
+        if cooling:
+            now = self._clock()
+            for node in [n for n, until in cooling.items() if until <= now]:
+                del cooling[node]
+        return frozenset(held or ()) | frozenset(cooling or ())
+
+    def hold(self, peer: str, node: int) -> None:
+        """Count ``node`` as used towards ``peer`` (chosen elsewhere, e.g. the session's own)."""
+        self._held.setdefault(peer, Counter())[node] += 1
+        cooling = self._cooling.get(peer)
+        if cooling:
+            cooling.pop(node, None)
+
+    def claim(self, peer: str, avoid: Iterable[int] = ()) -> int | None:
+        """A node nobody uses towards ``peer`` (254 down, none of ``avoid``), now held;
+        ``None`` if all 254 are taken."""
+        taken = self.in_use(peer).union(avoid)
+        node = next((n for n in range(254, 0, -1) if n not in taken), None)
+        if node is not None:
+            self.hold(peer, node)
+        return node
+
+    def release(self, peer: str, node: int, cool_until: float = 0.0) -> None:
+        """Give ``node`` back; it is free again once every holder gave it back and
+        ``cool_until`` (:func:`time.monotonic`) has passed."""
+        held = self._held.get(peer)
+        if held is None or not held[node]:
+            return
+        held[node] -= 1
+        if held[node]:
+            return
+        del held[node]
+        if not held:
+            del self._held[peer]
+        if cool_until > self._clock():
+            self._cooling.setdefault(peer, {})[node] = cool_until
+
+
+#: The source nodes of every session and pool of this process.
+SOURCE_NODES = SourceNodes()
