@@ -6,8 +6,10 @@
   FINS on a serial port (``serial:///dev/ttyUSB0`` or ``serial://COM3``).
 
 Query parameters on UDP/TCP URLs set node addressing: ``?dest=1.2.0`` (DNA.DA1.DA2),
-``?src=0.10.0`` and ``?node=N`` (the destination node, DA1). On every URL, ``?timeout=S``
-sets the seconds per attempt and ``?read_only=1`` makes a read-only client.
+``?src=0.10.0`` and ``?node=N`` (the destination node, DA1), and ``?max_sid_spaces=N`` the
+sockets (UDP) or connections (FINS/TCP) a session may open to the PLC when the 256 SIDs of one
+are not enough (see docs/session.md). On every URL, ``?timeout=S`` sets the seconds a call
+may take and ``?read_only=1`` makes a read-only client.
 """
 
 from __future__ import annotations
@@ -19,14 +21,18 @@ from urllib.parse import parse_qsl, urlsplit
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, switch, whole_number
+from .transport import tcp, udp
 from .transport.base import url_host
 
 DEFAULT_PORT = 9600
+#: The most SID spaces (UDP sockets with their own source nodes, FINS/TCP connections) one
+#: session may be allowed: one per source node a FINS header can carry.
+MAX_SID_SPACES = 254
 
 #: Serial line settings, from a ``serial://`` URL's query or keyword arguments of ``connect``.
 SERIAL_SETTINGS = frozenset({"baudrate", "bytesize", "parity", "stopbits", "unit", "response_wait"})
 _SERIAL_KEYS = SERIAL_SETTINGS | {"timeout", "read_only"}
-_NET_KEYS = {"dest", "src", "node", "timeout", "read_only"}
+_NET_KEYS = {"dest", "src", "node", "timeout", "read_only", "max_sid_spaces"}
 
 _PARITIES = ("N", "E", "O", "M", "S")
 
@@ -56,6 +62,8 @@ def option_value(name: str, value: object) -> int | float | str:
         return switch(name, value)
     if name in ("node", "tcp_node"):
         return _integer(name, value, 0, 254)
+    if name == "max_sid_spaces":
+        return _integer(name, value, 1, MAX_SID_SPACES)
     if name == "baudrate":
         return _integer("baudrate", value, 1)
     if name == "bytesize":
@@ -109,7 +117,8 @@ class Endpoint:
         spelling: ``udp://h:9600?dest=3.5.0&timeout=0.3``. A pool shares a session only
         among URLs with the same key. An option given twice counts by its first value (the
         one :meth:`option` and ``connect`` use); a serial setting at its default is left out
-        (``serial:///dev/ttyS0?baudrate=9600`` is ``serial:///dev/ttyS0``). ``read_only`` is
+        (``serial:///dev/ttyS0?baudrate=9600`` is ``serial:///dev/ttyS0``), and so is
+        ``max_sid_spaces`` at its default for the scheme. ``read_only`` is
         left out: it changes what a borrower may send, not how, and each borrower of the
         shared session gets its own guard (:meth:`Client.with_read_only`)."""
         seen: dict[str, str] = {}
@@ -118,6 +127,8 @@ class Endpoint:
                 seen[name] = _canonical(name, value)
         if self.scheme == "serial":
             seen = {n: v for n, v in seen.items() if v != _SERIAL_DEFAULT_TEXT.get(n)}
+        elif seen.get("max_sid_spaces") == str(_DEFAULT_SID_SPACES[self.scheme]):
+            del seen["max_sid_spaces"]
         if not seen:
             return self.link
         query = "&".join(f"{name}={seen[name]}" for name in sorted(seen))
@@ -200,6 +211,9 @@ def _canonical(name: str, value: str) -> str:
     """One spelling of an option's value (``?node=07`` is ``node=7``, ``?dest=3.5`` ...)."""
     return str(option_value(name, value))
 
+
+#: SID spaces a session of each scheme opens at most unless told (the transport's default).
+_DEFAULT_SID_SPACES = {"udp": udp.DEFAULT_SID_SPACES, "tcp": tcp.DEFAULT_SID_SPACES}
 
 _SERIAL_DEFAULT_TEXT = {name: _canonical(name, str(v)) for name, v in SERIAL_DEFAULTS.items()}
 

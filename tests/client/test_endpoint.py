@@ -38,6 +38,9 @@ from aiofins.protocol.errors import CommandError, ConnectionLost
         # dest and src were checked without naming the URL
         ("udp://127.0.0.1?dest=1.2.3.4", "FINS address '1.2.3.4' is not NET.NODE"),
         ("udp://127.0.0.1?src=300.1.1", "network address 300 out of range"),
+        ("udp://127.0.0.1?max_sid_spaces=0", "max_sid_spaces must be a whole number, 1..254"),
+        ("tcp://127.0.0.1?max_sid_spaces=x", "max_sid_spaces must be a whole number, 1..254"),
+        ("serial:///dev/ttyS0?max_sid_spaces=2", "unknown serial option 'max_sid_spaces'"),
     ],
 )
 def test_bad_option_values_are_refused_naming_the_url(url: str, message: str) -> None:
@@ -106,6 +109,10 @@ def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
         ("udp://[0:0:0:0:0:0:0:1]:9601?node=1", "udp://[::1]:9601?node=1"),
         ("tcp://[FE80:0::1%eth0]", "tcp://[fe80::1%eth0]:9600"),
         ("udp://PLC.Example", "udp://plc.example:9600"),
+        ("udp://h?max_sid_spaces=08&node=1", "udp://h:9600?max_sid_spaces=8&node=1"),
+        ("udp://h?max_sid_spaces=4", "udp://h:9600"),  # the default for UDP
+        ("tcp://h?max_sid_spaces=4", "tcp://h:9600?max_sid_spaces=4"),
+        ("tcp://h?max_sid_spaces=2", "tcp://h:9600"),  # the default for FINS/TCP
         (
             "serial:///dev/ttyS0?parity=e&baudrate=19200",
             "serial:///dev/ttyS0?baudrate=19200&parity=E",
