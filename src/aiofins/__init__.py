@@ -12,6 +12,7 @@ from .hooks import (
     RequestTimedOut,
     ResponseReceived,
     ScanDone,
+    SidSpaceChanged,
 )
 from .poller import Poller, Quality, ScanState, Snapshot
 from .pool import Pool, PoolFull
@@ -68,6 +69,7 @@ __all__ = [
     "ResponseReceived",
     "ScanDone",
     "ScanState",
+    "SidSpaceChanged",
     "Snapshot",
     "TagFileError",
     "__version__",

@@ -28,6 +28,7 @@ __all__ = [
     "RequestTimedOut",
     "ResponseReceived",
     "ScanDone",
+    "SidSpaceChanged",
 ]
 
 logger = logging.getLogger("aiofins.hooks")
@@ -102,6 +103,22 @@ class ConnectionStateChanged:
 
 
 @dataclass(frozen=True, slots=True)
+class SidSpaceChanged:
+    """One of a session's extra SID spaces (another UDP socket or FINS/TCP connection,
+    opened when the SIDs of the spaces before it were all taken) moved from one state to
+    another (names of ``SpaceState`` members)."""
+
+    endpoint: str
+    #: The space's number (1 for the first extra space; the session's own is 0).
+    space: int
+    #: The state it left (``None``: just made, opening).
+    old: str | None
+    new: str
+    #: Its source node (SA1), once known.
+    node: int | None
+
+
+@dataclass(frozen=True, slots=True)
 class ScanDone:
     """A poller group finished one scan."""
 
@@ -162,6 +179,7 @@ class EventHooks:
     connection_state_changed: list[Callable[[ConnectionStateChanged], object]] = field(
         default_factory=list
     )
+    sid_space_changed: list[Callable[[SidSpaceChanged], object]] = field(default_factory=list)
     scan_done: list[Callable[[ScanDone], object]] = field(default_factory=list)
     #: Callbacks that raised (each caught, logged and counted here).
     errors: int = 0
@@ -174,6 +192,7 @@ class EventHooks:
             or self.request_retried
             or self.request_timed_out
             or self.connection_state_changed
+            or self.sid_space_changed
             or self.scan_done
         )
 
@@ -210,5 +229,6 @@ _EVENT_LISTS = (
     "request_retried",
     "request_timed_out",
     "connection_state_changed",
+    "sid_space_changed",
     "scan_done",
 )

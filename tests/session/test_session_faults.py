@@ -456,7 +456,7 @@ async def test_waiting_for_a_free_sid_is_bounded_by_the_requests_timeout() -> No
     their timeout with SlotTimeout, instead of waiting for the quarantines to end."""
     async with (
         udp_responder(lambda c: []) as peer,
-        session_for(peer, timeout=5.0, max_in_flight=64) as session,
+        session_for(peer, timeout=5.0, max_in_flight=64, max_sid_spaces=1) as session,
     ):
         for _ in range(256):
             with anyio.move_on_after(0.002):

@@ -115,7 +115,10 @@ async def test_a_late_duplicate_teaches_the_linger(caplog: pytest.LogCaptureFixt
         good = reply(cmd, 0, word_data(cmd))
         return [(0.0, good), (0.2, good)] if sent % 10 == 1 else [(0.0, good)]
 
-    async with udp_responder(late_duplicates) as peer, session_for(peer) as session:
+    async with (
+        udp_responder(late_duplicates) as peer,
+        session_for(peer, max_sid_spaces=1) as session,
+    ):
         with caplog.at_level(logging.WARNING, logger="aiofins.session"):
             assert (await session.request(0x01, 0x01, read_params(1))).data == expected(1)
             with anyio.fail_after(5):
@@ -131,7 +134,12 @@ async def test_sid_exhaustion_is_logged_once_and_counted(caplog: pytest.LogCaptu
     async with (
         udp_responder(lambda c: []) as peer,
         session_for(
-            peer, max_in_flight=255, timeout=0.05, breaker_threshold=0, min_quarantine=30
+            peer,
+            max_in_flight=255,
+            timeout=0.05,
+            breaker_threshold=0,
+            min_quarantine=30,
+            max_sid_spaces=1,
         ) as session,
     ):
         with caplog.at_level(logging.WARNING, logger="aiofins.session"):

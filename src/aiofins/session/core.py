@@ -75,6 +75,7 @@ from .slots import (
     SlotTimeout,
     no_free_sid_message,
 )
+from .spaces import ExtraSpace, SidSpaces
 from .states import LinkState
 from .watcher import DeadlineWatcher, Expired
 
@@ -111,7 +112,11 @@ class Session:
     ``max(quarantine_factor x timeout, min_quarantine)`` seconds. An answered SID lingers
     (is not reused) while a duplicate of its reply could still come: ``min_linger`` at
     least, longer after a retransmission (one retransmission timeout) or once the link has
-    shown late duplicates (twice the latest seen). End codes 2604/2605 (busy) are retried
+    shown late duplicates (twice the latest seen). When every SID of the transport is taken,
+    the session opens another SID space (another UDP socket with a source node of its own,
+    another FINS/TCP connection; see :mod:`aiofins.session.spaces`) rather than reuse one
+    early, up to ``max_sid_spaces`` in all (default: the transport's,
+    ``transport.default_sid_spaces``). End codes 2604/2605 (busy) are retried
     ``busy_retries`` times with a growing pause, as the command was not executed.
 
     After ``breaker_threshold`` calls in a row that got no answer (0: never) calls fail at
@@ -132,6 +137,7 @@ class Session:
         attempt_timeout: float | None = None,
         rto_bounds: tuple[float, float] = (0.02, 1.0),
         min_linger: float = 0.0,
+        max_sid_spaces: int | None = None,
         busy_retries: int = 3,
         busy_backoff: float = 0.01,
         quarantine_factor: float = 2.0,
@@ -164,6 +170,10 @@ class Session:
             raise CommandError(f"min_quarantine {min_quarantine} must be 0 or more seconds")
         if not 0 <= min_linger <= MAX_LINGER:
             raise CommandError(f"min_linger {min_linger} must be 0..{MAX_LINGER} seconds")
+        if max_sid_spaces is None:
+            max_sid_spaces = transport.default_sid_spaces
+        elif not 1 <= max_sid_spaces <= 254:
+            raise CommandError(f"max_sid_spaces {max_sid_spaces} out of range 1..254")
         for name, (low, high) in (
             ("reconnect_backoff", reconnect_backoff),
             ("breaker_cooldown", breaker_cooldown),
@@ -220,6 +230,19 @@ class Session:
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
         #: The link: its state, connection attempts, the reconnect backoff.
+        #: The SID spaces opened when the transport's own are all taken (see .spaces).
+        self._spaces = SidSpaces(
+            transport,
+            max_sid_spaces,
+            min_linger,
+            self.stats,
+            self._hooks,
+            self.sids,
+            received=self.frame_received,
+            dropped=self.frame_dropped,
+            fail=self._fail_space,
+            prefix=self._prefix_from,
+        )
         self._link = Link(
             transport,
             self,
@@ -246,6 +269,16 @@ class Session:
     def closed(self) -> bool:
         return self._link.state is LinkState.SHUT
 
+    @property
+    def max_sid_spaces(self) -> int:
+        """SID spaces (sockets or connections) the session opens at most, its own included."""
+        return self._spaces.limit
+
+    @property
+    def sid_spaces(self) -> int:
+        """SID spaces open now (or opening), the session's own included."""
+        return 1 + len(self._spaces.extra)
+
     # ----------------------------------------------------------------- lifecycle
 
     async def __aenter__(self) -> Session:
@@ -261,6 +294,7 @@ class Session:
         self._tg = tg
         background = Background(tg, self._background_failed)
         self._background = self._link.background = self._watcher.background = background
+        self._spaces.background = background
         try:
             background.start_soon(self._watcher.run)
             await self._link.ensure_open()
@@ -296,6 +330,7 @@ class Session:
             self._background.cancel_all()
         with anyio.CancelScope(shield=True):
             await self.transport.aclose()
+            await self._spaces.aclose()
 
     def _adopt_local_node(self) -> None:
         """The transport is open: take the node the peer assigned us (FINS/TCP), if any, as
@@ -310,11 +345,15 @@ class Session:
             self.source = FinsAddress(self.source.network, node, self.source.unit)
             for state in self._dests.values():
                 state.prefix = self._prefix(state.address)
+        self._spaces.primary_opened(self.source.node)
 
     # ----------------------------------------------------------------- transport sink
 
-    def frame_received(self, frame: bytes, _addr: object = None) -> None:
-        """Called by the transport for each whole frame; never raises.
+    def frame_received(
+        self, frame: bytes, _addr: object = None, space: ExtraSpace | None = None
+    ) -> None:
+        """Called by the transport for each whole frame; never raises. ``space``: the extra
+        SID space whose transport received it (``None``: the session's own).
 
         (The unused second argument lets asyncio call this as ``datagram_received``.)
         """
@@ -324,7 +363,7 @@ class Session:
             self.stats.malformed += 1
             return
         key = (frame[6] << 24) | (frame[7] << 16) | (frame[8] << 8) | frame[9]
-        sids = self.sids
+        sids = self.sids if space is None else space.sids
         pending = sids.pending
         p = pending.get(key)
         if p is None:
@@ -332,7 +371,7 @@ class Session:
             if p is None and frame[12] & 0x80 and len(frame) >= 16:
                 p = match_relay_error(pending, frame)
             if p is None:
-                self._unmatched(key, frame)
+                self._unmatched(key, frame, sids)
                 return
             key = p.key
         if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
@@ -403,13 +442,15 @@ class Session:
         if self._deadlines.heap:
             self._deadlines.prune(len(pending))
 
-    def _unmatched(self, key: int, frame: bytes) -> None:
+    def _unmatched(self, key: int, frame: bytes, sids: SidSpace) -> None:
         """A reply no request waits for: counted (late, duplicate or unsolicited; see
         :meth:`SidSpace.unmatched`), and logged when it says something about the link."""
-        kind, lateness = self.sids.unmatched(self.stats, key)
+        kind, lateness = sids.unmatched(self.stats, key)
         if kind == "duplicate":
+            if self._spaces.extra:  # what the peer shows holds for every socket to it
+                self._spaces.share_linger(sids)
             if lateness:
-                linger = self.sids.linger
+                linger = sids.linger
                 if linger < 2 * self._linger_logged:
                     return
                 self._linger_logged = linger
@@ -546,7 +587,17 @@ class Session:
             # must not reach a newer request.
             sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
             p.fail(exc)
-        self._deadlines.clear()
+        if not self._spaces.extra:  # (else their requests' deadlines stay)
+            self._deadlines.clear()
+
+    def _fail_space(self, space: ExtraSpace, exc: BaseException) -> None:
+        """``space``'s link failed or it closes: its requests fail, their SIDs quarantined
+        (its transport is closed next: a late reply can no longer reach anyone)."""
+        now = monotonic()
+        sids = space.sids
+        for p in sids.drain():
+            sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
+            p.fail(exc)
 
     # ----------------------------------------------------------------- deadlines
 
@@ -619,7 +670,10 @@ class Session:
 
     def _prefix(self, dest: FinsAddress) -> bytes:
         """ICF RSV GCT DNA DA1 DA2 SNA SA1 SA2: the header before the SID."""
-        s = self.source
+        return self._prefix_from(dest, self.source)
+
+    def _prefix_from(self, dest: FinsAddress, s: FinsAddress) -> bytes:
+        """The header before the SID from source ``s`` (an extra SID space's) to ``dest``."""
         return header_prefix(
             self.gct, (dest.network, dest.node, dest.unit), (s.network, s.node, s.unit)
         )
@@ -635,12 +689,14 @@ class Session:
         now: float,
         end: float,
         cap: float | None,
+        space: ExtraSpace | None = None,
     ) -> bytes | None:
         """Put ``p``, command ``mrc src params`` to ``state``'s destination, on the books:
         take a free SID (``p.key``), build the frame, register ``p`` under its SID as sent
         ``now`` with its first deadline, tell the hooks and the log. Returns the frame for
         the caller to send, or ``None`` (nothing registered) when all 256 SIDs of the
-        destination are in flight, quarantined or lingering.
+        destination are in flight, quarantined or lingering. ``space``: an extra SID space
+        to take the SID from and send on (``None``: the session's own transport).
 
         Every field of :class:`Pending` is set here (``p`` may come from ``__new__``
         alone: the hot path spares itself an ``__init__`` call).
@@ -649,28 +705,34 @@ class Session:
         time (until ``end``) that lets every attempt go out, the wait doubling each time;
         never more than the caller's per-attempt ``cap``. (One call for all of this: a call
         costs as much as the rest of the steps, and this runs once per request.)"""
-        sids = self.sids
+        if space is None:
+            sids = self.sids
+            mine = state
+        else:  # its own SIDs and header; the destination's slots and round-trip estimate
+            sids = space.sids
+            mine = space.dest_state(state)
         pending = sids.pending
-        key = state.base | state.cursor
+        key = mine.base | mine.cursor
         if (
             key in pending
             or key in sids.quarantine
             or sids.lingering.get(key, 0.0) > now
             or (sids.routed and sids.sid_taken(key))
         ):
-            found = sids.allocate(state)
+            found = sids.allocate(mine)
             if found is None:
                 return None
             key = found
         else:
-            state.cursor = (key + 1) & 0xFF
+            mine.cursor = (key + 1) & 0xFF
         # Built before the request is registered: bad parameters (not bytes) raise here and
         # leave nothing behind.
-        frame = pack_head(state.prefix, key & 0xFF, mrc, src) + params
+        frame = pack_head(mine.prefix, key & 0xFF, mrc, src) + params
         p.key = key
         p.mrc = mrc
         p.src = src
         p.rtt = state
+        p.space = space
         p.done = p.abandoned = False
         p.attempts = 1
         if retries:
@@ -709,7 +771,9 @@ class Session:
         the send timed out): out of the table, its SID quarantined, counted."""
         if p.done:
             return
-        self.sids.abandon(p, self.quarantine_until(monotonic(), timeout))
+        (self.sids if p.space is None else p.space.sids).abandon(
+            p, self.quarantine_until(monotonic(), timeout)
+        )
         if timed_out:
             self.stats.timeouts += 1
         else:
@@ -850,10 +914,24 @@ class Session:
                         )
                         if sent is None:
                             # The SID found is free and stays so until start() takes it.
-                            state.cursor = await self._wait_for_sid(state, end, timeout) & 0xFF
+                            key, space = await self._sid_anywhere(state, end, timeout)
+                            if space is None:
+                                state.cursor = key & 0xFF
+                            else:  # on another socket or connection
+                                space.dest_state(state).cursor = key & 0xFF
+                                transport = space.transport
                             now = monotonic()
                             sent = self.start(
-                                p, state, mrc, src, params, retries, now, end, attempt_timeout
+                                p,
+                                state,
+                                mrc,
+                                src,
+                                params,
+                                retries,
+                                now,
+                                end,
+                                attempt_timeout,
+                                space,
                             )
                             assert sent is not None
                         frame = sent
@@ -1006,28 +1084,48 @@ class Session:
             self._call_answered()
         return responses
 
-    async def _wait_for_sid(self, state: DestState, end: float, timeout: float) -> int:
-        """A free SID; while all 256 are in flight, quarantined or lingering, wait for the
-        first to come free, up to the call's deadline ``end`` (then :class:`SlotTimeout`).
-        Running out is counted and logged (once until SIDs are free again)."""
-        sids = self.sids
+    async def _sid_anywhere(
+        self, state: DestState, end: float, timeout: float
+    ) -> tuple[int, ExtraSpace | None]:
+        """A free SID (and the extra space it belongs to, ``None``: the session's own) when
+        the next one of the session's own space is taken: another of its own, one of an
+        open extra space, or one of a space opened now (see :mod:`.spaces`). At the cap,
+        wait for the first to come free in any space, up to the call's deadline ``end``
+        (then :class:`SlotTimeout`). Running out is counted and logged (once until SIDs
+        are free again)."""
+        sids, spaces = self.sids, self._spaces
         key = sids.allocate(state)
         if key is not None:
-            sids.short = False
-            return key
+            if sids.short:
+                sids.short = False
+                spaces.enough()
+            return key, None
+        got = spaces.allocate(state)
+        while got is None and spaces.may_open(monotonic()):
+            if not await spaces.open(self.source, self._nodes_in_use(), end - monotonic()):
+                break
+            got = spaces.allocate(state)
+        if got is not None:
+            if sids.short:
+                sids.short = False
+                spaces.enough()
+            return got
         self.stats.sid_exhausted += 1
         if not sids.short:
             sids.short = True
-            logger.warning(
-                "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, %d lingering): "
-                "requests wait for one; lower the rate or the linger",
-                self.transport.description,
-                state.address,
-                len(sids.pending),
-                len(sids.quarantine),
-                len(sids.lingering),
-                extra={"endpoint": self.transport.description, "dest": str(state.address)},
-            )
+            if spaces.limit > 1:
+                spaces.short(state.address)
+            else:
+                logger.warning(
+                    "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
+                    "%d lingering): requests wait for one; lower the rate or the linger",
+                    self.transport.description,
+                    state.address,
+                    len(sids.pending),
+                    len(sids.quarantine),
+                    len(sids.lingering),
+                    extra={"endpoint": self.transport.description, "dest": str(state.address)},
+                )
         # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
         # behind it, first come first served.
         lock = state.sid_lock
@@ -1035,10 +1133,22 @@ class Session:
             lock = state.sid_lock = anyio.Lock()
         with anyio.move_on_after(max(end - monotonic(), 0.0)):
             async with lock:
-                key = sids.allocate(state)
-                while key is None:
-                    await anyio.sleep(min(SID_WAIT, sids.free_in(state, monotonic())))
+                while True:
                     key = sids.allocate(state)
-        if key is None:
-            raise self.no_free_sid(state, timeout)
-        return key
+                    if key is not None:
+                        return key, None
+                    got = spaces.allocate(state)
+                    if got is not None:
+                        return got
+                    now = monotonic()
+                    if spaces.may_open(now):
+                        await spaces.open(self.source, self._nodes_in_use(), end - now)
+                        continue
+                    wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
+                    await anyio.sleep(wait)
+        raise self.no_free_sid(state, timeout)
+
+    def _nodes_in_use(self) -> set[int]:
+        """Nodes an extra space's socket may not take as its source: ours and those of
+        the destinations we address."""
+        return {self.source.node, *(d.node for d in self._dests)}

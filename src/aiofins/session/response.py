@@ -102,6 +102,8 @@ class SessionStats:
         "mismatched",
         "retries",
         "sid_exhausted",
+        "sid_space_failures",
+        "sid_spaces_opened",
         "timeouts",
         "unsolicited",
     )
@@ -118,7 +120,9 @@ class SessionStats:
         self.malformed = 0
         self.retries = 0  # retransmissions (same frame and SID)
         self.background_errors = 0  # background tasks (transport reader...) that raised
-        self.sid_exhausted = 0  # times a request found all 256 SIDs of its destination taken
+        self.sid_exhausted = 0  # times a request found all SIDs of its destination taken
+        self.sid_spaces_opened = 0  # extra SID spaces (sockets, connections) opened
+        self.sid_space_failures = 0  # extra SID spaces that could not be opened
         self.breaker_rejects = 0  # calls failed at once by an open circuit breaker
         self.busy_retries = 0
         self.end_code_errors = 0

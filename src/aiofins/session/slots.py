@@ -6,12 +6,16 @@ import asyncio
 import contextlib
 from collections import deque
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 import anyio
 
 from ..protocol.errors import FinsTimeout
 from ..protocol.header import FinsAddress
 from .states import RequestState
+
+if TYPE_CHECKING:
+    from .spaces import ExtraSpace
 
 
 class Retransmission:
@@ -60,6 +64,7 @@ class Pending:
         "plan",
         "rtt",
         "sent_at",
+        "space",
         "src",
     )
 
@@ -75,6 +80,8 @@ class Pending:
         self.plan: Plan | Retransmission | None = None
         self.rtt: DestState | None = None
         self.abandoned = False
+        #: The extra SID space it went out on (``None``: the session's own transport).
+        self.space: ExtraSpace | None = None
 
     @property
     def state(self) -> RequestState:
@@ -110,6 +117,7 @@ class AsyncioPending(Pending):
         self.plan: Plan | Retransmission | None = None
         self.attempts = 1
         self.abandoned = False
+        self.space = None
 
     def wake(self, frame: bytes) -> None:
         if not self.fut.done():

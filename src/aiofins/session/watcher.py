@@ -127,7 +127,9 @@ class DeadlineWatcher:
                 if plan.left and now < plan.end:
                     self.retransmit(p, plan, now)
                     continue
-            session.sids.abandon(p, session.quarantine_until(now, now - p.sent_at))
+            (session.sids if p.space is None else p.space.sids).abandon(
+                p, session.quarantine_until(now, now - p.sent_at)
+            )
             session.stats.timeouts += 1
             self._log_timeout(p, now)
             hooks = self.hooks
@@ -186,7 +188,7 @@ class DeadlineWatcher:
         self.deadlines.add(p)
         session.stats.retries += 1
         key = p.key
-        transport = session.transport
+        transport = session.transport if p.space is None else p.space.transport
         if logger.isEnabledFor(_DEBUG):
             logger.debug(
                 "%s: no reply to SID %d (command %02X%02X) within %.3f s: sent again (attempt %d)",
@@ -216,8 +218,9 @@ class DeadlineWatcher:
 
     async def _resend(self, p: Pending, resend: Retransmission) -> None:
         """A retransmission through an awaited send (trio, FINS/TCP under anyio)."""
+        transport = self.session.transport if p.space is None else p.space.transport
         try:
-            await self.session.transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
+            await transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
         except Exception as exc:  # a boundary: the request fails, nothing else
             self.give_up(p, exc)
 
@@ -228,7 +231,9 @@ class DeadlineWatcher:
             return
         session = self.session
         now = monotonic()
-        session.sids.abandon(p, session.quarantine_until(now, now - p.sent_at))
+        (session.sids if p.space is None else p.space.sids).abandon(
+            p, session.quarantine_until(now, now - p.sent_at)
+        )
         if not isinstance(exc, FinsError):
             where = session.transport.description
             err = ConnectionLost(f"{where}: {exc or type(exc).__name__}")

@@ -1,0 +1,184 @@
+"""More SID spaces instead of early reuse (issue #12): when every SID of the session's socket
+is in flight or lingering, another socket (UDP, its own source node) or FINS/TCP connection is
+opened, up to ``max_sid_spaces``; at the cap requests wait, counted and logged. Real loopback
+peers, asyncio, uvloop and trio."""
+
+from __future__ import annotations
+
+import logging
+import random
+from time import monotonic
+
+import anyio
+import pytest
+
+from aiofins.hooks import EventHooks, SidSpaceChanged
+from aiofins.protocol.errors import CommandError
+from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
+from aiofins.session.nodes import SOURCE_NODES
+from aiofins.simulator import VirtualPLC, run_simulator
+from aiofins.transport import MemoryTransport, SerialTransport, TcpTransport
+
+from .test_session_lifecycle import run_readers
+from .test_session_udp import Reply, reply, session_for, udp_responder, word_data
+
+pytestmark = pytest.mark.anyio
+
+PLC = FinsAddress(0, 1, 0)
+
+
+class ReuseWatch:
+    """The peer's view: for each (source node, SID) when the last reply to its last use goes
+    out (duplicates included); a command reusing it earlier is an early reuse."""
+
+    def __init__(self, duplicate_rate: float, max_delay: float) -> None:
+        self.rng = random.Random(12)
+        self.rate = duplicate_rate
+        self.max_delay = max_delay
+        self.last_reply: dict[tuple[int, int], float] = {}
+        self.early = 0
+        self.nodes: set[int] = set()
+
+    def __call__(self, cmd: bytes) -> list[Reply]:
+        now = monotonic()
+        use = (cmd[7], cmd[9])  # SA1, SID
+        self.nodes.add(cmd[7])
+        if self.last_reply.get(use, 0.0) > now:
+            self.early += 1
+        good = reply(cmd, 0, word_data(cmd))
+        replies = [(0.0, good)]
+        last = now
+        if self.rng.random() < self.rate:
+            delay = self.rng.uniform(0.0, self.max_delay)
+            replies.append((delay, good))
+            last = now + delay
+        self.last_reply[use] = last
+        return replies
+
+
+async def test_duplicates_past_a_sid_wrap_open_more_spaces_never_reuse_early() -> None:
+    """5 % of replies duplicated up to 0.3 s late, SIDs lingering 1 s: one socket carries
+    at most 256 requests a second, 20 tasks ask for more. More sockets open, each with its
+    own source node; no SID of any is reused while a reply to it may come; 0 wrong values."""
+    watch = ReuseWatch(0.05, 0.3)
+    events: list[SidSpaceChanged] = []
+    async with (
+        udp_responder(watch) as peer,
+        session_for(
+            peer, min_linger=1.0, timeout=5.0, hooks=EventHooks(sid_space_changed=[events.append])
+        ) as session,
+    ):
+        assert session.max_sid_spaces == 4
+        with anyio.fail_after(30):
+            good, wrong, errors = await run_readers(session, 20, 1200)
+        assert (good, wrong, errors) == (1200, 0, [])
+        assert watch.early == 0
+        stats = session.stats
+        assert stats.sid_spaces_opened >= 1 and stats.sid_space_failures == 0
+        assert stats.duplicates > 10
+        assert session.sid_spaces == 1 + stats.sid_spaces_opened
+        # Each socket its own source node, none the PLC's (1) or the session's own (2).
+        assert len(watch.nodes) == session.sid_spaces and watch.nodes >= {2}
+        assert 1 not in watch.nodes
+        assert watch.nodes <= SOURCE_NODES.in_use(f"udp://127.0.0.1:{peer.port}")
+        opened = [e for e in events if e.new == "OPEN"]
+        assert len(opened) == stats.sid_spaces_opened
+        assert {e.node for e in opened} == watch.nodes - {2}
+        assert [e.old for e in events if e.space == 1][:2] == [None, "OPENING"]
+    # Closed with the session: the nodes cool while the lingering SIDs' replies may come.
+    assert SOURCE_NODES.in_use(f"udp://127.0.0.1:{peer.port}") <= watch.nodes - {2}
+
+
+async def test_at_the_cap_requests_wait_counted_and_logged_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    watch = ReuseWatch(0.05, 0.3)
+    async with (
+        udp_responder(watch) as peer,
+        session_for(peer, min_linger=1.0, timeout=10.0, max_sid_spaces=2) as session,
+    ):
+        with caplog.at_level(logging.WARNING, logger="aiofins.session"), anyio.fail_after(30):
+            good, wrong, errors = await run_readers(session, 20, 1000)
+        assert (good, wrong, errors) == (1000, 0, [])
+        assert watch.early == 0
+        assert session.stats.sid_spaces_opened == 1 and session.sid_spaces == 2
+        assert session.stats.sid_exhausted > 0
+        assert len(watch.nodes) == 2
+        capped = [r for r in caplog.records if "in all 2 SID spaces are taken" in r.getMessage()]
+        assert len(capped) >= 1 and all(r.levelno == logging.WARNING for r in capped)
+        assert len(capped) < session.stats.sid_exhausted  # once per episode, not per request
+
+
+async def test_an_idle_space_is_closed_and_its_node_cools() -> None:
+    events: list[SidSpaceChanged] = []
+    async with (
+        udp_responder() as peer,
+        session_for(
+            peer,
+            min_linger=2.0,
+            max_sid_spaces=2,
+            hooks=EventHooks(sid_space_changed=[events.append]),
+        ) as session,
+    ):
+        session._spaces.idle_after = 0.2
+        good, wrong, errors = await run_readers(session, 10, 300)
+        assert (good, wrong, errors) == (300, 0, [])
+        assert session.sid_spaces == 2
+        with anyio.fail_after(5):
+            while session.sid_spaces > 1:
+                await anyio.sleep(0.01)
+        assert [(e.old, e.new) for e in events] == [
+            (None, "OPENING"),
+            ("OPENING", "OPEN"),
+            ("OPEN", "CLOSING"),
+            ("CLOSING", "CLOSED"),
+        ]
+        node = events[-1].node
+        assert node is not None
+        # Its SIDs linger up to 2 s after their replies: the node is not given to another
+        # socket meanwhile (a late reply would reach it).
+        assert node in SOURCE_NODES.in_use(f"udp://127.0.0.1:{peer.port}")
+        # Needed again: a fresh socket, with another node.
+        good, wrong, errors = await run_readers(session, 10, 300)
+        assert (good, wrong) == (300, 0)
+        assert session.stats.sid_spaces_opened >= 2
+        second = [e for e in events if e.new == "OPEN"][1]
+        assert second.space == 2 and second.node not in (node, 2)
+
+
+async def test_a_second_fins_tcp_connection_gets_its_node_from_the_plc() -> None:
+    plc = VirtualPLC()
+    plc.write("D0", [(1 << 12) ^ w for w in range(1000)])
+    async with run_simulator(plc, tcp=("127.0.0.1", 0)) as sim:
+        transport = TcpTransport("127.0.0.1", sim.tcp_port, connect_timeout=2)
+        async with Session(
+            transport, source=FinsAddress(0, 0, 0), dest=FinsAddress(0, 1, 0), min_linger=1.0
+        ) as session:
+            assert session.max_sid_spaces == 2  # FINS/TCP's default
+            good, wrong, errors = await run_readers(session, 20, 700, timeout=10.0)
+            assert (good, wrong, errors) == (700, 0, [])
+            assert session.stats.sid_spaces_opened == 1 and session.sid_spaces == 2
+            (space,) = session._spaces.extra
+            assert space.source is not None and space.source.node != session.source.node
+            assert space.transport.local_node == space.source.node
+            assert session.stats.sid_exhausted > 0  # at the cap of 2 connections
+
+
+async def test_max_sid_spaces_is_checked_and_the_memory_transport_can_have_more() -> None:
+    async with Session(
+        MemoryTransport(VirtualPLC().handle_frame),
+        source=FinsAddress(0, 2, 0),
+        dest=FinsAddress(0, 1, 0),
+        max_sid_spaces=3,
+    ) as session:
+        assert session.max_sid_spaces == 3  # the memory transport can make more
+    serial = SerialTransport("/dev/null")  # one line: one space, whatever is asked
+    assert Session(serial, source=PLC, dest=PLC, max_sid_spaces=3).max_sid_spaces == 1
+    with pytest.raises(CommandError, match=r"max_sid_spaces 0 out of range 1\.\.254"):
+        Session(
+            MemoryTransport(VirtualPLC().handle_frame),
+            source=FinsAddress(0, 2, 0),
+            dest=FinsAddress(0, 1, 0),
+            max_sid_spaces=0,
+        )
