@@ -21,7 +21,14 @@ from typing import Any
 import anyio
 
 from .client import Client
-from .endpoint import SERIAL_SETTINGS, Endpoint, node_from_host, option_value, parse_endpoint
+from .endpoint import (
+    MAX_SID_SPACES,
+    SERIAL_SETTINGS,
+    Endpoint,
+    node_from_host,
+    option_value,
+    parse_endpoint,
+)
 from .hooks import EventHooks
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
@@ -167,12 +174,22 @@ _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "timeout": lambda v: seconds("timeout", v),
     "retries": lambda v: whole_number("retries", v, 0),
     "max_in_flight": lambda v: whole_number("max_in_flight", v, 1, 255),
+    "max_sid_spaces": lambda v: whole_number("max_sid_spaces", v, 1, MAX_SID_SPACES),
     "gct": lambda v: whole_number("gct", v, 0, 255),
     "read_only": lambda v: _flag("read_only", v),
     "hooks": lambda v: _hooks(v),
     "dest": lambda v: FinsAddress.of(v),
     "src": lambda v: FinsAddress.of(v),
 }
+
+
+def _sid_spaces(endpoint: Endpoint | None, spaces: int | None) -> int | None:
+    """``max_sid_spaces`` as given, else the URL's ``?max_sid_spaces=``, else ``None`` (the
+    transport's default)."""
+    if spaces is not None or endpoint is None:
+        return spaces
+    text = endpoint.option("max_sid_spaces")
+    return int(option_value("max_sid_spaces", text)) if text else None
 
 
 def _hooks(value: object) -> EventHooks:
@@ -197,6 +214,7 @@ async def connect(
     timeout: float | None = None,
     retries: int = 2,
     max_in_flight: int | None = None,
+    max_sid_spaces: int | None = None,
     gct: int = 2,
     networks: tuple[NetworkType, ...] = (),
     limits: RouteLimits | None = None,
@@ -209,7 +227,11 @@ async def connect(
 
     ``networks`` names the networks a routed request crosses (their smallest limits apply);
     ``limits`` overrides them altogether. ``max_in_flight`` caps concurrent requests to the
-    PLC (default 5; serial lines carry one at a time). Serial settings (``baudrate``,
+    PLC (default 5; serial lines carry one at a time). ``max_sid_spaces`` (or
+    ``?max_sid_spaces=N``) caps the sockets (UDP, each with a source node of its own) or
+    connections (FINS/TCP) the session may open to the PLC when the 256 SIDs of one are all
+    in flight or lingering (default 4 over UDP, 2 over FINS/TCP; see docs/session.md).
+    Serial settings (``baudrate``,
     ``bytesize``, ``parity``, ``stopbits``, ``unit``, ``response_wait``) come from the URL
     query or keyword arguments. FINS/TCP: ``tcp_node`` asks the PLC for a client node (0: let
     it allocate one); ``tcp_connect_timeout`` bounds a connection attempt, connect and
@@ -243,6 +265,7 @@ async def connect(
             "timeout": timeout,
             "retries": retries,
             "max_in_flight": max_in_flight,
+            "max_sid_spaces": max_sid_spaces,
             "gct": gct,
             "read_only": read_only,
             "hooks": hooks,
@@ -285,6 +308,7 @@ async def connect(
             else request_timeout(endpoint)
         ),
         retries=retries,
+        max_sid_spaces=_sid_spaces(endpoint, max_sid_spaces),
         hooks=hooks,
     )
     async with session:

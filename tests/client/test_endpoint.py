@@ -143,3 +143,21 @@ def test_serial_defaults_are_those_connect_uses() -> None:
     assert parse_endpoint("serial:///dev/ttyS0?unit=1&parity=n&baudrate=9600").key == (
         "serial:///dev/ttyS0?unit=1"
     )
+
+
+@pytest.mark.anyio
+async def test_max_sid_spaces_from_the_url_or_connect(anyio_backend: object) -> None:
+    from aiofins.simulator import VirtualPLC, run_simulator
+
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as sim:
+        base = f"udp://127.0.0.1:{sim.udp_port}"
+        async with connect(base) as plc:
+            assert plc.session.max_sid_spaces == 4  # UDP's default
+        async with connect(f"{base}?max_sid_spaces=3") as plc:
+            assert plc.session.max_sid_spaces == 3
+            assert await plc.read("D0") == [0]
+        async with connect(f"{base}?max_sid_spaces=3", max_sid_spaces=1) as plc:
+            assert plc.session.max_sid_spaces == 1  # the keyword wins
+        with pytest.raises(CommandError, match=r"max_sid_spaces must be a whole number, 1\.\.254"):
+            async with connect(base, max_sid_spaces=0):
+                pass  # pragma: no cover
