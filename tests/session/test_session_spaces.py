@@ -20,8 +20,8 @@ from aiofins.session.nodes import SOURCE_NODES
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.transport import MemoryTransport, SerialTransport, TcpTransport
 
-from .test_session_lifecycle import run_readers
-from .test_session_udp import Reply, reply, session_for, udp_responder, word_data
+from .test_session_lifecycle import expected, run_readers
+from .test_session_udp import Reply, read_params, reply, session_for, udp_responder, word_data
 
 pytestmark = pytest.mark.anyio
 
@@ -182,3 +182,23 @@ async def test_max_sid_spaces_is_checked_and_the_memory_transport_can_have_more(
             dest=FinsAddress(0, 1, 0),
             max_sid_spaces=0,
         )
+
+
+async def test_request_many_uses_more_spaces_too() -> None:
+    """A pipelined batch finding every SID taken goes on in another space (opened for it in
+    the background) instead of waiting for the linger to end; never an early reuse."""
+    watch = ReuseWatch(0.05, 0.3)
+    async with (
+        udp_responder(watch) as peer,
+        session_for(peer, min_linger=1.0, timeout=5.0) as session,
+    ):
+        with anyio.fail_after(20):
+            for start in range(0, 1200, 400):
+                reads = [(0x01, 0x01, read_params(w % 4096)) for w in range(start, start + 400)]
+                responses = await session.request_many(reads, idempotent=True)
+                assert [r.data for r in responses] == [
+                    expected(w % 4096) for w in range(start, start + 400)
+                ]
+        assert watch.early == 0
+        assert session.stats.sid_spaces_opened >= 1
+        assert len(watch.nodes) == session.sid_spaces

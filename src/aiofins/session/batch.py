@@ -38,6 +38,7 @@ from .slots import DestState, Pending
 
 if TYPE_CHECKING:
     from .core import Session
+    from .spaces import ExtraSpace
 
 _NORMAL = EndCode(0)
 _new_pending = object.__new__
@@ -198,6 +199,17 @@ class Batch:
         p.busy = busy
         end = now + self.timeout
         frame = session.start(p, state, mrc, src, params, self.retries, now, end, None)
+        if frame is None:  # another SID space's (opened meanwhile if none is open)
+            got = session.spare_sid(state, now)
+            if got is not None:
+                space = got[1]
+                space.dest_state(state).cursor = got[0] & 0xFF
+                frame = session.start(
+                    p, state, mrc, src, params, self.retries, now, end, None, space
+                )
+                assert frame is not None
+                self.send_on(space, p, frame)
+                return
         if frame is None:  # every SID in use: try again shortly, keeping the slot
             since = self.sid_waits.setdefault(index, now)
             if index == self.next - 1 or len(self.sid_waits) == 1:
@@ -214,6 +226,19 @@ class Batch:
         self.outbox.append((p, frame))
         if self.flush_handle is None:
             self.flush_handle = session.loop.call_soon(self.flush)
+
+    def send_on(self, space: ExtraSpace, p: BatchPending, frame: bytes) -> None:
+        """Send ``p`` at once on an extra SID space's own transport."""
+        if self.sid_waits:
+            self.sid_waits.pop(p.index, None)
+        try:
+            fast_send = space.transport.fast_send
+            if fast_send is None:
+                raise ConnectionLost(f"{space.transport.description} is closed")
+            fast_send(frame)
+        except BaseException as exc:
+            self.abandon(p)
+            self.finish(exc)
 
     def flush(self) -> None:
         """Send the frames queued in this event-loop step."""
@@ -324,7 +349,7 @@ class Batch:
         # Sent and not answered: this batch's entries of the pending table (a scan, once).
         mine = [
             p
-            for p in self.session.sids.pending.values()
+            for p in self.session.requests_in_flight()
             if isinstance(p, BatchPending) and p.batch is self
         ]
         for p in mine:

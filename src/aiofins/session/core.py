@@ -1148,6 +1148,23 @@ class Session:
                     await anyio.sleep(wait)
         raise self.no_free_sid(state, timeout)
 
+    def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None:
+        """For a batch that found no free SID of the transport's own: one of an open extra
+        space, and the space. A batch cannot wait for a space to open: if none has a free
+        SID, one is opened in the background (if allowed) for its next try."""
+        spaces = self._spaces
+        got = spaces.take(state, now) or spaces.allocate(state)
+        if got is None and spaces.may_open(now):
+            spaces.open_soon(self.source, self._nodes_in_use())
+        return got
+
+    def requests_in_flight(self) -> list[Pending]:
+        """Every request in flight, on every SID space."""
+        out = list(self.sids.pending.values())
+        for space in self._spaces.extra:
+            out.extend(space.sids.pending.values())
+        return out
+
     def _nodes_in_use(self) -> set[int]:
         """Nodes an extra space's socket may not take as its source: ours and those of
         the destinations we address."""

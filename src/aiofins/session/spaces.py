@@ -249,6 +249,11 @@ class SidSpaces:
             await space.opened.wait()
         return space.state is SpaceState.OPEN
 
+    def open_soon(self, source: FinsAddress, avoid: set[int]) -> None:
+        """Start opening another space unless one is opening (see :meth:`open`)."""
+        if not any(s.state is SpaceState.OPENING for s in self.extra):
+            self._start(source, avoid)
+
     def _start(self, source: FinsAddress, avoid: set[int]) -> ExtraSpace | None:
         transport = self.transport.another()
         if transport is None or self.background is None:
