@@ -211,6 +211,7 @@ async def test_a_lossy_link_costs_retransmissions_not_calls() -> None:
         assert elapsed < 8, elapsed
         assert session.stats.retries >= 300  # the losses cost retransmissions
         assert session.stats.timeouts == len(errors)
+        assert not [e for e in errors if isinstance(e, SlotTimeout)]  # nobody starved
 
 
 async def test_a_retransmission_is_the_same_frame_and_the_first_reply_answers() -> None:
@@ -238,6 +239,55 @@ async def test_a_retransmission_is_the_same_frame_and_the_first_reply_answers() 
         # The SID lingers: the next read does not get it.
         await session.request(0x01, 0x01, read_params(4))
         assert peer.received[-1][9] != peer.received[0][9]
+
+
+async def test_a_lost_request_gives_its_slot_back_once_presumed_lost() -> None:
+    """Issue #12 (3): a datagram presumed lost (past its retransmission timeout) occupies
+    none of the PLC's capacity. With one slot, a read the peer never answers is sent three
+    times (its retransmissions keep its slot: nothing queued goes between them), then gives
+    its slot back and waits for a late reply until its deadline while the queued reads go
+    through; without that they would all wait the whole timeout behind it."""
+
+    def black_hole_word_0(cmd: bytes) -> list[Reply]:
+        return [] if cmd[13:15] == b"\x00\x00" else answer(cmd)
+
+    async with (
+        udp_responder(black_hole_word_0) as peer,
+        session_for(peer, max_in_flight=1, rto_bounds=(0.02, 0.05), timeout=2.0) as session,
+    ):
+        for _ in range(8):  # the round trip measured: the RTO is at its floor
+            await session.request(0x01, 0x01, read_params(9), idempotent=True)
+        peer.received.clear()
+        done: list[float] = []
+        lost = anyio.Event()
+
+        async def the_lost_one() -> None:
+            with pytest.raises(FinsTimeout, match=r"in 3 attempts within 2\.0 s"):
+                await session.request(0x01, 0x01, read_params(0), idempotent=True)
+            lost.set()
+
+        async def queued(word: int) -> None:
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word)
+            done.append(monotonic())
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(the_lost_one)
+            with anyio.fail_after(5):
+                while not peer.received:
+                    await anyio.sleep(0.001)
+            start = monotonic()
+            for word in range(1, 21):
+                tg.start_soon(queued, word)
+            with anyio.fail_after(5):
+                while len(done) < 20:
+                    await anyio.sleep(0.005)
+            assert not lost.is_set() and session.stats.timeouts == 0
+            assert max(done) - start < 1.0  # not behind the lost one's 2 s
+            assert session.stats.in_flight == 1  # the lost one still waits for its reply
+        words = [int.from_bytes(f[13:15], "big") for f in peer.received]
+        assert words[:3] == [0, 0, 0]  # its retransmissions before any queued read
+        assert sorted(words[3:]) == list(range(1, 21))
 
 
 # --------------------------------------------------------------------------- deadlines

@@ -193,6 +193,7 @@ class Batch:
         mrc, src, params = self.commands[index]
         p = _new_pending(BatchPending)  # session.start() sets the fields of every request
         p.fut = None
+        p.slots = None  # the batch holds its slots (see held)
         p.batch = self
         p.index = index
         p.attempt = attempt

@@ -908,6 +908,7 @@ class Session:
                             p.fut = fut
                         else:
                             p = EventPending(0, mrc, src)
+                        p.slots = slots  # given back when no longer useful (see the watcher)
                         now = monotonic()
                         sent = self.start(
                             p, state, mrc, src, params, retries, now, end, attempt_timeout
@@ -962,10 +963,11 @@ class Session:
                             self.abandon(p, timeout, isinstance(exc, FinsTimeout))
                             raise
                     finally:
-                        if slots.waiters:
-                            slots.release()  # hands the slot to the first waiter
-                        else:
-                            slots.in_flight -= 1
+                        if p is None or p.slots is not None:  # (else given back already)
+                            if slots.waiters:
+                                slots.release()  # hands the slot to the first waiter
+                            else:
+                                slots.in_flight -= 1
                 except Expired:
                     assert p is not None
                     raise FinsTimeout(

@@ -64,6 +64,7 @@ class Pending:
         "plan",
         "rtt",
         "sent_at",
+        "slots",
         "space",
         "src",
     )
@@ -82,6 +83,18 @@ class Pending:
         self.abandoned = False
         #: The extra SID space it went out on (``None``: the session's own transport).
         self.space: ExtraSpace | None = None
+        #: The in-flight slot it holds (``None``: none, or given back: see
+        #: :meth:`free_slot`).
+        self.slots: SlotQueue | None = None
+
+    def free_slot(self) -> None:
+        """Give back the in-flight slot this request holds, if any: its reply came, it was
+        given up on, or its last transmission is presumed lost (past its retransmission
+        timeout, a datagram occupies none of the PLC's capacity for commands)."""
+        slots = self.slots
+        if slots is not None:
+            self.slots = None
+            slots.release()
 
     @property
     def state(self) -> RequestState:
@@ -118,6 +131,7 @@ class AsyncioPending(Pending):
         self.attempts = 1
         self.abandoned = False
         self.space = None
+        self.slots = None
 
     def wake(self, frame: bytes) -> None:
         if not self.fut.done():

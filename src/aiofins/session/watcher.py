@@ -124,12 +124,17 @@ class DeadlineWatcher:
                 if type(plan) is tuple:  # the first retransmission: now an object
                     plan = p.plan = Retransmission(*plan)
                 assert isinstance(plan, Retransmission)
-                if plan.left and now < plan.end:
-                    self.retransmit(p, plan, now)
-                    continue
+                if now < plan.end:
+                    if plan.left:
+                        self.retransmit(p, plan, now)
+                        continue
+                    if plan.cap is None and p.deadline < plan.end:  # the last: presumed lost
+                        self._presumed_lost(p, plan)
+                        continue
             (session.sids if p.space is None else p.space.sids).abandon(
                 p, session.quarantine_until(now, now - p.sent_at)
             )
+            p.free_slot()  # at once, not when its caller next runs
             session.stats.timeouts += 1
             self._log_timeout(p, now)
             hooks = self.hooks
@@ -138,6 +143,15 @@ class DeadlineWatcher:
                     hooks.request_timed_out, RequestTimedOut, p, p.attempts, now - p.sent_at
                 )
             p.fail(Expired("request timed out"))
+
+    def _presumed_lost(self, p: Pending, plan: Retransmission) -> None:
+        """No reply to ``p``'s last transmission within its retransmission timeout: the
+        datagram is presumed lost and occupies none of the PLC's capacity, so the slot
+        goes to the next caller; ``p`` still waits for a late reply (its SID registered)
+        until its call's deadline."""
+        p.free_slot()
+        p.deadline = plan.end
+        self.deadlines.add(p)
 
     def _log_timeout(self, p: Pending, now: float) -> None:
         """A request got no reply after its last transmission: a WARNING for the first
@@ -180,10 +194,10 @@ class DeadlineWatcher:
         if cap is not None and wait > cap:
             wait = cap
         resend.wait = wait
-        if resend.left:
-            deadline = now + wait
+        if resend.left or cap is None:
+            deadline = now + wait  # the last: then presumed lost (see _presumed_lost)
         else:
-            deadline = resend.end if cap is None else now + cap
+            deadline = now + cap
         p.deadline = min(deadline, resend.end)
         self.deadlines.add(p)
         session.stats.retries += 1
