@@ -17,10 +17,12 @@ from aiofins.protocol.errors import CommandError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.nodes import SOURCE_NODES
+from aiofins.session.states import LinkState
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.transport import MemoryTransport, SerialTransport, TcpTransport
 
 from .test_session_lifecycle import expected, run_readers
+from .test_session_tcp import TcpPeer, tcp_server, tcp_session
 from .test_session_udp import Reply, read_params, reply, session_for, udp_responder, word_data
 
 pytestmark = pytest.mark.anyio
@@ -203,3 +205,25 @@ async def test_request_many_uses_more_spaces_too() -> None:
         assert watch.early == 0
         assert session.stats.sid_spaces_opened >= 1
         assert len(watch.nodes) == session.sid_spaces
+
+
+async def test_an_extra_connection_lost_fails_only_its_own_space() -> None:
+    events: list[SidSpaceChanged] = []
+    async with (
+        tcp_server(TcpPeer()) as peer,
+        tcp_session(
+            peer, min_linger=2.0, hooks=EventHooks(sid_space_changed=[events.append])
+        ) as session,
+    ):
+        good, wrong, errors = await run_readers(session, 10, 300)
+        assert (good, wrong, errors) == (300, 0, [])
+        assert session.sid_spaces == 2 and peer.connections == 2
+        await peer.streams[1].aclose()  # the PLC resets the second connection
+        with anyio.fail_after(5):
+            while session.sid_spaces > 1:
+                await anyio.sleep(0.01)
+        assert [e.new for e in events][-2:] == ["CLOSING", "CLOSED"]
+        assert session.link_state is LinkState.OPEN  # the session's own link goes on
+        assert session.stats.disconnects == 0
+        r = await session.request(0x01, 0x01, read_params(3))
+        assert r.data == expected(3)
