@@ -208,6 +208,8 @@ class EndpointStats:
     malformed: int = 0
     retries: int = 0
     sid_exhausted: int = 0
+    sid_spaces_opened: int = 0
+    sid_space_failures: int = 0
     breaker_rejects: int = 0
     busy_retries: int = 0
     end_code_errors: int = 0
