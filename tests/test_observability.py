@@ -355,7 +355,13 @@ async def test_sid_space_exhausted_is_warned_about_once(caplog: pytest.LogCaptur
     async with simulator() as sim:
         sim.plan.rule = FaultRule(drop_request=1.0)
         session = session_to(
-            sim, timeout=0.05, retries=0, max_in_flight=255, min_quarantine=60, breaker_threshold=0
+            sim,
+            timeout=0.05,
+            retries=0,
+            max_in_flight=255,
+            min_quarantine=60,
+            breaker_threshold=0,
+            max_sid_spaces=1,  # (one socket: its 256 SIDs are all there is)
         )
         async with session:
 
