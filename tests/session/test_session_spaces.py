@@ -13,7 +13,7 @@ import anyio
 import pytest
 
 from aiofins.hooks import EventHooks, SidSpaceChanged
-from aiofins.protocol.errors import CommandError
+from aiofins.protocol.errors import CommandError, FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.nodes import SOURCE_NODES
@@ -83,6 +83,7 @@ async def test_duplicates_past_a_sid_wrap_open_more_spaces_never_reuse_early() -
         assert stats.duplicates > 10
         assert session.sid_spaces == 1 + stats.sid_spaces_opened
         # Each socket its own source node, none the PLC's (1) or the session's own (2).
+        assert stats.in_flight == 0
         assert len(watch.nodes) == session.sid_spaces and watch.nodes >= {2}
         assert 1 not in watch.nodes
         assert watch.nodes <= SOURCE_NODES.in_use(f"udp://127.0.0.1:{peer.port}")
@@ -227,3 +228,30 @@ async def test_an_extra_connection_lost_fails_only_its_own_space() -> None:
         assert session.stats.disconnects == 0
         r = await session.request(0x01, 0x01, read_params(3))
         assert r.data == expected(3)
+
+
+async def test_requests_in_flight_on_every_space_are_counted() -> None:
+    def answer_below_1000(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        return [] if word >= 1000 else [(0.0, reply(cmd, 0, word_data(cmd)))]
+
+    async with (
+        udp_responder(answer_below_1000) as peer,
+        session_for(peer, min_linger=5.0, max_sid_spaces=2, max_in_flight=10) as session,
+    ):
+        good, wrong, errors = await run_readers(session, 5, 256)  # the own socket's SIDs linger
+        assert (good, wrong, errors) == (256, 0, [])
+        async with anyio.create_task_group() as tg:
+            for word in (1000, 1001, 1002):
+                tg.start_soon(_times_out, session, word)
+            with anyio.fail_after(5):
+                while len(peer.received) < 259:
+                    await anyio.sleep(0.005)
+            assert {f[7] for f in peer.received[256:]} == {254}  # the extra socket's node
+            assert session.stats.in_flight == 3 and session.sid_spaces == 2
+        assert session.stats.in_flight == 0
+
+
+async def _times_out(session: Session, word: int) -> None:
+    with pytest.raises(FinsTimeout):
+        await session.request(0x01, 0x01, read_params(word), timeout=0.5)

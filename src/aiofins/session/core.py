@@ -75,7 +75,7 @@ from .slots import (
     SlotTimeout,
     no_free_sid_message,
 )
-from .spaces import ExtraSpace, SidSpaces
+from .spaces import ExtraSpace, InFlight, SidSpaces
 from .states import LinkState
 from .watcher import DeadlineWatcher, Expired
 
@@ -226,7 +226,8 @@ class Session:
         self._flags_logged = 0  # CPU error flags (0040/0080) already logged
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
-        self.stats = SessionStats(self._pending)
+        in_flight = InFlight(self.sids.pending)
+        self.stats = SessionStats(in_flight)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
         #: The link: its state, connection attempts, the reconnect backoff.
@@ -243,6 +244,7 @@ class Session:
             fail=self._fail_space,
             prefix=self._prefix_from,
         )
+        in_flight.spaces = self._spaces.extra
         self._link = Link(
             transport,
             self,

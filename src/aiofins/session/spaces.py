@@ -36,7 +36,7 @@ from ..transport.base import Transport
 from .background import Background
 from .nodes import SOURCE_NODES
 from .sids import SidSpace
-from .slots import DestState
+from .slots import DestState, Pending
 
 if TYPE_CHECKING:
     from .response import SessionStats
@@ -127,6 +127,19 @@ class ExtraSpace:
 
     def __repr__(self) -> str:
         return f"<SID space {self.number} of {self.transport.description}: {self.state.name}>"
+
+
+class InFlight:
+    """How many requests are in flight on every SID space (``len()``; ``stats.in_flight``)."""
+
+    __slots__ = ("pending", "spaces")
+
+    def __init__(self, pending: dict[int, Pending]) -> None:
+        self.pending = pending
+        self.spaces: list[ExtraSpace] = []
+
+    def __len__(self) -> int:
+        return len(self.pending) + sum(len(s.sids.pending) for s in self.spaces)
 
 
 class SidSpaces:
