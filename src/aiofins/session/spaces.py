@@ -208,8 +208,10 @@ class SidSpaces:
 
     def take(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None:
         """A free SID of an open extra space for ``state``'s destination, and the space."""
+        routed = self.primary.routed  # (a relay error is matched by SID: see SidSpace)
         for space in self.extra:
             if space.state is SpaceState.OPEN:
+                space.sids.routed = routed
                 key = space.sids.take(space.dest_state(state), now)
                 if key is not None:
                     space.last_used = now
@@ -219,8 +221,10 @@ class SidSpaces:
     def allocate(self, state: DestState) -> tuple[int, ExtraSpace] | None:
         """Like :meth:`take`, looking at every SID (ends quarantines and lingers that are
         over)."""
+        routed = self.primary.routed
         for space in self.extra:
             if space.state is SpaceState.OPEN:
+                space.sids.routed = routed
                 key = space.sids.allocate(space.dest_state(state))
                 if key is not None:
                     space.last_used = monotonic()
