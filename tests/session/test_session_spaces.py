@@ -255,3 +255,24 @@ async def test_requests_in_flight_on_every_space_are_counted() -> None:
 async def _times_out(session: Session, word: int) -> None:
     with pytest.raises(FinsTimeout):
         await session.request(0x01, 0x01, read_params(word), timeout=0.5)
+
+
+async def test_a_plc_refusing_another_connection_is_a_counted_failure_not_an_error(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The PLC takes one FINS/TCP connection only: the second space's handshake is refused.
+    Counted and logged; the requests wait for the session's own SIDs instead, all answered."""
+    plc = VirtualPLC()
+    plc.write("D0", [(1 << 12) ^ w for w in range(1000)])
+    async with run_simulator(plc, tcp=("127.0.0.1", 0), max_connections=1) as sim:
+        transport = TcpTransport("127.0.0.1", sim.tcp_port, connect_timeout=2)
+        async with Session(
+            transport, source=FinsAddress(0, 0, 0), dest=PLC, min_linger=0.5, timeout=10.0
+        ) as session:
+            with caplog.at_level(logging.WARNING, logger="aiofins.session"):
+                good, wrong, errors = await run_readers(session, 10, 400)
+            assert (good, wrong, errors) == (400, 0, [])
+            assert session.stats.sid_space_failures >= 1
+            assert session.stats.sid_spaces_opened == 0 and session.sid_spaces == 1
+            assert session.stats.background_errors == 0 and session.stats.disconnects == 0
+            assert any("cannot open another SID space" in r.getMessage() for r in caplog.records)
