@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from aiofins.gateway.config import MqttConfig
 from aiofins.gateway.mqtt import MqttLink
-from aiofins.gateway.payload import SetPayloadError, parse_set, scan_message
-from aiofins.poller import Quality, Snapshot, TagReading
+from aiofins.gateway.payload import ScanEncoder, SetPayloadError, parse_set, scan_message
+from aiofins.poller import GoodReadings, Quality, Snapshot, TagReading
+from aiofins.protocol.values import Value
 from aiofins.tags import parse_tag
 
 
@@ -50,6 +54,75 @@ def test_scan_message_carries_values_qualities_and_json_safe_floats() -> None:
         },
     }
     assert json.loads(scan_message("p", "g", snap, ["a"]))["values"].keys() == {"a"}
+
+
+def _expected(value: Value | None) -> object:
+    if isinstance(value, float) and math.isnan(value):
+        return "NaN"
+    if isinstance(value, float) and math.isinf(value):
+        return "Infinity" if value > 0 else "-Infinity"
+    return value
+
+
+_TAG_VALUES = st.fixed_dictionaries(
+    {
+        "count": st.integers(-(2**63), 2**64),
+        "level": st.floats(allow_nan=True, allow_infinity=True, width=32),
+        "temp": st.floats(allow_nan=True, allow_infinity=True),
+        "run": st.booleans(),
+        'na"me\\ü': st.text(max_size=8),
+    }
+)
+
+
+@given(
+    scans=st.lists(
+        st.tuples(_TAG_VALUES, st.floats(0, 2e9), st.floats(0, 10), st.booleans()),
+        min_size=1,
+        max_size=6,
+    )
+)
+def test_an_encoder_gives_the_json_of_every_scan_in_a_row(
+    scans: list[tuple[dict[str, Value], float, float, bool]],
+) -> None:
+    """One encoder over a run of scans (all-good ones reuse the parts of unchanged tags,
+    some failed in between) gives each scan's exact JSON."""
+    encoder = ScanEncoder('pl"c', "g")
+    last: dict[str, Value] = {}
+    for scan, (values, stamp, duration, failed) in enumerate(scans):
+        if failed:  # stale values with the last scan's timestamp
+            readings: Mapping[str, TagReading] = {
+                name: TagReading(last.get(name), Quality.STALE, 1.5, "FinsTimeout: x")
+                for name in values
+            }
+            error: str | None = "FinsTimeout: x"
+            expected = {
+                name: {
+                    "value": _expected(last.get(name)),
+                    "quality": "STALE",
+                    "timestamp": 1.5,
+                    "error": "FinsTimeout: x",
+                }
+                for name in values
+            }
+        else:
+            readings, error, last = GoodReadings(dict(values), stamp), None, values
+            expected = {
+                name: {"value": _expected(v), "quality": "GOOD", "timestamp": stamp}
+                for name, v in values.items()
+            }
+        snap = Snapshot("p/g", "udp://x", scan, stamp, duration, readings, frozenset(), error)
+        doc = json.loads(encoder.encode(snap))
+        assert doc.pop("duration") == pytest.approx(duration, abs=1e-6)
+        assert doc == {
+            "plc": 'pl"c',
+            "group": "g",
+            "scan": scan,
+            "timestamp": stamp,
+            "error": error,
+            "values": expected,
+        }
+        assert json.loads(encoder.encode(snap, ["run"]))["values"] == {"run": expected["run"]}
 
 
 @pytest.mark.parametrize(

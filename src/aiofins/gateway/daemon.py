@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import time
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -32,7 +33,7 @@ from .config import GatewayConfig, GroupConfig, PlcConfig, render
 from .http import HttpServer
 from .metrics import CONTENT_TYPE, GatewayMetrics
 from .mqtt import LinkState, MqttLink, Outbox
-from .payload import scan_message, status_message
+from .payload import ScanEncoder, status_message
 from .plcs import PlcState, PlcStatus
 from .sharding import Shard
 from .writes import encode_reply, handle_set, reply_topic
@@ -56,6 +57,10 @@ class Route:
     status: PlcStatus = field(repr=False)
     #: The poller's scan group, from the route's first scan on (see ``Gateway._start_groups``).
     scan_group: ScanGroup | None = None
+    encoder: ScanEncoder = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.encoder = ScanEncoder(self.plc, self.group.name)
 
     @property
     def scans(self) -> int:
@@ -215,19 +220,19 @@ class Gateway:
 
     async def _consume_snapshots(self) -> None:
         put = self.link.put
+        routes = self.routes
         async for snap in self.poller:
-            route = self.routes[snap.group]
-            changed = route.status.observe(route.group.name, snap.error)
-            if changed is not None:
+            route = routes[snap.group]
+            if route.status.observe(route.group.name, snap.error) is not None:
                 self._announce(route.status)
-            group = route.group
-            if group.changes_only:
-                names = [n for n in snap.readings if n in snap.changed]
-                if not names:
+            if route.group.changes_only:
+                changed = snap.changed
+                if not changed:
                     continue
+                names = [n for n in snap.readings if n in changed]
+                put(route.outbox, route.encoder.encode(snap, names), snap.timestamp)
             else:
-                names = list(snap.readings)
-            put(route.outbox, scan_message(route.plc, group.name, snap, names), snap.timestamp)
+                put(route.outbox, route.encoder.encode(snap), snap.timestamp)
 
     def _announce(self, status: PlcStatus) -> None:
         """Queue the PLC's state on its status topic (retained; the newest replaces any
@@ -257,8 +262,6 @@ class Gateway:
                 self._announce(status)
 
     def _on_published(self, stamp: float) -> None:
-        import time
-
         self.metrics.latency.observe(max(0.0, time.time() - stamp))
 
     # -- writes -------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """The gateway's Prometheus metrics (prometheus_client), read from its live counters.
 
 A collector reads the counters when ``/metrics`` is scraped, so a scan costs nothing extra;
-only the scan-to-publish latency is a histogram fed per published message. Every gateway has
+only the scan-to-publish latency is a histogram fed per published message (a bucket count
+bumped, no lock and no call into prometheus_client). Every gateway has
 its own registry (two gateways in one process do not mix their numbers). Names start with
 ``aiofins_gateway_``; the library's own metrics (:class:`aiofins.metrics.FinsMetrics`: the
 pool's endpoints, sessions and request latencies, the poller's groups) are served next to
@@ -10,11 +11,12 @@ them.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
-from prometheus_client import CollectorRegistry, Histogram, generate_latest
-from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+from prometheus_client import CollectorRegistry, generate_latest
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily
 from prometheus_client.registry import Collector
 
 from .mqtt import LinkState
@@ -45,18 +47,35 @@ LATENCY_BUCKETS = (
 )
 
 
+class LatencyHistogram:
+    """Counts of observations per bucket (upper bounds ``LATENCY_BUCKETS``, then +Inf)."""
+
+    __slots__ = ("counts", "sum")
+
+    def __init__(self) -> None:
+        self.counts = [0] * (len(LATENCY_BUCKETS) + 1)
+        self.sum = 0.0
+
+    def observe(self, seconds: float) -> None:
+        self.counts[bisect_left(LATENCY_BUCKETS, seconds)] += 1
+        self.sum += seconds
+
+    def metric(self, name: str, documentation: str) -> HistogramMetricFamily:
+        buckets: list[tuple[str, float]] = []
+        total = 0
+        for bound, count in zip((*map(repr, LATENCY_BUCKETS), "+Inf"), self.counts, strict=True):
+            total += count
+            buckets.append((bound, total))
+        return HistogramMetricFamily(name, documentation, buckets=buckets, sum_value=self.sum)
+
+
 class GatewayMetrics:
     """A registry with the gateway's metrics; :meth:`render` is the ``/metrics`` body."""
 
     def __init__(self, gateway: Gateway) -> None:
         self.registry = CollectorRegistry(auto_describe=False)
-        self.latency = Histogram(
-            "aiofins_gateway_publish_latency_seconds",
-            "Time from a scan's timestamp to the broker taking its message",
-            buckets=LATENCY_BUCKETS,
-            registry=self.registry,
-        )
-        self.registry.register(_Collector(gateway))
+        self.latency = LatencyHistogram()
+        self.registry.register(_Collector(gateway, self.latency))
         self.registry.register(gateway.library_metrics)
 
     def render(self) -> bytes:
@@ -64,8 +83,9 @@ class GatewayMetrics:
 
 
 class _Collector(Collector):
-    def __init__(self, gateway: Gateway) -> None:
+    def __init__(self, gateway: Gateway, latency: LatencyHistogram) -> None:
         self.gateway = gateway
+        self.latency = latency
 
     def collect(self) -> Iterator[Metric]:
         gw = self.gateway
@@ -136,3 +156,8 @@ class _Collector(Collector):
         for outcome, count in sorted(gw.write_counts.items()):
             writes.add_metric([outcome], count)
         yield writes
+        yield self.latency.metric(
+            "aiofins_gateway_publish_latency_seconds",
+            "Time from a scan's timestamp to the broker taking its message (QoS 0: to the "
+            "connection taking it)",
+        )

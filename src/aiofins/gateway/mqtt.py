@@ -2,11 +2,19 @@
 
 Scans never wait for the broker: :meth:`MqttLink.put` appends a message to its topic's
 :class:`Outbox` (bounded: when full, the oldest message is dropped and counted) and returns.
-While the link is :attr:`LinkState.CONNECTED`, a few publisher tasks take outboxes in turn,
-one message each, so every topic keeps its order and no topic starves the others. A message
-leaves its outbox only once the broker took it (a publish cut off by a lost link is sent again
-after the reconnect: at least once). A lost or refused connection is tried again after a
-jittered, doubling backoff.
+While the link is :attr:`LinkState.CONNECTED`, outboxes are sent in turn, one message each, so
+every topic keeps its order and no topic starves the others:
+
+* QoS 0 messages are handed to the connection's MQTT client (paho, under aiomqtt) as they
+  come, with no task switch or future per message: a message put into an empty outbox goes
+  out at once, a backlog (after a reconnect) through one pump task. Its socket writes happen
+  in the event loop's next step, many messages to one wake-up. A message handed over but not
+  yet written when the link breaks goes back to the front of its outbox.
+* QoS 1 and 2 messages go through a few publisher tasks that await the broker's
+  acknowledgement; a message leaves its outbox only once acknowledged.
+
+So a publish cut off by a lost link is sent again after the reconnect (at least once). A lost
+or refused connection is tried again after a jittered, doubling backoff.
 
 The gateway's own status topic carries ``online`` (published on every connect, retained) and
 ``offline`` (the MQTT will, published by the broker if the gateway vanishes, and by the
@@ -34,8 +42,15 @@ from .payload import status_message
 
 if TYPE_CHECKING:
     import aiomqtt
+    import paho.mqtt.client as paho_mqtt
 
 log = logging.getLogger("aiofins.gateway")
+
+#: QoS 0 messages handed to the MQTT client and not yet known to be written to its socket,
+#: at most (a slow broker makes the rest wait in their outboxes, bounded and counted).
+MAX_HANDED = 1024
+#: QoS 0 messages the pump hands over before it lets the event loop write them.
+PUMP_BATCH = 256
 
 
 class LinkState(Enum):
@@ -109,9 +124,18 @@ class MqttLink:
         #: Set once :meth:`run` has ended (after :meth:`close`).
         self.done = anyio.Event()
         self._client: aiomqtt.Client | None = None
+        #: QoS 1/2 outboxes with messages, for the publisher tasks.
         send, receive = anyio.create_memory_object_stream[Outbox](float("inf"))
         self._ready: MemoryObjectSendStream[Outbox] = send
         self._ready_out: MemoryObjectReceiveStream[Outbox] = receive
+        #: QoS 0 outboxes with messages, for the pump.
+        self._ready0: deque[Outbox] = deque()
+        self._pump_idle: anyio.Event | None = None
+        #: The connected client's paho client (QoS 0 goes straight to it), or None.
+        self._paho: paho_mqtt.Client | None = None
+        #: QoS 0 messages handed to paho, oldest first, until known written.
+        self._handed: deque[tuple[Outbox, tuple[bytes, float], paho_mqtt.MQTTMessageInfo]] = deque()
+        self._lost: Callable[[str], None] | None = None
 
     # -- state ------------------------------------------------------------------------
 
@@ -138,7 +162,12 @@ class MqttLink:
 
     def put(self, box: Outbox, payload: bytes, stamp: float | None = None) -> None:
         """Queue a message (never waits; a full outbox drops its oldest, counted)."""
+        entry = (payload, time.time() if stamp is None else stamp)
         messages = box.messages
+        if box.qos == 0:
+            paho = self._paho
+            if paho is not None and not messages and self._hand(paho, box, entry):
+                return
         if len(messages) >= box.limit:
             if box.sending is None or messages[0] is not box.sending:
                 messages.popleft()
@@ -146,10 +175,55 @@ class MqttLink:
             elif len(messages) > 1:  # the head may reach the broker: drop the next oldest
                 del messages[1]
                 box.dropped += 1
-        messages.append((payload, time.time() if stamp is None else stamp))
+        messages.append(entry)
         if not box.queued:
-            box.queued = True
+            self._queue(box)
+
+    def _queue(self, box: Outbox) -> None:
+        box.queued = True
+        if box.qos:
             self._ready.send_nowait(box)
+        else:
+            self._ready0.append(box)
+            if self._pump_idle is not None:
+                self._pump_idle.set()
+
+    def _hand(self, paho: paho_mqtt.Client, box: Outbox, entry: tuple[bytes, float]) -> bool:
+        """Hand a QoS 0 message to paho (written in the loop's next step); False if paho has
+        too many unwritten or the link is lost (the message stays with the caller)."""
+        handed = self._handed
+        while handed and handed[0][2].is_published():
+            handed.popleft()
+        if len(handed) >= MAX_HANDED:
+            return False
+        info = paho.publish(box.topic, entry[0], 0, box.retain)
+        if info.rc:  # not MQTT_ERR_SUCCESS: no connection
+            self._paho = None
+            if self._lost is not None:
+                self._lost(f"publish failed: error {info.rc}")
+            return False
+        handed.append((box, entry, info))
+        box.published += 1
+        if self.on_published is not None:
+            self.on_published(entry[1])
+        return True
+
+    def _take_back(self) -> None:
+        """After the link broke: QoS 0 messages handed to paho but never written go back to
+        the front of their outboxes (or, where the outbox is full by now, count as dropped)."""
+        self._paho = None
+        handed = self._handed
+        while handed:
+            box, entry, info = handed.pop()  # newest first: each goes in front of the next
+            if info.is_published():
+                continue
+            box.published -= 1
+            if len(box.messages) >= box.limit:
+                box.dropped += 1  # the oldest of a full outbox
+            else:
+                box.messages.appendleft(entry)
+            if not box.queued:
+                self._queue(box)
 
     @property
     def dropped(self) -> int:
@@ -186,6 +260,7 @@ class MqttLink:
                 why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
             finally:
                 self._client = None
+                self._take_back()  # (the client is disconnected: what paho wrote is known)
             if self._closing.is_set():
                 break
             delay = random.uniform(backoff / 2, backoff)  # jitter: shards do not reconnect in step
@@ -226,6 +301,7 @@ class MqttLink:
         async with anyio.create_task_group() as tg:
 
             def lost(why: str) -> None:
+                self._paho = self._lost = None  # nothing more is handed to this connection
                 if ended == ["closed"]:
                     ended[0] = why
                 tg.cancel_scope.cancel()
@@ -239,10 +315,13 @@ class MqttLink:
             except aiomqtt.MqttError as exc:
                 return f"lost during setup: {exc}"
             self._client = client
+            self._lost = lost
+            self._paho = _paho_client(client)
             self._enter(LinkState.CONNECTED, f"{self.config.host}:{self.config.port}")
             if self.on_connected is not None:
                 self.on_connected()
             tg.start_soon(self._receive, client, lost)
+            tg.start_soon(self._pump, client, lost)
             for _ in range(self.config.publishers):
                 tg.start_soon(self._publish, client, self._ready_out.clone(), lost)
             await self._closing.wait()
@@ -251,6 +330,7 @@ class MqttLink:
                     await client.publish(
                         self.status_topic, status_message("offline"), qos=1, retain=True
                     )
+            self._paho = self._lost = None
             tg.cancel_scope.cancel()
         return ended[0]
 
@@ -264,6 +344,47 @@ class MqttLink:
                     self.on_message(str(message.topic), bytes(payload))
         except aiomqtt.MqttError as exc:
             lost(f"connection lost: {exc}")
+
+    async def _pump(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
+        """Send the QoS 0 outboxes' backlogs, one message per outbox in turn."""
+        import aiomqtt
+
+        ready = self._ready0
+        while True:
+            sent = 0
+            while ready:
+                box = ready.popleft()
+                box.queued = False
+                if not box.messages:
+                    continue
+                entry = box.messages.popleft()
+                paho = self._paho
+                if paho is None:  # an aiomqtt without a paho client to hand to
+                    try:
+                        await client.publish(box.topic, entry[0], 0, box.retain)
+                    except aiomqtt.MqttError as exc:
+                        box.messages.appendleft(entry)
+                        self._queue(box)
+                        lost(f"publish failed: {exc}")
+                        return
+                    box.published += 1
+                    if self.on_published is not None:
+                        self.on_published(entry[1])
+                elif not self._hand(paho, box, entry):
+                    box.messages.appendleft(entry)
+                    self._queue(box)
+                    if self._paho is None:
+                        return  # lost
+                    await anyio.sleep(0.005)  # paho has enough unwritten: let it write
+                    continue
+                if box.messages:
+                    self._queue(box)
+                sent += 1
+                if sent % PUMP_BATCH == 0:
+                    await anyio.sleep(0)  # let the event loop write them
+            idle = self._pump_idle = anyio.Event()
+            await idle.wait()
+            self._pump_idle = None
 
     async def _publish(
         self,
@@ -295,9 +416,17 @@ class MqttLink:
                         on_published(entry[1])
                 finally:  # one message per turn: the outbox goes to the back of the queue
                     if box.messages and not box.queued:
-                        box.queued = True
-                        self._ready.send_nowait(box)
+                        self._queue(box)
 
     def close(self) -> None:
         """Stop: publish ``offline`` if connected, disconnect, make no more attempts."""
         self._closing.set()
+
+
+def _paho_client(client: aiomqtt.Client) -> paho_mqtt.Client | None:
+    """The paho client an aiomqtt client runs on (its ``_client``: aiomqtt has no public
+    name for it), or None if this aiomqtt has none (QoS 0 then goes through its publish)."""
+    import paho.mqtt.client as paho_mqtt
+
+    paho = getattr(client, "_client", None)
+    return paho if isinstance(paho, paho_mqtt.Client) else None
