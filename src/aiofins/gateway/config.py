@@ -66,7 +66,8 @@ class MqttConfig:
     timeout: float = 10.0
     gateway_topic: str = DEFAULT_GATEWAY_TOPIC
     plc_status_topic: str = DEFAULT_PLC_STATUS_TOPIC
-    #: Publish tasks working at once (each keeps its group's messages in order).
+    #: Tasks publishing QoS 1/2 messages at once, each awaiting an acknowledgement (each
+    #: keeps its topic's messages in order; QoS 0 messages need none).
     publishers: int = 8
 
 
