@@ -257,6 +257,20 @@ url = "udp://127.0.0.1:{sim.udp_port}"
         broker.stop()
 
 
+async def test_the_pool_keeps_a_session_for_every_plc_of_the_shard() -> None:
+    """More PLCs than the pool's default bound (256 sessions): each keeps its session (the
+    gateway once evicted and reopened a session on nearly every scan past 256 PLCs)."""
+    plcs = "".join(
+        f'[[plcs]]\nname = "p{i}"\nurl = "udp://127.0.0.1:{10000 + i}"\n' for i in range(600)
+    )
+    cfg = parse_config(
+        '[http]\nenabled = false\n[[groups]]\nname = "g"\ntags = { x = "D0" }\n' + plcs, "t.toml"
+    )
+    assert Gateway(cfg).pool.max_sessions >= 600
+    shard = Gateway(cfg, shard=Shard(1, 2))
+    assert len(shard.plcs) < shard.pool.max_sessions < 600
+
+
 async def test_two_shards_publish_every_plc_exactly_once_between_them(broker: Broker) -> None:
     count = 200
     async with AsyncExitStack() as stack:

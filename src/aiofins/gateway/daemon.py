@@ -93,7 +93,11 @@ class Gateway:
         mqtt = config.mqtt
         #: The library's own metrics (sessions, pool, poller), served on /metrics too.
         self.library_metrics = FinsMetrics(registry=None)
-        self.pool = Pool(hooks=self.library_metrics.hooks, **dict(config.connect))
+        options = dict(config.connect)
+        # A session per PLC, kept: with the pool's default bound (256 sessions) a gateway of
+        # more PLCs evicted one and opened another on nearly every scan.
+        options.setdefault("max_sessions", max(256, len(self.plcs) + 16))
+        self.pool = Pool(hooks=self.library_metrics.hooks, **options)
         self.poller = Poller(self.pool, buffer=max(64, sum(len(p.groups) for p in self.plcs)))
         self.plc_status: dict[str, PlcStatus] = {p.name: PlcStatus(p.name) for p in self.plcs}
         self.routes: dict[str, Route] = {}
