@@ -133,6 +133,41 @@ url = "udp://127.0.0.1:{free_port()}"
             assert late.on("fins/_gateway/gw") == [{"state": "offline"}]
 
 
+async def test_changes_only_publishes_the_tags_that_changed(broker: Broker) -> None:
+    plc = VirtualPLC()
+    plc.write("D0", [1, 2])
+    async with run_simulator(plc, udp=("127.0.0.1", 0)) as sim:
+        cfg = config(
+            broker,
+            f"""
+[[groups]]
+name = "c"
+interval = 0.05
+changes_only = true
+tags = {{ a = "D0", b = "D1" }}
+[[plcs]]
+name = "p"
+url = "udp://127.0.0.1:{sim.udp_port}"
+""",
+        )
+        async with subscribe(broker.port, "fins/p/c") as sub, Gateway(cfg) as gateway:
+            await sub.wait_for(lambda: sub.messages)
+            first = sub.on("fins/p/c")[0]
+            assert first["scan"] == 1 and first["values"].keys() == {"a", "b"}
+            route = gateway.routes["p/c"]
+            with anyio.fail_after(5):
+                while route.scans < 5:  # scans without changes publish nothing
+                    await anyio.sleep(0.02)
+            assert len(sub.messages) == 1 and route.outbox.published == 1
+            plc.write("D1", [7])
+            await sub.wait_for(lambda: len(sub.messages) == 2)
+            second = sub.on("fins/p/c")[1]
+            assert second["scan"] > 5
+            assert second["values"] == {
+                "b": {"value": 7, "quality": "GOOD", "timestamp": second["timestamp"]}
+            }
+
+
 async def test_a_plc_killed_and_restarted_goes_offline_and_online_once_each(
     broker: Broker,
 ) -> None:
