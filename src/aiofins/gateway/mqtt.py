@@ -84,11 +84,14 @@ class Outbox:
     limit: int
     #: (payload, Unix time the message's data was read).
     messages: deque[tuple[bytes, float]] = field(default_factory=deque)
+    #: Messages the broker took (QoS 0: handed to the connection; one not written when it
+    #: breaks goes back into ``messages`` and is not counted).
     published: int = 0
+    #: Messages dropped from a full outbox (the oldest first).
     dropped: int = 0
-    #: Whether the outbox waits in the publishers' queue.
+    #: Whether the outbox waits in the pump's (QoS 0) or the publishers' (QoS 1/2) queue.
     queued: bool = False
-    #: The message being published (the head), which a full outbox does not drop.
+    #: The QoS 1/2 message being published (the head), which a full outbox does not drop.
     sending: tuple[bytes, float] | None = None
 
 
