@@ -46,6 +46,7 @@ import asyncio
 import dataclasses
 import enum
 import logging
+import math
 import random
 import socket
 from collections.abc import Awaitable, Callable
@@ -225,6 +226,10 @@ class EndpointStats:
     latency_p99: float = 0.0
 
 
+#: Seconds between two warnings that the pool evicts sessions still in regular use.
+_CHURN_WARNING_EVERY = 60.0
+
+
 def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
     for name in SESSION_COUNTERS:
         setattr(into, name, getattr(into, name) + getattr(stats, name))
@@ -360,6 +365,8 @@ class Pool:
         self._urls: dict[str, list[str]] = {}
         #: key -> (retry_at, ceiling, delay) after a failure.
         self._failures: dict[str, tuple[float, float, float]] = {}
+        #: When the pool last warned that it evicts sessions still in regular use.
+        self._churn_warned = -math.inf
         self._stats: dict[str, EndpointStats] = {}
         #: Keys without a session whose counters are kept, oldest first.
         self._retired: dict[str, None] = {}
@@ -557,6 +564,33 @@ class Pool:
     def _count(self, states: frozenset[EntryState]) -> int:
         return sum(e.state in states for lst in self._entries.values() for e in lst)
 
+    def _evicting(self, victim: _Entry, key: str) -> None:
+        """Log an eviction: DEBUG, and a WARNING (at most one a minute) when the session
+        evicted was used within the last ``health_interval``: more endpoints are in regular
+        use than ``max_sessions``, and the pool closes and reopens sessions all the time."""
+        now = self._now()
+        idle = now - victim.last_used
+        if idle < self.health_interval and now - self._churn_warned >= _CHURN_WARNING_EVERY:
+            self._churn_warned = now
+            logger.warning(
+                "%s: evicted, though used %.1f s ago, to make room for %s: more endpoints are "
+                "in use than max_sessions=%d, so sessions are closed and opened again all the "
+                "time; raise Pool(max_sessions=...)",
+                victim.key,
+                idle,
+                key,
+                self.max_sessions,
+                extra={"endpoint": victim.key},
+            )
+        else:
+            logger.debug(
+                "%s: evicted (idle %.1f s) to make room for %s",
+                victim.key,
+                idle,
+                key,
+                extra={"endpoint": victim.key},
+            )
+
     async def _make_room(self, key: str, timeout: float) -> None:
         """Evict idle sessions (least recently used first) until a new one fits within
         ``max_sessions``; :class:`PoolFull` if every session is in use or being opened."""
@@ -570,12 +604,7 @@ class Pool:
                 ]
                 if idle:
                     victim = min(idle, key=_last_used)
-                    logger.debug(
-                        "%s: evicted (idle) to make room for %s",
-                        victim.key,
-                        key,
-                        extra={"endpoint": victim.key},
-                    )
+                    self._evicting(victim, key)
                     self._stats[victim.key].evictions += 1
                     victim.move(EntryState.CLOSING)
                 closing = [

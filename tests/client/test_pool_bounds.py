@@ -447,3 +447,23 @@ async def test_an_endpoints_stats_sum_every_session_counter(anyio_backend: objec
             assert (stats.duplicates, stats.end_code_errors) == (session["duplicates"], 1)
             for name in SESSION_COUNTERS:
                 assert getattr(stats, name) == session[name], name
+
+
+async def test_evicting_sessions_in_regular_use_is_a_warning(
+    sim: Simulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A pool smaller than the endpoints in use closed and reopened a session on nearly every
+    borrow (the gateway over 1,000 PLCs with the default 256) and said so only at DEBUG."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    caplog.set_level(logging.DEBUG, logger="aiofins.pool")
+    async with Pool(max_sessions=2) as pool:
+        for _ in range(3):
+            for query in ("?node=1", "?node=0", "?dest=0.1.0"):
+                async with pool.client(url + query) as plc:
+                    assert await plc.read("D0") == [0]
+        evictions = sum(s.evictions for s in pool.stats().values())
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert evictions == 7  # every borrow after the first two
+    assert len(warnings) == 1  # once a minute
+    assert "more endpoints are in use than max_sessions=2" in warnings[0].getMessage()
+    assert warnings[0].endpoint == f"{url}?node=1"  # type: ignore[attr-defined]
