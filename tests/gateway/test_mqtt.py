@@ -20,7 +20,7 @@ from anyio.abc import SocketAttribute
 from anyio.streams.buffered import BufferedByteReceiveStream
 
 from aiofins.gateway.config import MqttConfig
-from aiofins.gateway.mqtt import LinkState, MqttLink
+from aiofins.gateway.mqtt import LinkState, MqttLink, Outbox
 
 from .conftest import Broker, subscribe
 
@@ -120,52 +120,51 @@ def link_to(port: int) -> MqttLink:
     return MqttLink(config, client_id="t", status_topic="s")
 
 
+@asynccontextmanager
+async def big_qos0_put(peer: Peer) -> AsyncIterator[tuple[MqttLink, Outbox]]:
+    """A link to ``peer``, connected, that has been given every message of BIG at QoS 0 in
+    one event-loop step (the socket fills while the peer does not read)."""
+    link = link_to(peer.port)
+    box = link.outbox("big", qos=0, limit=len(BIG))
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(link.run)
+        with anyio.fail_after(10):
+            await link.connected.wait()
+        for payload in BIG:
+            link.put(box, payload)
+        yield link, box  # the test closes the link: its run() ends
+
+
 async def test_a_qos0_write_cut_short_is_finished_in_order(anyio_backend: object) -> None:
-    async with mqtt_peer() as peer:
-        link = link_to(peer.port)
-        box = link.outbox("big", qos=0, limit=len(BIG))
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(link.run)
-            with anyio.fail_after(10):
-                await link.connected.wait()
-            for payload in BIG:  # one loop step: the socket fills, paho keeps the rest
-                link.put(box, payload)
-            assert not box.messages  # all handed to the connection
-            await peer.wait_for(1, 0)  # "online"
-            peer.reading.set()
-            await peer.wait_for(1 + len(BIG), 0)
-            assert peer.connections[0][1:] == [("big", p) for p in BIG]
-            assert box.published == len(BIG) and box.dropped == 0
-            link.close()
+    async with mqtt_peer() as peer, big_qos0_put(peer) as (link, box):
+        assert not box.messages  # all handed to the connection
+        await peer.wait_for(1, 0)  # "online"
+        peer.reading.set()
+        await peer.wait_for(1 + len(BIG), 0)
+        assert peer.connections[0][1:] == [("big", p) for p in BIG]
+        assert box.published == len(BIG) and box.dropped == 0
+        link.close()
 
 
 async def test_qos0_messages_not_written_when_the_link_breaks_go_back_to_their_outbox(
     anyio_backend: object,
 ) -> None:
-    async with mqtt_peer() as peer:
-        link = link_to(peer.port)
-        box = link.outbox("big", qos=0, limit=len(BIG))
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(link.run)
-            with anyio.fail_after(10):
-                await link.connected.wait()
-            for payload in BIG:
-                link.put(box, payload)
-            peer.abort.set()  # RST while most messages wait to be written
-            with anyio.fail_after(10):
-                while link.state is LinkState.CONNECTED:
-                    await anyio.sleep(0.01)
-            # Every message was written (published) or is back in the outbox, in order.
-            written = box.published
-            assert 0 < len(box.messages) == len(BIG) - written
-            assert [p for p, _ in box.messages] == BIG[written:]
-            # The next connection sends them.
-            peer.abort = anyio.Event()
-            peer.reading.set()
-            await peer.wait_for(1 + len(BIG) - written, 1)
-            assert peer.connections[1][1:] == [("big", p) for p in BIG[written:]]
-            assert box.published == len(BIG) and not box.messages
-            link.close()
+    async with mqtt_peer() as peer, big_qos0_put(peer) as (link, box):
+        peer.abort.set()  # RST while most messages wait to be written
+        with anyio.fail_after(10):
+            while link.state is LinkState.CONNECTED:
+                await anyio.sleep(0.01)
+        # Every message was written (published) or is back in the outbox, in order.
+        written = box.published
+        assert 0 < len(box.messages) == len(BIG) - written
+        assert [p for p, _ in box.messages] == BIG[written:]
+        # The next connection sends them.
+        peer.abort = anyio.Event()
+        peer.reading.set()
+        await peer.wait_for(1 + len(BIG) - written, 1)
+        assert peer.connections[1][1:] == [("big", p) for p in BIG[written:]]
+        assert box.published == len(BIG) and not box.messages
+        link.close()
 
 
 async def test_a_qos0_backlog_goes_out_after_the_connect_in_order(broker: Broker) -> None:
