@@ -45,6 +45,7 @@ class TcpPeer:
     streams: list[SocketStream] = field(default_factory=list)
     connections: int = 0
     error_notification: int = 0  # answer the next frame with command 3 instead
+    delay: float = 0.0  # seconds before each answer (the stream is read again after it)
     #: While set to an event, a node address request is answered only once it is set.
     handshake_gate: anyio.Event | None = None
     serving: anyio.CancelScope | None = None
@@ -112,6 +113,8 @@ class TcpPeer:
             answer = self.answer(payload)
             if answer is None:
                 return
+            if self.delay:
+                await anyio.sleep(self.delay)
             if self.confirmation:
                 await self.write(stream, encode_message(6, b""))
             await self.write(stream, encode_message(2, answer))
@@ -356,6 +359,25 @@ async def test_timeout_over_tcp() -> None:
         with pytest.raises(FinsTimeout):
             await session.request(0x01, 0x01, read_params(0))
         assert session.stats.timeouts == 1
+
+
+async def test_a_slow_reply_over_tcp_is_awaited_not_retransmitted_after_the_rto(
+    anyio_backend: object,
+) -> None:
+    """A stream loses nothing: once the round trip is measured (RTO at its 20 ms floor), a
+    reply 60 ms late is waited for on the call's own schedule (1/7 of timeout=1 first),
+    not sent again after the RTO."""
+    peer = TcpPeer()
+    async with tcp_server(peer), tcp_session(peer, retries=2, timeout=1) as session:
+        await session.request(0x01, 0x01, read_params(0), idempotent=True)  # RTT measured
+        peer.delay = 0.06
+        slow = await session.request(0x01, 0x01, read_params(1), idempotent=True)
+        peer.delay = 0.0
+        # Read by the peer after anything sent before it: a duplicate would be in frames.
+        await session.request(0x01, 0x01, read_params(2), idempotent=True)
+        assert slow.data == word_data(peer.frames[1])
+        assert [f[13:15] for f in peer.frames] == [b"\x00\x00", b"\x00\x01", b"\x00\x02"]
+        assert session.stats.retries == 0
 
 
 def sid_order(frames: list[bytes]) -> list[int]:

@@ -437,3 +437,26 @@ async def test_parameters_that_are_not_bytes_leave_nothing_behind() -> None:
             (PLC.node << 12) ^ 5
         ).to_bytes(2, "big")
         assert len(responder.received) == 1 and s.stats.timeouts == 0
+
+
+@pytest.mark.anyio
+async def test_a_slow_reply_over_udp_is_retransmitted_after_the_rto(anyio_backend: object) -> None:
+    """Over UDP a datagram may be lost: once the round trip is measured (RTO at its 20 ms
+    floor), a request whose reply takes 60 ms is sent again (same frame and SID) before it
+    comes; the call still gets that reply."""
+    delays = [0.0, 0.06]
+
+    def slow_second(cmd: bytes) -> list[Reply]:
+        delay = delays[0] if len(delays) == 1 else delays.pop(0)
+        return [(delay, reply(cmd, 0, word_data(cmd)))]
+
+    async with (
+        udp_responder(slow_second) as responder,
+        session_for(responder, retries=2, timeout=1) as session,
+    ):
+        await session.request(0x01, 0x01, read_params(0), idempotent=True)  # RTT measured
+        slow = await session.request(0x01, 0x01, read_params(1), idempotent=True)
+        assert slow.data == word_data(responder.received[1])
+        assert session.stats.retries >= 1
+        assert len(responder.received) >= 3
+        assert len(set(responder.received[1:])) == 1  # the same frame, the same SID

@@ -199,6 +199,9 @@ class Session:
         self.reconnect_backoff = reconnect_backoff
         self.hooks = hooks
         self._hooks = None if hooks is None else hooks.or_none()
+        #: Whether retransmissions follow the measured RTO: not over a reliable stream
+        #: (FINS/TCP), which loses nothing; there the call's own schedule alone.
+        self._adaptive = not transport.reliable
         limit = transport.max_in_flight
         self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
         #: One request on the line at a time across all destinations (serial links).
@@ -407,9 +410,10 @@ class Session:
             else:
                 r.srtt = srtt = latency
                 var = r.rttvar = 0.5 * latency
-            rto = srtt + 4 * var
-            low, high = self.rto_bounds
-            r.rto = low if rto < low else high if rto > high else rto
+            if self._adaptive:  # (over a stream state.rto stays 0: see start())
+                rto = srtt + 4 * var
+                low, high = self.rto_bounds
+                r.rto = low if rto < low else high if rto > high else rto
             linger = sids.linger
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
@@ -703,8 +707,9 @@ class Session:
         Every field of :class:`Pending` is set here (``p`` may come from ``__new__``
         alone: the hot path spares itself an ``__init__`` call).
 
-        The first wait: the destination's RTO once measured, else the share of the call's
-        time (until ``end``) that lets every attempt go out, the wait doubling each time;
+        The first wait: the destination's RTO once measured (never over a reliable stream:
+        its RTO stays unset), else the share of the call's time (until ``end``) that lets
+        every attempt go out, the wait doubling each time;
         never more than the caller's per-attempt ``cap``. (One call for all of this: a call
         costs as much as the rest of the steps, and this runs once per request.)"""
         if space is None:

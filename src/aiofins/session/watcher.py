@@ -189,7 +189,9 @@ class DeadlineWatcher:
         resend.left -= 1
         p.attempts += 1
         p.rtt = None  # Karn: a reply can no longer be timed
-        wait = min(2 * resend.wait, session.rto_bounds[1])
+        wait = 2 * resend.wait
+        if session._adaptive and wait > session.rto_bounds[1]:  # (a stream: the call's plan)
+            wait = session.rto_bounds[1]
         cap = resend.cap
         if cap is not None and wait > cap:
             wait = cap

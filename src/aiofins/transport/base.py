@@ -65,6 +65,10 @@ class Transport(ABC):
     #: SID spaces (sockets or connections to the peer, see :meth:`another`) a session opens
     #: at most by default: 1 where the medium has a single link.
     default_sid_spaces: int = 1
+    #: Whether the medium delivers every frame it accepts, in order, or fails the link (a
+    #: stream: FINS/TCP, in memory): the session then never retransmits after its adaptive
+    #: retransmission timeout, only on the call's own schedule (see docs/session.md).
+    reliable: bool = False
     #: A synchronous send the session may call instead of ``await send()`` (set while open
     #: by transports that never need to wait, e.g. asyncio UDP); ``None`` otherwise.
     fast_send: Callable[[bytes], None] | None = None

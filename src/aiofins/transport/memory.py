@@ -44,6 +44,7 @@ class MemoryTransport(Transport):
     """
 
     reconnectable = True
+    reliable = True
 
     def __init__(self, handler: FrameHandler, *, name: str = "memory") -> None:
         self.handler = handler

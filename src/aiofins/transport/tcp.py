@@ -253,6 +253,7 @@ class TcpTransport(Transport):
     reconnectable = True
     fresh_sid_space = True
     default_sid_spaces = DEFAULT_SID_SPACES
+    reliable = True
 
     def __init__(
         self,
