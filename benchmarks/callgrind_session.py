@@ -9,7 +9,10 @@ of interpreter start-up and imports. Cases:
 
 - ``request``: sequential ``await session.request(0x01, 0x01, params)``;
 - ``many``: ``session.request_many`` of 100 commands at a time, window 50
-  (``max_in_flight=50``), per command.
+  (``max_in_flight=50``), per command;
+- ``paced``: sequential requests 5 ms apart (a poller's pace: each answered long before its
+  retransmission timeout), with the default ``rto_bounds``, 100 and 600 requests; also
+  prints how often the deadline watcher woke (its task ran) in the larger run.
 
 By default the retransmission timeout is held at 1.5-2 s (``rto_bounds=(1.5, 2.0)``): under
 valgrind a request takes ~1 ms, so with the adaptive default (20 ms floor) the deadline
@@ -38,6 +41,7 @@ from typing import Any
 
 SMALL, LARGE = 2_000, 12_000
 BATCH = 100
+PACED_SMALL, PACED_LARGE, PACE = 100, 600, 0.005
 
 
 def _workload(case: str, n: int, adaptive: bool) -> None:
@@ -83,7 +87,7 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
 
     params = bytes.fromhex("82006400000001")  # D100, 1 word
     options: dict[str, Any] = {}
-    if not adaptive and "rto_bounds" in inspect.signature(Session).parameters:
+    if not adaptive and case != "paced" and "rto_bounds" in inspect.signature(Session).parameters:
         options["rto_bounds"] = (1.5, 2.0)  # (trees before the adaptive RTO have none)
 
     async def main() -> None:
@@ -98,6 +102,22 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
                 request = session.request
                 for _ in range(n):
                     await request(0x01, 0x01, params, idempotent=True)
+            elif case == "paced":
+                watcher: Any = session._watcher  # counts its task's wake-ups
+                wakes = 0
+                expire = watcher.expire
+
+                def counted(now: float) -> None:
+                    nonlocal wakes
+                    wakes += 1
+                    expire(now)
+
+                watcher.expire = counted
+                request = session.request
+                for _ in range(n):
+                    await request(0x01, 0x01, params, idempotent=True)
+                    await asyncio.sleep(PACE)
+                print(f"wakes {wakes}")
             else:
                 commands = [(0x01, 0x01, params)] * BATCH
                 for _ in range(n // BATCH):
@@ -106,7 +126,7 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
     asyncio.run(main())
 
 
-def _instructions(case: str, n: int, src: str | None, adaptive: bool) -> int:
+def _instructions(case: str, n: int, src: str | None, adaptive: bool) -> tuple[int, str]:
     env = dict(os.environ)
     if src:
         env["PYTHONPATH"] = os.path.abspath(src)
@@ -124,12 +144,12 @@ def _instructions(case: str, n: int, src: str | None, adaptive: bool) -> int:
         ]
         if adaptive:
             command.append("--adaptive")
-        subprocess.run(command, check=True, env=env, capture_output=True)
+        run = subprocess.run(command, check=True, env=env, capture_output=True, text=True)
         with open(out) as f:
             text = f.read()
     match = re.search(r"^(?:summary|totals): (\d+)", text, re.MULTILINE)
     assert match, "no totals in callgrind's output"
-    return int(match.group(1))
+    return int(match.group(1)), run.stdout.strip()
 
 
 def main() -> None:
@@ -143,10 +163,12 @@ def main() -> None:
         _workload(args.inner[0], int(args.inner[1]), args.adaptive)
         return
     for case in args.cases.split(","):
-        small = _instructions(case, SMALL, args.src, args.adaptive)
-        large = _instructions(case, LARGE, args.src, args.adaptive)
-        per = (large - small) / (LARGE - SMALL)
-        print(f"{case:8s} {per / 1000:8.1f}k instructions per request", flush=True)
+        low, high = (PACED_SMALL, PACED_LARGE) if case == "paced" else (SMALL, LARGE)
+        small, _ = _instructions(case, low, args.src, args.adaptive)
+        large, said = _instructions(case, high, args.src, args.adaptive)
+        per = (large - small) / (high - low)
+        extra = f" ({said} in {high} requests)" if said else ""
+        print(f"{case:8s} {per / 1000:8.1f}k instructions per request{extra}", flush=True)
 
 
 if __name__ == "__main__":

@@ -460,3 +460,32 @@ async def test_a_slow_reply_over_udp_is_retransmitted_after_the_rto(anyio_backen
         assert session.stats.retries >= 1
         assert len(responder.received) >= 3
         assert len(set(responder.received[1:])) == 1  # the same frame, the same SID
+
+
+@pytest.mark.anyio
+async def test_answered_requests_do_not_wake_the_deadline_watcher(anyio_backend: object) -> None:
+    """A paced caller (one read every 50 ms, each answered long before its 20 ms RTO): the
+    watcher's timer finds nothing due and its task is not woken (under asyncio: the timer
+    re-arms itself; trio's cancel-scope deadline still wakes it)."""
+    if anyio_backend == "trio":
+        pytest.skip("the watcher sleeps on a cancel scope's deadline under trio")
+    async with (
+        udp_responder() as responder,
+        session_for(responder, retries=2, timeout=1) as session,
+    ):
+        watcher = session._watcher
+        expire = watcher.expire
+        wakes: list[float] = []
+
+        def counted(now: float) -> None:
+            wakes.append(now)
+            expire(now)
+
+        watcher.expire = counted  # type: ignore[method-assign]
+        for word in range(6):
+            response = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert response.data == word_data(responder.received[-1])
+            await anyio.sleep(0.05)  # the pace, past each request's RTO
+        assert session.stats.retries == 0
+        assert len(responder.received) == 6
+        assert wakes == []

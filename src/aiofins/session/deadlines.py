@@ -47,6 +47,19 @@ class Deadlines:
             at = heap[0][0]
         return at
 
+    def live_earliest(self) -> float:
+        """The earliest deadline of a request not yet answered (``inf`` if none); answered
+        requests at the fronts are dropped on the way."""
+        fifo, heap = self.fifo, self.heap
+        while fifo and fifo[0].done:
+            fifo.popleft()
+        while heap and heap[0][2].done:
+            heapq.heappop(heap)
+        at = fifo[0].deadline if fifo else math.inf
+        if heap and heap[0][0] < at:
+            at = heap[0][0]
+        return at
+
     def prune(self, live: int) -> None:
         """Drop answered requests from the fronts; compact if they pile up (``live`` in flight)."""
         fifo, heap = self.fifo, self.heap

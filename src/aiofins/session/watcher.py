@@ -63,6 +63,26 @@ class DeadlineWatcher:
         #: The backend's clock (set by the session on entry).
         self.clock: Callable[[], float] = monotonic
         self.background: Background | None = None
+        self._fire = self.fire  # (bound once: arm() passes it to every timer)
+
+    def fire(self) -> None:
+        """The asyncio timer's callback. Wakes the watcher only if a request is due: when
+        the requests it was armed for were answered meanwhile (a paced caller: one request
+        every scan, answered long before its retransmission timeout), it re-arms for the
+        earliest request still in flight, or sleeps until the next request arms it, without
+        a task step."""
+        self.timer = None
+        waiter = self.waiter
+        if waiter is None or waiter.done():
+            return
+        at = self.deadlines.live_earliest()
+        now = monotonic()
+        if at <= now:
+            waiter.set_result(None)
+            return
+        self.at = at
+        if at != math.inf:
+            self.timer = self.loop.call_at(self.clock() + (at - now), self._fire)
 
     async def run(self) -> None:
         """The only timer: sleeps until the earliest deadline, retransmits or expires what is
@@ -80,7 +100,7 @@ class DeadlineWatcher:
             if loop is not None:
                 waiter = self.waiter = loop.create_future()
                 if at != math.inf:
-                    self.timer = loop.call_at(loop.time() + (at - monotonic()), _wake, waiter)
+                    self.timer = loop.call_at(loop.time() + (at - monotonic()), self._fire)
                 try:
                     await waiter
                 finally:
@@ -108,7 +128,7 @@ class DeadlineWatcher:
             timer = self.timer
             if timer is not None:
                 timer.cancel()
-            self.timer = self.loop.call_at(self.clock() + (deadline - monotonic()), _wake, waiter)
+            self.timer = self.loop.call_at(self.clock() + (deadline - monotonic()), self._fire)
             return
         scope = self.scope
         if scope is not None:
@@ -256,9 +276,3 @@ class DeadlineWatcher:
             err.__cause__ = exc
             exc = err
         p.fail(exc)
-
-
-def _wake(waiter: asyncio.Future[None]) -> None:
-    """The asyncio timer's callback: wake the watcher."""
-    if not waiter.done():
-        waiter.set_result(None)
