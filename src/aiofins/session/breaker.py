@@ -11,7 +11,22 @@ timeout, so a PLC that answers again is found within about one timeout of a call
 from __future__ import annotations
 
 import enum
+import logging
+import math
 import random
+from time import monotonic
+from typing import TYPE_CHECKING
+
+from ..protocol.errors import CircuitOpen, ConnectionLost, FinsTimeout
+from ..protocol.header import FinsAddress
+from .batch import raise_after_a_turn
+from .link import InBackoff
+from .slots import SlotTimeout
+
+if TYPE_CHECKING:
+    from .response import SessionStats
+
+logger = logging.getLogger("aiofins.session")
 
 
 class BreakerState(enum.Enum):
@@ -85,3 +100,54 @@ class CircuitBreaker:
         """A probe ended without an outcome (cancelled, no slot): another may go."""
         if self.state is BreakerState.HALF_OPEN:
             self.state = BreakerState.OPEN
+
+
+# The session's side: what a call does at the breaker (its start, its end), logged.
+
+
+async def admit_call(
+    breaker: CircuitBreaker, stats: SessionStats, dest: FinsAddress, where: str
+) -> None:
+    """Let a call to ``dest`` (via ``where``) through an open breaker as the probe, or fail
+    it at once with :class:`CircuitOpen` (counted in ``stats.breaker_rejects``)."""
+    wait = breaker.admit(monotonic())
+    if wait:
+        stats.breaker_rejects += 1
+        if wait == math.inf:
+            how = "a probe is testing whether it answers again"
+            wait = 0.0
+        else:
+            how = f"the next probe in {wait:.2f} s"
+        await raise_after_a_turn(
+            CircuitOpen(
+                f"{dest} via {where} failed {breaker.failures} calls in a row: "
+                f"failing fast ({how})",
+                retry_after=wait,
+            )
+        )
+
+
+def call_answered(breaker: CircuitBreaker, where: str) -> None:
+    """A call got an answer (any end code): the breaker closes (logged if it was open)."""
+    if breaker.succeeded():
+        logger.info("%s answers again: circuit breaker closed", where, extra={"endpoint": where})
+
+
+def call_ended(breaker: CircuitBreaker, exc: BaseException, timeout: float, where: str) -> None:
+    """A call raised ``exc`` (its ``timeout`` was that): a failure of the link (no answer,
+    link lost) counts towards opening the breaker (logged when it opens); a call failed
+    before it was sent (slot or SID wait, open breaker, reconnect backoff) or cancelled
+    only gives back the probe's turn."""
+    if isinstance(exc, (FinsTimeout, ConnectionLost)) and not isinstance(
+        exc, (SlotTimeout, CircuitOpen, InBackoff)
+    ):
+        if breaker.failed(monotonic(), timeout):
+            logger.warning(
+                "%s: %d calls in a row got no answer: circuit breaker open, failing fast "
+                "while a probe tests the link",
+                where,
+                breaker.failures,
+                extra={"endpoint": where},
+            )
+    else:
+        breaker.released()

@@ -29,7 +29,6 @@ from ..hooks import (
 )
 from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
-    CircuitOpen,
     CommandError,
     ConnectionLost,
     EndCodeError,
@@ -39,9 +38,6 @@ from ..protocol.errors import (
 from ..protocol.frames import (
     BUSY_CODES,
     ERROR_BITS,
-    MRC,
-    SID,
-    SRC,
     check_command,
     end_code_error,
     header_prefix,
@@ -53,8 +49,9 @@ from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
 from .batch import raise_after_a_turn, request_many
-from .breaker import BreakerState, CircuitBreaker
-from .link import InBackoff, Link
+from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, call_ended
+from .link import Link
+from .log import cpu_flags_seen, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
 from .response import (
     RING_MASK,
@@ -363,7 +360,7 @@ class Session:
         (The unused second argument lets asyncio call this as ``datagram_received``.)
         """
         if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
-            self._log_frame("received", frame)
+            log_frame(self.transport.description, "received", frame)
         if len(frame) < 14:
             self.stats.malformed += 1
             return
@@ -376,7 +373,7 @@ class Session:
             if p is None and frame[12] & 0x80 and len(frame) >= 16:
                 p = match_relay_error(pending, frame)
             if p is None:
-                self._unmatched(key, frame, sids)
+                log_unmatched(self, key, sids)
                 return
             key = p.key
         if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
@@ -447,84 +444,6 @@ class Session:
                 self._deadlines.prune(len(pending))
         if self._deadlines.heap:
             self._deadlines.prune(len(pending))
-
-    def _unmatched(self, key: int, frame: bytes, sids: SidSpace) -> None:
-        """A reply no request waits for: counted (late, duplicate or unsolicited; see
-        :meth:`SidSpace.unmatched`), and logged when it says something about the link."""
-        kind, lateness = sids.unmatched(self.stats, key)
-        if kind == "duplicate":
-            if self._spaces.extra:  # what the peer shows holds for every socket to it
-                self._spaces.share_linger(sids)
-            if lateness:
-                linger = sids.linger
-                if linger < 2 * self._linger_logged:
-                    return
-                self._linger_logged = linger
-                logger.warning(
-                    "%s: a duplicate reply came %.3f s after its request was answered; "
-                    "SIDs now linger %.3f s after a reply",
-                    self.transport.description,
-                    lateness,
-                    linger,
-                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
-                )
-        elif kind == "late":
-            late = self.stats.late_replies
-            if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
-                logger.warning(
-                    "%s: %d late replies so far (each came after its request was given up "
-                    "on): the timeout is too short for this PLC or route",
-                    self.transport.description,
-                    late,
-                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
-                )
-            elif logger.isEnabledFor(_DEBUG):
-                logger.debug(
-                    "%s: late reply for SID %d (its request was given up on)",
-                    self.transport.description,
-                    key & 0xFF,
-                    extra={"endpoint": self.transport.description, "sid": key & 0xFF},
-                )
-
-    def _log_frame(self, direction: str, frame: bytes) -> None:
-        """DEBUG: one frame sent or received, with its SID, command and bytes in hex."""
-        where = self.transport.description
-        if len(frame) < 12:
-            logger.debug("%s: %s %s", where, direction, frame.hex(" "), extra={"endpoint": where})
-            return
-        logger.debug(
-            "%s: %s SID %d command %02X%02X: %s",
-            where,
-            direction,
-            frame[SID],
-            frame[MRC],
-            frame[SRC],
-            frame.hex(" "),
-            extra={
-                "endpoint": where,
-                "sid": frame[SID],
-                "command": f"{frame[MRC]:02X}{frame[SRC]:02X}",
-            },
-        )
-
-    def cpu_flags_seen(self, end_code: int) -> None:
-        """A reply's end code carries CPU error flags (0040 non-fatal, 0080 fatal error):
-        not an error of the call, but logged as a WARNING, once per flag and session."""
-        new = end_code & CPU_ERROR_FLAGS & ~self._flags_logged
-        if not new:
-            return
-        self._flags_logged |= new
-        where = self.transport.description
-        for bit, what in ((0x80, "a fatal CPU error"), (0x40, "a non-fatal CPU error")):
-            if new & bit:
-                logger.warning(
-                    "%s reports %s (end code %04X flag %04X); see the CPU's error log",
-                    where,
-                    what,
-                    end_code,
-                    bit,
-                    extra={"endpoint": where, "end_code": f"{end_code:04X}"},
-                )
 
     def emit(self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any) -> None:
         """Hand one request event (:class:`RequestSent`, :class:`ResponseReceived`,
@@ -612,45 +531,6 @@ class Session:
         again, unless its late reply comes first: ``max(quarantine_factor x timeout,
         min_quarantine)`` from now."""
         return now + max(self.quarantine_factor * timeout, self.min_quarantine)
-
-    # ----------------------------------------------------------------- circuit breaker
-
-    async def _admit(self, dest: FinsAddress) -> None:
-        """Let a call through an open breaker as the probe, or fail it at once."""
-        wait = self._breaker.admit(monotonic())
-        if wait:
-            self.stats.breaker_rejects += 1
-            if wait == math.inf:
-                how = "a probe is testing whether it answers again"
-                wait = 0.0
-            else:
-                how = f"the next probe in {wait:.2f} s"
-            await raise_after_a_turn(
-                CircuitOpen(
-                    f"{dest} via {self.transport.description} failed "
-                    f"{self._breaker.failures} calls in a row: failing fast ({how})",
-                    retry_after=wait,
-                )
-            )
-
-    def _call_failed(self, timeout: float) -> None:
-        breaker = self._breaker
-        if breaker.failed(monotonic(), timeout):
-            logger.warning(
-                "%s: %d calls in a row got no answer: circuit breaker open, failing fast "
-                "while a probe tests the link",
-                self.transport.description,
-                breaker.failures,
-                extra={"endpoint": self.transport.description},
-            )
-
-    def _call_answered(self) -> None:
-        if self._breaker.succeeded():
-            logger.info(
-                "%s answers again: circuit breaker closed",
-                self.transport.description,
-                extra={"endpoint": self.transport.description},
-            )
 
     # ----------------------------------------------------------------- the hot path
     # One request's steps, used by request() and by request_many()'s batches (batch.py):
@@ -770,7 +650,7 @@ class Session:
         if hooks is not None and hooks.request_sent:
             self.emit(hooks.request_sent, RequestSent, p)
         if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
-            self._log_frame("sent", frame)
+            log_frame(self.transport.description, "sent", frame)
         return frame
 
     def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None:
@@ -795,7 +675,8 @@ class Session:
         self.stats.completed += 1
         response: Response = _new(Response)  # new_response(), inlined
         if raw:
-            self.cpu_flags_seen(raw)
+            where = self.transport.description
+            self._flags_logged = cpu_flags_seen(where, raw, self._flags_logged)
             _set_end_code(response, EndCode(raw))
         else:
             _set_end_code(response, _NORMAL)
@@ -809,7 +690,8 @@ class Session:
         made so far, fewer than ``busy_retries``; ``None`` otherwise."""
         raw = (frame[12] << 8) | frame[13]
         if raw & CPU_ERROR_FLAGS:
-            self.cpu_flags_seen(raw)
+            where = self.transport.description
+            self._flags_logged = cpu_flags_seen(where, raw, self._flags_logged)
         if (raw & END_CODE_MASK) in BUSY_CODES and busy < self.busy_retries:
             return self.busy_backoff * (1 << busy)
         return None
@@ -892,7 +774,7 @@ class Session:
             check_command(mrc, src, params)  # raises the error that says which
         end = monotonic() + timeout
         if self._breaker.state is not _CLOSED_BREAKER:
-            await self._admit(dest)
+            await admit_call(self._breaker, self.stats, dest, self.transport.description)
         busy = 0
         try:
             while True:
@@ -985,7 +867,7 @@ class Session:
                 response = self.response(frame)
                 if response is not None:
                     if self._breaker.failures:
-                        self._call_answered()
+                        call_answered(self._breaker, self.transport.description)
                     return response
                 pause = self.busy_pause(frame, busy)
                 if pause is not None and pause < end - monotonic():
@@ -994,16 +876,10 @@ class Session:
                     busy += 1
                     continue
                 if self._breaker.failures:
-                    self._call_answered()
+                    call_answered(self._breaker, self.transport.description)
                 raise self.end_code_failure(frame, mrc, src)
-        except (FinsTimeout, ConnectionLost) as exc:
-            if not isinstance(exc, (SlotTimeout, CircuitOpen, InBackoff)):
-                self._call_failed(timeout)
-            else:
-                self._breaker.released()
-            raise
-        except BaseException:
-            self._breaker.released()
+        except BaseException as exc:
+            call_ended(self._breaker, exc, timeout, self.transport.description)
             raise
 
     def _polled(self, answered: bool) -> None:
@@ -1064,8 +940,9 @@ class Session:
         the receive callback: keep it short); an exception it raises ends the batch the
         same way and is raised to the caller.
         """
-        if self._breaker.state is not _CLOSED_BREAKER:
-            await self._admit(dest or self.dest)
+        breaker = self._breaker
+        if breaker.state is not _CLOSED_BREAKER:
+            await admit_call(breaker, self.stats, dest or self.dest, self.transport.description)
         try:
             responses = await request_many(
                 self,
@@ -1077,20 +954,15 @@ class Session:
                 window=window,
                 on_response=on_response,
             )
-        except (FinsTimeout, ConnectionLost) as exc:
-            if not isinstance(exc, (SlotTimeout, CircuitOpen, InBackoff)):
-                self._call_failed(self.timeout if timeout is None else timeout)
-            else:
-                self._breaker.released()
-            raise
         except EndCodeError:
-            self._call_answered()
+            call_answered(breaker, self.transport.description)
             raise
-        except BaseException:
-            self._breaker.released()
+        except BaseException as exc:
+            timeout = self.timeout if timeout is None else timeout
+            call_ended(breaker, exc, timeout, self.transport.description)
             raise
-        if self._breaker.failures:
-            self._call_answered()
+        if breaker.failures:
+            call_answered(breaker, self.transport.description)
         return responses
 
     async def _sid_anywhere(

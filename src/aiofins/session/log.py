@@ -1,0 +1,102 @@
+"""What the session logs about frames: each frame at DEBUG, replies no request waits for,
+CPU error flags a reply carries. (Kept out of the hot path's module: none of it runs for a
+normal reply unless DEBUG logging is on.)"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+from ..protocol.endcodes import CPU_ERROR_FLAGS
+from ..protocol.frames import MRC, SID, SRC
+from .sids import SidSpace
+
+if TYPE_CHECKING:
+    from .core import Session
+
+logger = logging.getLogger("aiofins.session")
+_DEBUG = logging.DEBUG
+
+
+def log_frame(where: str, direction: str, frame: bytes) -> None:
+    """DEBUG: one frame sent or received via ``where``, with its SID, command and bytes."""
+    if len(frame) < 12:
+        logger.debug("%s: %s %s", where, direction, frame.hex(" "), extra={"endpoint": where})
+        return
+    logger.debug(
+        "%s: %s SID %d command %02X%02X: %s",
+        where,
+        direction,
+        frame[SID],
+        frame[MRC],
+        frame[SRC],
+        frame.hex(" "),
+        extra={
+            "endpoint": where,
+            "sid": frame[SID],
+            "command": f"{frame[MRC]:02X}{frame[SRC]:02X}",
+        },
+    )
+
+
+def cpu_flags_seen(where: str, end_code: int, logged: int) -> int:
+    """A reply's end code carries CPU error flags (0040 non-fatal, 0080 fatal error): not
+    an error of the call, but logged as a WARNING, once per flag and session (``logged``:
+    the flags logged so far). Returns the flags logged now."""
+    new = end_code & CPU_ERROR_FLAGS & ~logged
+    if not new:
+        return logged
+    for bit, what in ((0x80, "a fatal CPU error"), (0x40, "a non-fatal CPU error")):
+        if new & bit:
+            logger.warning(
+                "%s reports %s (end code %04X flag %04X); see the CPU's error log",
+                where,
+                what,
+                end_code,
+                bit,
+                extra={"endpoint": where, "end_code": f"{end_code:04X}"},
+            )
+    return logged | new
+
+
+def log_unmatched(session: Session, key: int, sids: SidSpace) -> None:
+    """A reply no request of ``session`` waits for (SID space ``sids``, reply key ``key``):
+    counted (late, duplicate or unsolicited; see :meth:`SidSpace.unmatched`), and logged
+    when it says something about the link (a duplicate that lengthens the linger, late
+    replies at 2, 4, 8 ...)."""
+    kind, lateness = sids.unmatched(session.stats, key)
+    where = session.transport.description
+    if kind == "duplicate":
+        spaces = session._spaces
+        if spaces.extra:  # what the peer shows holds for every socket to it
+            spaces.share_linger(sids)
+        if lateness:
+            linger = sids.linger
+            if linger < 2 * session._linger_logged:
+                return
+            session._linger_logged = linger
+            logger.warning(
+                "%s: a duplicate reply came %.3f s after its request was answered; "
+                "SIDs now linger %.3f s after a reply",
+                where,
+                lateness,
+                linger,
+                extra={"endpoint": where, "sid": key & 0xFF},
+            )
+    elif kind == "late":
+        late = session.stats.late_replies
+        if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
+            logger.warning(
+                "%s: %d late replies so far (each came after its request was given up "
+                "on): the timeout is too short for this PLC or route",
+                where,
+                late,
+                extra={"endpoint": where, "sid": key & 0xFF},
+            )
+        elif logger.isEnabledFor(_DEBUG):
+            logger.debug(
+                "%s: late reply for SID %d (its request was given up on)",
+                where,
+                key & 0xFF,
+                extra={"endpoint": where, "sid": key & 0xFF},
+            )
