@@ -62,7 +62,7 @@ from .response import (
     _set_end_code,
     _set_frame,
 )
-from .sids import MAX_LINGER, SID_WAIT, SidSpace
+from .sids import MAX_LINGER, SidSpace
 from .slots import (
     AsyncioPending,
     DestState,
@@ -72,7 +72,7 @@ from .slots import (
     SlotTimeout,
     no_free_sid_message,
 )
-from .spaces import ExtraSpace, InFlight, SidSpaces
+from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
 from .states import LinkState
 from .watcher import DeadlineWatcher, Expired
 
@@ -802,28 +802,17 @@ class Session:
                         sent = self.start(
                             p, state, mrc, src, params, retries, now, end, attempt_timeout
                         )
-                        if sent is None:
-                            # The SID found is free and stays so until start() takes it.
-                            key, space = await self._sid_anywhere(state, end, timeout)
-                            if space is None:
-                                state.cursor = key & 0xFF
-                            else:  # on another socket or connection
-                                space.dest_state(state).cursor = key & 0xFF
-                                transport = space.transport
-                            now = monotonic()
-                            sent = self.start(
+                        if sent is None:  # no free SID at hand: wait for one
+                            sent, transport, now = await start_when_free(
+                                self,
                                 p,
                                 state,
-                                mrc,
-                                src,
-                                params,
+                                (mrc, src, params),
                                 retries,
-                                now,
                                 end,
                                 attempt_timeout,
-                                space,
+                                timeout,
                             )
-                            assert sent is not None
                         frame = sent
                         try:
                             fast_send = transport.fast_send
@@ -964,70 +953,6 @@ class Session:
         if breaker.failures:
             call_answered(breaker, self.transport.description)
         return responses
-
-    async def _sid_anywhere(
-        self, state: DestState, end: float, timeout: float
-    ) -> tuple[int, ExtraSpace | None]:
-        """A free SID (and the extra space it belongs to, ``None``: the session's own) when
-        the next one of the session's own space is taken: another of its own, one of an
-        open extra space, or one of a space opened now (see :mod:`.spaces`). At the cap,
-        wait for the first to come free in any space, up to the call's deadline ``end``
-        (then :class:`SlotTimeout`). Running out is counted and logged (once until SIDs
-        are free again)."""
-        sids, spaces = self.sids, self._spaces
-        key = sids.allocate(state)
-        if key is not None:
-            if sids.short:
-                sids.short = False
-                spaces.enough()
-            return key, None
-        got = spaces.allocate(state)
-        while got is None and spaces.may_open(monotonic()):
-            if not await spaces.open(self.source, self._nodes_in_use(), end - monotonic()):
-                break
-            got = spaces.allocate(state)
-        if got is not None:
-            if sids.short:
-                sids.short = False
-                spaces.enough()
-            return got
-        self.stats.sid_exhausted += 1
-        if not sids.short:
-            sids.short = True
-            if spaces.limit > 1:
-                spaces.short(state.address)
-            else:
-                logger.warning(
-                    "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
-                    "%d lingering): requests wait for one; lower the rate or the linger",
-                    self.transport.description,
-                    state.address,
-                    len(sids.pending),
-                    len(sids.quarantine),
-                    len(sids.lingering),
-                    extra={"endpoint": self.transport.description, "dest": str(state.address)},
-                )
-        # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
-        # behind it, first come first served.
-        lock = state.sid_lock
-        if lock is None:
-            lock = state.sid_lock = anyio.Lock()
-        with anyio.move_on_after(max(end - monotonic(), 0.0)):
-            async with lock:
-                while True:
-                    key = sids.allocate(state)
-                    if key is not None:
-                        return key, None
-                    got = spaces.allocate(state)
-                    if got is not None:
-                        return got
-                    now = monotonic()
-                    if spaces.may_open(now):
-                        await spaces.open(self.source, self._nodes_in_use(), end - now)
-                        continue
-                    wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
-                    await anyio.sleep(wait)
-        raise self.no_free_sid(state, timeout)
 
     def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None:
         """For a batch that found no free SID of the transport's own: one of an open extra

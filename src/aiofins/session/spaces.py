@@ -35,10 +35,11 @@ from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .background import Background
 from .nodes import SOURCE_NODES
-from .sids import SidSpace
+from .sids import SID_WAIT, SidSpace
 from .slots import DestState, Pending
 
 if TYPE_CHECKING:
+    from .core import Session
     from .response import SessionStats
 
 logger = logging.getLogger("aiofins.session")
@@ -458,3 +459,97 @@ class SidSpaces:
     def enough(self) -> None:
         """A SID was found again: the next shortage is logged again."""
         self._capped = False
+
+
+async def sid_anywhere(
+    session: Session, state: DestState, end: float, timeout: float
+) -> tuple[int, ExtraSpace | None]:
+    """A free SID (and the extra space it belongs to, ``None``: the session's own) when
+    the next one of the session's own space is taken: another of its own, one of an
+    open extra space, or one of a space opened now (see :mod:`.spaces`). At the cap,
+    wait for the first to come free in any space, up to the call's deadline ``end``
+    (then :class:`SlotTimeout`). Running out is counted and logged (once until SIDs
+    are free again)."""
+    sids, spaces = session.sids, session._spaces
+    key = sids.allocate(state)
+    if key is not None:
+        if sids.short:
+            sids.short = False
+            spaces.enough()
+        return key, None
+    got = spaces.allocate(state)
+    while got is None and spaces.may_open(monotonic()):
+        if not await spaces.open(session.source, session._nodes_in_use(), end - monotonic()):
+            break
+        got = spaces.allocate(state)
+    if got is not None:
+        if sids.short:
+            sids.short = False
+            spaces.enough()
+        return got
+    session.stats.sid_exhausted += 1
+    if not sids.short:
+        sids.short = True
+        if spaces.limit > 1:
+            spaces.short(state.address)
+        else:
+            logger.warning(
+                "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
+                "%d lingering): requests wait for one; lower the rate or the linger",
+                session.transport.description,
+                state.address,
+                len(sids.pending),
+                len(sids.quarantine),
+                len(sids.lingering),
+                extra={"endpoint": session.transport.description, "dest": str(state.address)},
+            )
+    # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
+    # behind it, first come first served.
+    lock = state.sid_lock
+    if lock is None:
+        lock = state.sid_lock = anyio.Lock()
+    with anyio.move_on_after(max(end - monotonic(), 0.0)):
+        async with lock:
+            while True:
+                key = sids.allocate(state)
+                if key is not None:
+                    return key, None
+                got = spaces.allocate(state)
+                if got is not None:
+                    return got
+                now = monotonic()
+                if spaces.may_open(now):
+                    await spaces.open(session.source, session._nodes_in_use(), end - now)
+                    continue
+                wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
+                await anyio.sleep(wait)
+    raise session.no_free_sid(state, timeout)
+
+
+async def start_when_free(
+    session: Session,
+    p: Pending,
+    state: DestState,
+    command: tuple[int, int, bytes],
+    retries: int,
+    end: float,
+    cap: float | None,
+    timeout: float,
+) -> tuple[bytes, Transport, float]:
+    """:meth:`Session.start` for a request that found the next SIDs of ``state`` taken:
+    once :func:`sid_anywhere` found a free one (waiting up to ``end``), ``p`` is started
+    on it (``timeout``: the call's, for the error). Returns the frame, the transport to
+    send it on and the time it was started."""
+    mrc, src, params = command
+    # The SID found is free and stays so until start() takes it.
+    key, space = await sid_anywhere(session, state, end, timeout)
+    transport = session.transport
+    if space is None:
+        state.cursor = key & 0xFF
+    else:  # on another socket or connection
+        space.dest_state(state).cursor = key & 0xFF
+        transport = space.transport
+    now = monotonic()
+    frame = session.start(p, state, mrc, src, params, retries, now, end, cap, space)
+    assert frame is not None
+    return frame, transport, now
