@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 from collections.abc import Callable, Sequence
 from time import monotonic
 from types import TracebackType
@@ -53,6 +52,7 @@ from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, ca
 from .link import Link
 from .log import cpu_flags_seen, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
+from .options import check_options
 from .response import (
     RING_MASK,
     Response,
@@ -62,7 +62,7 @@ from .response import (
     _set_end_code,
     _set_frame,
 )
-from .sids import MAX_LINGER, SidSpace
+from .sids import SidSpace
 from .slots import (
     AsyncioPending,
     DestState,
@@ -144,42 +144,24 @@ class Session:
         breaker_cooldown: tuple[float, float] = (0.05, 2.0),
         hooks: EventHooks | None = None,
     ) -> None:
-        if not 0 <= gct <= 0xFF:
-            raise CommandError(f"GCT {gct} out of range 0..255")
-        if not 1 <= max_in_flight <= 255:
-            raise CommandError(f"max_in_flight {max_in_flight} out of range 1..255")
-        if timeout <= 0:
-            raise CommandError(f"timeout {timeout} must be positive")
-        if attempt_timeout is not None and attempt_timeout <= 0:
-            raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
-        for name, count in (
-            ("retries", retries),
-            ("busy_retries", busy_retries),
-            ("breaker_threshold", breaker_threshold),
-        ):
-            if count < 0:
-                raise CommandError(f"{name} {count} must not be negative")
-        if busy_backoff < 0:
-            raise CommandError(f"busy_backoff {busy_backoff} must not be negative")
-        if quarantine_factor <= 0:
-            raise CommandError(f"quarantine_factor {quarantine_factor} must be positive")
-        if not 0 <= min_quarantine < math.inf:
-            raise CommandError(f"min_quarantine {min_quarantine} must be 0 or more seconds")
-        if not 0 <= min_linger <= MAX_LINGER:
-            raise CommandError(f"min_linger {min_linger} must be 0..{MAX_LINGER} seconds")
-        if max_sid_spaces is None:
-            max_sid_spaces = transport.default_sid_spaces
-        elif not 1 <= max_sid_spaces <= 254:
-            raise CommandError(f"max_sid_spaces {max_sid_spaces} out of range 1..254")
-        for name, (low, high) in (
-            ("reconnect_backoff", reconnect_backoff),
-            ("breaker_cooldown", breaker_cooldown),
-        ):
-            if not 0 <= low <= high:
-                raise CommandError(f"{name} {(low, high)} must be (min, max), 0 <= min <= max")
-        low, high = rto_bounds
-        if not 0 < low <= high < math.inf:
-            raise CommandError(f"rto_bounds {rto_bounds} must be (min, max), 0 < min <= max")
+        max_sid_spaces = check_options(
+            gct=gct,
+            max_in_flight=max_in_flight,
+            timeout=timeout,
+            attempt_timeout=attempt_timeout,
+            retries=retries,
+            busy_retries=busy_retries,
+            breaker_threshold=breaker_threshold,
+            busy_backoff=busy_backoff,
+            quarantine_factor=quarantine_factor,
+            min_quarantine=min_quarantine,
+            min_linger=min_linger,
+            max_sid_spaces=max_sid_spaces,
+            default_sid_spaces=transport.default_sid_spaces,
+            reconnect_backoff=reconnect_backoff,
+            breaker_cooldown=breaker_cooldown,
+            rto_bounds=rto_bounds,
+        )
         self.transport = transport
         self.source = source
         self.dest = dest
