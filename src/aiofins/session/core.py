@@ -102,7 +102,8 @@ class Session:
     ``idempotent=True``; others only if the caller passes ``retries``) are sent again with
     the same frame and SID up to ``retries`` times, each after the destination's adaptive
     retransmission timeout (RFC 6298 from measured round trips, within ``rto_bounds``,
-    doubling per retransmission); the last attempt waits until the call's deadline.
+    doubling per retransmission; over a reliable stream, FINS/TCP, the call's share
+    instead); the last attempt waits until the call's deadline.
     ``attempt_timeout`` caps each attempt's wait instead, for those who want it.
 
     A SID given up on stays quarantined until its late reply comes, or for
@@ -840,18 +841,26 @@ class Session:
                     if self._breaker.failures:
                         call_answered(self._breaker, self.transport.description)
                     return response
-                pause = self.busy_pause(frame, busy)
-                if pause is not None and pause < end - monotonic():
-                    self.stats.busy_retries += 1
-                    await anyio.sleep(pause)
-                    busy += 1
-                    continue
-                if self._breaker.failures:
-                    call_answered(self._breaker, self.transport.description)
-                raise self.end_code_failure(frame, mrc, src)
+                await self._busy_pause_or_raise(frame, busy, end, mrc, src)
+                busy += 1
         except BaseException as exc:
             call_ended(self._breaker, exc, timeout, self.transport.description)
             raise
+
+    async def _busy_pause_or_raise(
+        self, frame: bytes, busy: int, end: float, mrc: int, src: int
+    ) -> None:
+        """A reply with an error end code: pause before sending the command again if the
+        PLC was too busy (see :meth:`busy_pause`) and the call's deadline ``end`` leaves
+        time, else raise the end code's error (the PLC answered: the breaker closes)."""
+        pause = self.busy_pause(frame, busy)
+        if pause is not None and pause < end - monotonic():
+            self.stats.busy_retries += 1
+            await anyio.sleep(pause)
+            return
+        if self._breaker.failures:
+            call_answered(self._breaker, self.transport.description)
+        raise self.end_code_failure(frame, mrc, src)
 
     def _polled(self, answered: bool) -> None:
         """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
