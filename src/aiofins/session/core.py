@@ -582,6 +582,8 @@ class Session:
             sids = space.sids
             mine = space.dest_state(state)
         pending = sids.pending
+        # SidSpace.take(), inlined (a call saved per request): a change to one is a change
+        # to both.
         key = mine.base | mine.cursor
         if (
             key in pending

@@ -78,7 +78,8 @@ class SidSpace:
     def take(self, state: DestState, now: float) -> int | None:
         """The key of a free SID for ``state``'s destination, next in round-robin order
         (``None``: all 256 are in flight, quarantined or lingering). Cheap when the next
-        one is free, as it nearly always is."""
+        one is free, as it nearly always is. ``Session.start()`` inlines it: keep the two
+        alike."""
         key = state.base | state.cursor
         if (
             key in self.pending
