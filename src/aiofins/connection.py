@@ -5,7 +5,9 @@ Node addressing defaults, all overridable:
 * UDP: the PLC's node (DA1) is the last octet of its IPv4 address (Omron's automatic
   address conversion; a host name is resolved first), our node (SA1) the last octet of the
   local address that routes to it; ``dest=``/``src=`` (or ``?dest=``/``?src=``/``?node=`` in
-  the URL) override them.
+  the URL) override them. Our node is one no other session of the process uses towards that
+  host:port (a PLC replies to the last port it saw for a node): a second session gets
+  another one, and a ``src`` named in use there is refused (see :mod:`.session.nodes`).
 * FINS/TCP: both nodes come from the handshake (we ask the PLC to assign ours).
 * Host Link: the CPU unit behind the serial port (``0.0.0``) from ``0.0.0``.
 """
@@ -15,7 +17,7 @@ from __future__ import annotations
 import inspect
 import socket
 from collections.abc import AsyncIterator, Callable, Mapping
-from contextlib import asynccontextmanager
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import Any
 
 import anyio
@@ -36,7 +38,8 @@ from .protocol.inputs import seconds, shown, whole_number
 from .protocol.limits import NetworkType, RouteLimits, limits_for
 from .protocol.values import WordOrder
 from .session import Session
-from .transport.base import Transport
+from .session.nodes import SOURCE_NODES
+from .transport.base import Transport, url_host
 from .transport.serial import SerialTransport
 from .transport.tcp import DEFAULT_CONNECT_TIMEOUT, TcpTransport
 from .transport.udp import UdpTransport
@@ -62,14 +65,17 @@ def _address(value: FinsAddress | str | None) -> FinsAddress | None:
 
 
 def local_node_towards(host: str, avoid: int | None = None) -> int:
-    """Last octet of the local IPv4 address that routes to ``host`` (no packet is sent)."""
+    """Last octet of the local IPv4 address that routes to ``host`` (no packet is sent); a
+    ``host`` that is no IPv4 address gets the fallback (it is not looked up: that would
+    block the event loop)."""
     node: int | None = None
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            probe.connect((host, 9600))
-            node = node_from_host(probe.getsockname()[0])
-    except OSError:
-        node = None
+    if node_from_host(host) is not None:
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.connect((host, 9600))
+                node = node_from_host(probe.getsockname()[0])
+        except OSError:
+            node = None
     if node is None or node == avoid:
         node = 254 if avoid != 254 else 253
     return node
@@ -105,15 +111,41 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
     )
 
 
+async def lookup(host: str, port: int, *, family: int = 0, kind: int = 0) -> list[Any]:
+    """``getaddrinfo`` without blocking the event loop: every host name that
+    :func:`connect` and the pool look up goes through here (the transports look theirs up
+    when they open)."""
+    return list(await anyio.getaddrinfo(host, port, family=family, type=kind))
+
+
 async def _ipv4_of(host: str, port: int) -> str | None:
     """``host`` itself if it is an IPv4 address, else its first IPv4 address (``None``: none)."""
     if node_from_host(host) is not None or ":" in host:
         return host
     try:
-        infos = await anyio.getaddrinfo(host, port, family=socket.AF_INET, type=socket.SOCK_DGRAM)
+        infos = await lookup(host, port, family=socket.AF_INET, kind=socket.SOCK_DGRAM)
     except OSError:
         return None
     return str(infos[0][4][0]) if infos else None
+
+
+async def peer_link(endpoint: Endpoint) -> str:
+    """Where a session to ``endpoint`` sends its frames, as sessions are told apart by the
+    PLC: a host name is resolved as the UDP transport resolves it (``localhost`` and
+    ``127.0.0.1`` are one Ethernet unit, which keeps one reply port per source node, and one
+    FINS/TCP node per connection); a serial device, or a name that does not resolve (the
+    connect fails on its own), is the link as written."""
+    if endpoint.scheme == "serial":
+        return endpoint.link
+    kind = socket.SOCK_DGRAM if endpoint.scheme == "udp" else socket.SOCK_STREAM
+    try:
+        infos = await lookup(endpoint.host, endpoint.port, kind=kind)
+    except OSError:
+        return endpoint.link
+    if not infos:
+        return endpoint.link
+    address = infos[0][4]
+    return f"{endpoint.scheme}://{url_host(str(address[0]))}:{address[1]}"
 
 
 async def default_addresses(
@@ -204,8 +236,7 @@ def _flag(name: str, value: object) -> bool:
     return value
 
 
-@asynccontextmanager
-async def connect(
+def connect(
     url: str | None = None,
     *,
     transport: Transport | None = None,
@@ -222,7 +253,7 @@ async def connect(
     read_only: bool = False,
     hooks: EventHooks | None = None,
     **transport_options: Any,
-) -> AsyncIterator[Client]:
+) -> AbstractAsyncContextManager[Client]:
     """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
 
     ``networks`` names the networks a routed request crosses (their smallest limits apply);
@@ -255,7 +286,61 @@ async def connect(
     ``transport=`` instead of a URL runs the client over a transport made by the caller, e.g.
     :class:`~aiofins.transport.MemoryTransport` around a virtual PLC (tests without sockets);
     ``dest`` then defaults to ``0.1.0`` and ``src`` to ``0.254.0``.
+
+    UDP: every session of the process to one host:port has a source node of its own (a PLC
+    replies to the last port it saw for a node, so two sockets sharing one steal each
+    other's replies). The default (above) is kept unless another session there uses it;
+    then the session gets a free node, 254 down. A ``src`` named here or in the URL whose
+    node another session to that host:port uses is refused with :class:`CommandError`.
     """
+    return _connect(
+        url,
+        transport=transport,
+        dest=dest,
+        src=src,
+        timeout=timeout,
+        retries=retries,
+        max_in_flight=max_in_flight,
+        max_sid_spaces=max_sid_spaces,
+        gct=gct,
+        networks=networks,
+        limits=limits,
+        word_order=word_order,
+        read_only=read_only,
+        hooks=hooks,
+        source_held=False,
+        **transport_options,
+    )
+
+
+def pooled_connect(url: str, **options: Any) -> AbstractAsyncContextManager[Client]:
+    """:func:`connect` for a :class:`~aiofins.Pool`'s session: its UDP source (``src=``)
+    is held in :data:`~aiofins.session.nodes.SOURCE_NODES` by the pool already, which chose
+    it there with :meth:`~aiofins.session.nodes.SourceNodes.source_for`."""
+    return _connect(url, source_held=True, **options)
+
+
+@asynccontextmanager
+async def _connect(
+    url: str | None = None,
+    *,
+    transport: Transport | None = None,
+    dest: FinsAddress | str | None = None,
+    src: FinsAddress | str | None = None,
+    timeout: float | None = None,
+    retries: int = 2,
+    max_in_flight: int | None = None,
+    max_sid_spaces: int | None = None,
+    gct: int = 2,
+    networks: tuple[NetworkType, ...] = (),
+    limits: RouteLimits | None = None,
+    word_order: WordOrder | str = WordOrder.LOW_FIRST,
+    read_only: bool = False,
+    hooks: EventHooks | None = None,
+    source_held: bool,
+    **transport_options: Any,
+) -> AsyncIterator[Client]:
+    """:func:`connect`; ``source_held``: the caller holds the UDP source node (``src``)."""
     if url is None and transport is None:
         raise CommandError("the connection URL must be text (or give transport=); got None")
     if url is not None and transport is not None:
@@ -276,12 +361,18 @@ async def connect(
     check_options(transport_options)
     endpoint: Endpoint | None = None
     guarded = read_only
+    held: tuple[str, int] | None = None  # our source node in SOURCE_NODES (UDP)
     if transport is None:
         assert url is not None
         endpoint = parse_endpoint(url)
         guarded = guarded or bool(option_value("read_only", endpoint.option("read_only", "0")))
         d, s = await default_addresses(endpoint, dest, src)
         transport = make_transport(endpoint, **transport_options)
+        if endpoint.scheme == "udp" and not source_held:
+            link = await peer_link(endpoint)
+            named = src is not None or endpoint.option("src") is not None
+            s = SOURCE_NODES.source_for(link, s, named=named, avoid={d.node}, where=endpoint.key)
+            held = (link, s.node)
     else:
         if not isinstance(transport, Transport):
             raise CommandError(f"transport must be a Transport, got {type(transport).__name__}")
@@ -292,36 +383,40 @@ async def connect(
             )
         d = _address(dest) or FinsAddress(0, 1, 0)
         s = _address(src) or FinsAddress(0, 254, 0)
-    serial = endpoint is not None and endpoint.scheme == "serial"
-    route = limits or limits_for(*(networks or ((NetworkType.HOST_LINK,) if serial else ())))
-    session = Session(
-        transport,
-        source=s,
-        dest=d,
-        gct=gct,
-        max_in_flight=5 if max_in_flight is None else max_in_flight,
-        timeout=(
-            timeout
-            if timeout is not None
-            else DEFAULT_TIMEOUT
-            if endpoint is None
-            else request_timeout(endpoint)
-        ),
-        retries=retries,
-        max_sid_spaces=_sid_spaces(endpoint, max_sid_spaces),
-        hooks=hooks,
-    )
-    async with session:
-        if (
-            transport.remote_node is not None
-            and dest is None
-            and (
-                endpoint is None
-                or (endpoint.option("dest") is None and endpoint.option("node") is None)
-            )
-        ):
-            session.dest = FinsAddress(0, transport.remote_node, 0)
-        yield Client(session, limits=route, word_order=word_order, read_only=guarded)
+    try:
+        serial = endpoint is not None and endpoint.scheme == "serial"
+        route = limits or limits_for(*(networks or ((NetworkType.HOST_LINK,) if serial else ())))
+        session = Session(
+            transport,
+            source=s,
+            dest=d,
+            gct=gct,
+            max_in_flight=5 if max_in_flight is None else max_in_flight,
+            timeout=(
+                timeout
+                if timeout is not None
+                else DEFAULT_TIMEOUT
+                if endpoint is None
+                else request_timeout(endpoint)
+            ),
+            retries=retries,
+            max_sid_spaces=_sid_spaces(endpoint, max_sid_spaces),
+            hooks=hooks,
+        )
+        async with session:
+            if (
+                transport.remote_node is not None
+                and dest is None
+                and (
+                    endpoint is None
+                    or (endpoint.option("dest") is None and endpoint.option("node") is None)
+                )
+            ):
+                session.dest = FinsAddress(0, transport.remote_node, 0)
+            yield Client(session, limits=route, word_order=word_order, read_only=guarded)
+    finally:
+        if held is not None:
+            SOURCE_NODES.release(*held)
 
 
 #: Every keyword option :func:`connect` takes (what :class:`Pool` passes on to it).

@@ -8,9 +8,9 @@ of concurrent tasks, so the default is one session per endpoint (``max_per_endpo
 more, each extra session is opened when all existing ones are busy. Every UDP session to one
 host:port gets its own FINS source node (SA1) — an Ethernet unit replies to the last UDP port
 it saw for a node, so two sockets sharing SA1 would steal each other's replies (a host name
-counts as the address it resolves to). FINS/TCP PLCs
-accept few connections (each holds one of the unit's node slots): keep ``max_per_endpoint``
-within that.
+counts as the address it resolves to; ``connect()`` sessions outside the pool count too).
+FINS/TCP PLCs accept few connections (each holds one of the unit's node slots): keep
+``max_per_endpoint`` within that.
 
 The pool holds at most ``max_sessions`` sessions: a new endpoint evicts the least recently
 used idle one, and :class:`PoolFull` says when every one is in use or being opened. A session
@@ -26,6 +26,8 @@ so PLCs back after a power cut are not retried in lockstep); calls in the meanti
 with :class:`~aiofins.ConnectionLost`. A borrower waits for a connection being made at most its
 timeout (``pool.client(url, timeout=...)``, by default the endpoint's request timeout), then
 gets :class:`~aiofins.FinsTimeout`; the connection attempt goes on for the next borrower.
+A new session's host name is resolved before the pool's lock is taken (a slow lookup for one
+endpoint holds up no other), within the same timeout.
 
 No error of a session's task, a health check or the maintenance reaches the pool's task group
 or the application: each becomes a failure of its own endpoint (counted, logged under
@@ -48,7 +50,6 @@ import enum
 import logging
 import math
 import random
-import socket
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
@@ -62,8 +63,9 @@ from .client import Client
 from .connection import (
     DEFAULT_TIMEOUT,
     check_options,
-    connect,
     default_addresses,
+    peer_link,
+    pooled_connect,
     request_timeout,
     url_read_only,
 )
@@ -74,7 +76,7 @@ from .protocol.inputs import seconds, whole_number
 from .session import SessionStats
 from .session.nodes import SOURCE_NODES
 from .session.response import SESSION_COUNTERS
-from .transport.base import is_asyncio, url_host
+from .transport.base import is_asyncio
 
 
 def event_loop_clock() -> Callable[[], float]:
@@ -235,23 +237,15 @@ def _add_counters(into: EndpointStats, stats: SessionStats) -> None:
         setattr(into, name, getattr(into, name) + getattr(stats, name))
 
 
-async def _peer_link(endpoint: Endpoint) -> str:
-    """Where a session to ``endpoint`` sends its frames, as the pool tells links apart: a
-    host name is resolved as the UDP transport resolves it (``localhost`` and ``127.0.0.1``
-    are one Ethernet unit, which keeps one reply port per source node, and one FINS/TCP
-    node per connection); a serial device, or a name that does not resolve (the connect
-    fails on its own), is the link as written."""
-    if endpoint.scheme == "serial":
-        return endpoint.link
-    kind = socket.SOCK_DGRAM if endpoint.scheme == "udp" else socket.SOCK_STREAM
-    try:
-        infos = await anyio.getaddrinfo(endpoint.host, endpoint.port, type=kind)
-    except OSError:
-        return endpoint.link
-    if not infos:
-        return endpoint.link
-    address = infos[0][4]
-    return f"{endpoint.scheme}://{url_host(str(address[0]))}:{address[1]}"
+@dataclass(frozen=True)
+class _Resolved:
+    """What a new session to an endpoint needs from name resolution, looked up before the
+    pool's lock is taken (a slow lookup for one endpoint delays no other)."""
+
+    #: Where its frames go (``udp://address:port``, see :func:`~aiofins.connection.peer_link`).
+    link: str
+    #: (dest, source) as connect() would default them (UDP; ``None`` elsewhere).
+    addresses: tuple[FinsAddress, FinsAddress] | None
 
 
 def _users(entry: _Entry) -> int:
@@ -490,32 +484,22 @@ class Pool:
         if timeout is None:  # the request timeout the endpoint's sessions get
             default = float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
             timeout = request_timeout(endpoint, default)
-        async with self._lock:
-            entries = [e for e in self._entries.get(key, []) if e.state in _LIVE]
-            usable = [e for e in entries if e.state is not EntryState.CLOSING]
-            idle = min(usable, key=_users, default=None)
-            # one session a serial line, and a FINS/TCP PLC for a fixed tcp_node
-            one = endpoint.scheme == "serial" or (
-                endpoint.scheme == "tcp" and bool(self.connect_options.get("tcp_node"))
-            )
-            most = 1 if one else self.max_per_endpoint
-            if idle is None or (idle.users and len(usable) < most):
-                retry_at = self._failures.get(key, (0.0, 0.0, 0.0))[0]
-                now = self._now()
-                if now < retry_at and idle is None:
-                    raise ConnectionLost(
-                        f"{key}: last connection attempt failed; retrying in {retry_at - now:.1f} s"
-                    )
-                if idle is None or self._count(_LIVE) < self.max_sessions:
-                    entry = await self._open(endpoint, url, timeout, extra=bool(usable))
-                else:
-                    entry = idle  # the pool is full: share the busy session
-            else:
-                entry = idle
-            entry.users += 1
+        deadline = self._now() + timeout  # for the name lookup and the connection
+        resolved: _Resolved | None = None
+        while True:  # twice at most: a new session's names are looked up outside the lock
+            async with self._lock:
+                found = await self._choose(endpoint, url, timeout, resolved)
+                if found is not None:
+                    entry = found
+                    entry.users += 1
+                    break
+            with anyio.CancelScope(deadline=deadline):
+                resolved = await self._resolve(endpoint)
+            if resolved is None:
+                raise FinsTimeout(f"{key}: {endpoint.host} was not resolved within {timeout} s")
         if entry.state is EntryState.CONNECTING:
             try:
-                with anyio.move_on_after(timeout):
+                with anyio.CancelScope(deadline=deadline):
                     await entry.wait_while(EntryState.CONNECTING)
             except BaseException:  # the borrower was cancelled: it no longer uses the entry
                 entry.users -= 1
@@ -538,16 +522,55 @@ class Pool:
             raise ConnectionLost(f"{key}: {err}") from err
         return entry
 
-    async def _open(self, endpoint: Endpoint, url: str, timeout: float, *, extra: bool) -> _Entry:
+    async def _choose(
+        self, endpoint: Endpoint, url: str, timeout: float, resolved: _Resolved | None
+    ) -> _Entry | None:
+        """The entry to lend for ``endpoint``: an open one, or a new one; ``None`` if a new
+        one is needed and its names are not looked up yet (``resolved``: the caller looks
+        them up without the lock, then asks again). Called with the lock held."""
+        key = endpoint.key
+        entries = [e for e in self._entries.get(key, []) if e.state in _LIVE]
+        usable = [e for e in entries if e.state is not EntryState.CLOSING]
+        idle = min(usable, key=_users, default=None)
+        # one session a serial line, and a FINS/TCP PLC for a fixed tcp_node
+        one = endpoint.scheme == "serial" or (
+            endpoint.scheme == "tcp" and bool(self.connect_options.get("tcp_node"))
+        )
+        most = 1 if one else self.max_per_endpoint
+        if idle is not None and not (idle.users and len(usable) < most):
+            return idle
+        retry_at = self._failures.get(key, (0.0, 0.0, 0.0))[0]
+        now = self._now()
+        if now < retry_at and idle is None:
+            raise ConnectionLost(
+                f"{key}: last connection attempt failed; retrying in {retry_at - now:.1f} s"
+            )
+        if idle is not None and self._count(_LIVE) >= self.max_sessions:
+            return idle  # the pool is full: share the busy session
+        if resolved is None:
+            return None
+        return await self._open(endpoint, url, timeout, resolved, extra=bool(usable))
+
+    async def _resolve(self, endpoint: Endpoint) -> _Resolved:
+        """Look up what a new session to ``endpoint`` needs (without the pool's lock)."""
+        link = await peer_link(endpoint)
+        if endpoint.scheme != "udp":
+            return _Resolved(link, None)
+        defaults = self._options_for(endpoint)
+        addresses = await default_addresses(endpoint, defaults.get("dest"), defaults.get("src"))
+        return _Resolved(link, addresses)
+
+    async def _open(
+        self, endpoint: Endpoint, url: str, timeout: float, resolved: _Resolved, *, extra: bool
+    ) -> _Entry:
         """A new entry for ``endpoint`` (its session is opened by a task of its own), once
         the pool has room for it (called with the lock held)."""
         await self._make_room(endpoint.key, timeout)
-        link = await _peer_link(endpoint)
-        dest, src = await self._addresses_for(endpoint, link, extra=extra)
+        link = resolved.link
+        # held from now on (UDP): no other session's socket, nor extra SID space, takes it
+        dest, src = self._addresses_for(endpoint, resolved, extra=extra)
         key = endpoint.key
         entry = _Entry(key, link, url, src, dest)
-        if src is not None:  # held from now on: no session's extra SID space takes it
-            SOURCE_NODES.hold(link, src.node)
         entries = self._entries.setdefault(key, [])
         entries.append(entry)
         urls = self._urls.setdefault(key, [])
@@ -644,19 +667,22 @@ class Pool:
                 options.pop("dest" if name == "node" else name, None)
         return options
 
-    async def _addresses_for(
-        self, endpoint: Endpoint, link: str, *, extra: bool
+    def _addresses_for(
+        self, endpoint: Endpoint, resolved: _Resolved, *, extra: bool
     ) -> tuple[FinsAddress | None, FinsAddress | None]:
         """(dest, source) of a new session to ``endpoint``; ``None``: left to connect().
 
         An Ethernet unit replies to the last UDP port it saw for a source node, so every UDP
         session to one host:port (whatever its key) gets a source node of its own: the one
         connect() would use if no other session there uses it as source or destination,
-        else a free one (254 down). A source the URL or the pool names is kept for a new
-        key: if another session to the same host:port uses its node, the URL is refused
-        (:class:`CommandError`). A serial line carries one session: another key for the
-        same device is refused while it is open.
+        else a free one (254 down); it is held in ``SOURCE_NODES`` from now on. A source the
+        URL or the pool names is kept for a new key: if another session to the same
+        host:port uses its node, the URL is refused (:class:`CommandError`). Both as
+        :meth:`SourceNodes.source_for <aiofins.session.nodes.SourceNodes.source_for>` does
+        it for connect(). A serial line carries one session: another key for the same
+        device is refused while it is open.
         """
+        link = resolved.link
         others = self._on_link(link)
         if endpoint.scheme == "serial":
             open_ = [e for e in others if e.state is not EntryState.CLOSING]
@@ -675,28 +701,15 @@ class Pool:
                     "second connection asking for it. Leave tcp_node out (the PLC assigns one)"
                 )
             return None, None
-        if endpoint.scheme != "udp":
+        if resolved.addresses is None:
             return None, None
-        defaults = self._options_for(endpoint)
-        dest, src = await default_addresses(endpoint, defaults.get("dest"), defaults.get("src"))
-        used = {e.src.node for e in others if e.src is not None} | SOURCE_NODES.in_use(link)
-        taken = used | {e.dest.node for e in others if e.dest is not None}
-        named = endpoint.option("src") or defaults.get("src")
-        if named is not None and not extra:
-            if src.node in used:
-                raise CommandError(
-                    f"{endpoint.key}: source node {src.node} is used by another session to "
-                    f"{link} in this pool or process; the PLC would send each one's replies to "
-                    "the other. Name another src, or leave it out"
-                )
-            return dest, src
-        if src.node not in taken:
-            return dest, src
-        avoid = taken | {dest.node}
-        node = next((n for n in range(254, 0, -1) if n not in avoid), None)
-        if node is None:
-            raise CommandError(f"{link}: no free FINS source node for another session")
-        return dest, FinsAddress(src.network, node, src.unit)
+        dest, src = resolved.addresses
+        named = (endpoint.option("src") or self._options_for(endpoint).get("src")) is not None
+        addressed = {e.dest.node for e in others if e.dest is not None}
+        src = SOURCE_NODES.source_for(
+            link, src, named=named and not extra, avoid=addressed | {dest.node}, where=endpoint.key
+        )
+        return dest, src
 
     # -- each session's task: its boundary --------------------------------------------------
 
@@ -708,7 +721,7 @@ class Pool:
             options["src"] = entry.src
         try:
             with entry.connecting:  # cancelled only while the connection is being made
-                async with connect(entry.url, **options) as client:
+                async with pooled_connect(entry.url, **options) as client:
                     entry.client = client
                     entry.last_used = entry.checked_at = self._now()
                     self._failures.pop(entry.key, None)

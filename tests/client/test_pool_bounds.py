@@ -467,3 +467,45 @@ async def test_evicting_sessions_in_regular_use_is_a_warning(
     assert len(warnings) == 1  # once a minute
     assert "more endpoints are in use than max_sessions=2" in warnings[0].getMessage()
     assert warnings[0].endpoint == f"{url}?node=1"  # type: ignore[attr-defined]
+
+
+async def test_a_slow_name_lookup_holds_up_no_other_endpoint(
+    sim: Simulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pool looked host names up while holding its lock: one endpoint whose name took
+    long to resolve (a slow DNS server) held up the first borrow of every other endpoint.
+    ``localhost`` resolves here when the test says so; ``127.0.0.1`` needs no lookup."""
+    looking_up = anyio.Event()
+    answer = anyio.Event()
+    real_lookup = aiofins.connection.lookup
+
+    async def slow_for_localhost(host: str, port: int, **kwargs: Any) -> list[Any]:
+        if host == "localhost":
+            looking_up.set()
+            await answer.wait()
+        return await real_lookup(host, port, **kwargs)
+
+    monkeypatch.setattr(aiofins.connection, "lookup", slow_for_localhost)
+    port = sim.udp_port
+    sources: dict[str, int] = {}
+    async with Pool(timeout=5) as pool:
+
+        async def borrow(url: str) -> None:
+            async with pool.client(url) as plc:
+                assert await plc.read("D0") == [0]
+                sources[url] = plc.session.source.node
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(borrow, f"udp://localhost:{port}")
+            await looking_up.wait()
+            with anyio.fail_after(5):  # without the lookup under the lock: at once
+                await borrow(f"udp://127.0.0.1:{port}")
+                # a borrower's timeout bounds its lookup as it bounds its connection
+                with pytest.raises(FinsTimeout, match=r"localhost was not resolved within 0.1 s"):
+                    async with pool.client(f"udp://localhost:{port}?node=1", timeout=0.1):
+                        pass
+            assert list(sources) == [f"udp://127.0.0.1:{port}"]  # the slow one still waits
+            answer.set()
+        # one unit under two names: a source node each, the first borrower's the default
+        assert sources == {f"udp://127.0.0.1:{port}": 254, f"udp://localhost:{port}": 253}
+        assert sum(s.sessions for s in pool.stats().values()) == 2

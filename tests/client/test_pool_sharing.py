@@ -339,3 +339,48 @@ async def test_connect_keywords_win_over_the_url_and_the_url_over_a_pools(
             assert await _what_it_gives(plc) == (FinsAddress(0, 1, 0), 1.5, [100])
         async with pool.client(base) as plc:
             assert await _what_it_gives(plc) == (FinsAddress(3, 5, 0), 1.5, [350])
+
+
+async def test_plain_connect_sessions_to_one_unit_get_their_own_source_nodes(
+    anyio_backend: object,
+) -> None:
+    """Two ``connect()`` sessions to one Ethernet unit (two workers' clients, a script and a
+    poller) both took the default source node: the unit sent each one's replies to the
+    other's socket, where a read with the same SID got the other's words."""
+    gateway = _plc(0, 1, 0)
+    gateway.write("D0", list(range(100, 110)))
+    ports: list[int] = []
+    async with anyio.create_task_group() as tg:
+        await tg.start(_serve_like_an_ethernet_unit, Site(gateway), ports.append)
+        url = f"udp://127.0.0.1:{ports[0]}"
+        link = f"udp://127.0.0.1:{ports[0]}"
+        async with connect(url, retries=0) as a, connect(url, retries=0) as b:
+            assert a.session.source.node == 254  # the first keeps the default
+            assert b.session.source.node == 253
+            assert SOURCE_NODES.in_use(link) == {253, 254}
+            got: dict[int, list[int]] = {0: [], 1: []}
+
+            async def reads(plc: Client, word: int) -> None:
+                for _ in range(60):
+                    got[word] += await plc.read(f"D{word}")
+
+            with anyio.fail_after(10):
+                async with anyio.create_task_group() as readers:
+                    readers.start_soon(reads, a, 0)
+                    readers.start_soon(reads, b, 1)
+            assert got == {0: [100] * 60, 1: [101] * 60}
+            for plc in (a, b):
+                stats = plc.session.stats
+                assert (stats.completed, stats.timeouts, stats.unsolicited) == (60, 0, 0)
+            # A source node named in use on the link is refused, as a pool refuses it.
+            with pytest.raises(CommandError, match=r"source node 254 is used .* or process"):
+                async with connect(url, src="0.254.0"):
+                    pass
+            with pytest.raises(CommandError, match=r"source node 253 is used"):
+                async with connect(f"udp://localhost:{ports[0]}?src=0.253.0"):
+                    pass
+            async with connect(url + "?src=0.200.0") as c:
+                assert c.session.source.node == 200
+                assert await c.read("D2") == [102]
+        assert SOURCE_NODES.in_use(link) == frozenset()  # given back on closing
+        tg.cancel_scope.cancel()

@@ -3,6 +3,10 @@ sessions' extra SID spaces take theirs from one registry."""
 
 from __future__ import annotations
 
+import pytest
+
+from aiofins.protocol.errors import CommandError
+from aiofins.protocol.header import FinsAddress
 from aiofins.session.nodes import SourceNodes
 
 PEER = "udp://127.0.0.1:9600"
@@ -56,3 +60,23 @@ def test_all_254_taken() -> None:
     nodes = SourceNodes()
     assert [nodes.claim(PEER) for _ in range(254)] == list(range(254, 0, -1))
     assert nodes.claim(PEER) is None
+
+
+def test_a_sessions_source_keeps_its_default_unless_in_use_and_a_named_one_is_refused() -> None:
+    nodes = SourceNodes()
+    default = FinsAddress(1, 254, 0)
+    assert nodes.source_for(PEER, default, named=False, where="a") == default  # now held
+    # in use, or a node addressed there: the next free one, network and unit kept
+    assert nodes.source_for(PEER, default, named=False, avoid={253}, where="b") == FinsAddress(
+        1, 252, 0
+    )
+    assert nodes.in_use(PEER) == {252, 254}
+    with pytest.raises(CommandError, match=r"^c: source node 254 is used by another session to"):
+        nodes.source_for(PEER, default, named=True, where="c")
+    assert nodes.in_use(PEER) == {252, 254}  # a refusal holds nothing
+    named = FinsAddress(0, 7, 0)
+    assert nodes.source_for(PEER, named, named=True, avoid={7}, where="d") == named  # kept
+    for node in range(1, 255):
+        nodes.hold(PEER, node)
+    with pytest.raises(CommandError, match="no free FINS source node"):
+        nodes.source_for(PEER, default, named=False, where="e")

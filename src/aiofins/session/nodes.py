@@ -13,23 +13,33 @@ be a fresh SID space.
 
 from __future__ import annotations
 
+import threading
 from collections import Counter
 from collections.abc import Callable, Iterable
 from time import monotonic
 
+from ..protocol.errors import CommandError
+from ..protocol.header import FinsAddress
+
 
 class SourceNodes:
     """Source nodes held per peer (``udp://address:port``), counted: a node held twice (two
-    sessions told to use it) is free again only once both gave it back."""
+    sessions told to use it) is free again only once both gave it back. Safe to share
+    between threads (each ``aiofins.sync`` client runs its own event loop)."""
 
     def __init__(self, clock: Callable[[], float] = monotonic) -> None:
         self._held: dict[str, Counter[int]] = {}
         #: peer -> node -> until when a node given back stays out of use.
         self._cooling: dict[str, dict[int, float]] = {}
         self._clock = clock
+        self._lock = threading.Lock()
 
     def in_use(self, peer: str) -> frozenset[int]:
         """The nodes held towards ``peer``, or given back and still cooling."""
+        with self._lock:
+            return self._in_use(peer)
+
+    def _in_use(self, peer: str) -> frozenset[int]:
         held = self._held.get(peer)
         cooling = self._cooling.get(peer)
         if cooling:
@@ -40,6 +50,10 @@ class SourceNodes:
 
     def hold(self, peer: str, node: int) -> None:
         """Count ``node`` as used towards ``peer`` (chosen elsewhere, e.g. the session's own)."""
+        with self._lock:
+            self._hold(peer, node)
+
+    def _hold(self, peer: str, node: int) -> None:
         self._held.setdefault(peer, Counter())[node] += 1
         cooling = self._cooling.get(peer)
         if cooling:
@@ -48,15 +62,56 @@ class SourceNodes:
     def claim(self, peer: str, avoid: Iterable[int] = ()) -> int | None:
         """A node nobody uses towards ``peer`` (254 down, none of ``avoid``), now held;
         ``None`` if all 254 are taken."""
-        taken = self.in_use(peer).union(avoid)
-        node = next((n for n in range(254, 0, -1) if n not in taken), None)
-        if node is not None:
-            self.hold(peer, node)
-        return node
+        with self._lock:
+            taken = self._in_use(peer).union(avoid)
+            node = next((n for n in range(254, 0, -1) if n not in taken), None)
+            if node is not None:
+                self._hold(peer, node)
+            return node
+
+    def source_for(
+        self,
+        peer: str,
+        source: FinsAddress,
+        *,
+        named: bool,
+        avoid: Iterable[int] = (),
+        where: str,
+    ) -> FinsAddress:
+        """The source address of a new session's socket to ``peer``, its node now held
+        (:meth:`release` gives it back).
+
+        ``source`` is the session's default: kept if no socket of the process uses its node
+        towards ``peer`` and it is none of ``avoid`` (e.g. nodes of PLCs addressed there),
+        else a free node, 254 down. A source the user ``named`` is kept, or refused with
+        :class:`CommandError` if its node is in use towards ``peer`` (the PLC would send
+        each socket's replies to the other); ``where`` begins the message (the endpoint).
+        """
+        with self._lock:
+            used = self._in_use(peer)
+            node = source.node
+            if named and node in used:
+                raise CommandError(
+                    f"{where}: source node {node} is used by another session to {peer} "
+                    "in this pool or process; the PLC would send each one's replies to "
+                    "the other. Name another src, or leave it out"
+                )
+            taken = used.union(avoid)
+            if not named and node in taken:
+                free = next((n for n in range(254, 0, -1) if n not in taken), None)
+                if free is None:
+                    raise CommandError(f"{peer}: no free FINS source node for another session")
+                node = free
+            self._hold(peer, node)
+            return FinsAddress(source.network, node, source.unit)
 
     def release(self, peer: str, node: int, cool_until: float = 0.0) -> None:
         """Give ``node`` back; it is free again once every holder gave it back and
         ``cool_until`` (:func:`time.monotonic`) has passed."""
+        with self._lock:
+            self._release(peer, node, cool_until)
+
+    def _release(self, peer: str, node: int, cool_until: float) -> None:
         held = self._held.get(peer)
         if held is None or not held[node]:
             return
