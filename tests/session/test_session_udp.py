@@ -72,6 +72,9 @@ class Responder:
     tg: TaskGroup
     port: int
     received: list[bytes] = field(default_factory=list)
+    #: The address each source node (SA1) last sent from: where an Ethernet unit sends the
+    #: replies to that node (a session's extra SID spaces are sockets with nodes of their own).
+    senders: dict[int, tuple[str, int]] = field(default_factory=dict)
 
     def send(self, frame: bytes, addr: tuple[str, int]) -> None:
         self.sock.sendto(frame, addr)
@@ -97,6 +100,8 @@ async def udp_responder(handler: Handler = answer) -> AsyncIterator[Responder]:
                     except BlockingIOError:
                         continue
                     responder.received.append(data)
+                    if len(data) > 7:
+                        responder.senders[data[7]] = addr
                     for delay, frame in responder.handler(data):
                         if delay <= 0:
                             responder.send(frame, addr)
