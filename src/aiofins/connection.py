@@ -15,6 +15,7 @@ Node addressing defaults, all overridable:
 from __future__ import annotations
 
 import inspect
+import ipaddress
 import socket
 from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
@@ -137,6 +138,12 @@ async def peer_link(endpoint: Endpoint) -> str:
     connect fails on its own), is the link as written."""
     if endpoint.scheme == "serial":
         return endpoint.link
+    try:  # an IP address needs no lookup (a worker thread's round trip per new session)
+        literal = str(ipaddress.ip_address(endpoint.host))
+    except ValueError:
+        pass
+    else:
+        return f"{endpoint.scheme}://{url_host(literal)}:{endpoint.port}"
     kind = socket.SOCK_DGRAM if endpoint.scheme == "udp" else socket.SOCK_STREAM
     try:
         infos = await lookup(endpoint.host, endpoint.port, kind=kind)

@@ -7,7 +7,8 @@ import socket
 import anyio
 import pytest
 
-from aiofins.connection import connect
+import aiofins.connection
+from aiofins.connection import connect, peer_link
 from aiofins.endpoint import option_value, parse_endpoint
 from aiofins.protocol.errors import CommandError, ConnectionLost
 
@@ -161,3 +162,30 @@ async def test_max_sid_spaces_from_the_url_or_connect(anyio_backend: object) -> 
         with pytest.raises(CommandError, match=r"max_sid_spaces must be a whole number, 1\.\.254"):
             async with connect(base, max_sid_spaces=0):
                 pass  # pragma: no cover
+
+
+@pytest.mark.parametrize(
+    ("url", "link"),
+    [
+        ("udp://127.0.0.1:9600", "udp://127.0.0.1:9600"),
+        ("tcp://10.0.0.5", "tcp://10.0.0.5:9600"),
+        ("udp://[0:0:0:0:0:0:0:1]:9601", "udp://[::1]:9601"),
+    ],
+)
+async def test_an_ip_address_is_its_own_peer_link_with_no_lookup(
+    anyio_backend: object, monkeypatch: pytest.MonkeyPatch, url: str, link: str
+) -> None:
+    """Every new UDP session asks where its frames go; for an address that took a worker
+    thread's getaddrinfo each, and a Pool opening 1,000 sessions at once queued them."""
+    looked_up: list[str] = []
+
+    async def lookup(host: str, port: int, **kwargs: object) -> list[object]:
+        looked_up.append(host)
+        raise OSError("no lookup expected")
+
+    monkeypatch.setattr(aiofins.connection, "lookup", lookup)
+    assert await peer_link(parse_endpoint(url)) == link
+    assert looked_up == []
+    # a name is still looked up (a failed lookup leaves the link as written)
+    assert await peer_link(parse_endpoint("udp://plc.invalid")) == "udp://plc.invalid:9600"
+    assert looked_up == ["plc.invalid"]
