@@ -29,10 +29,11 @@ import heapq
 import logging
 import math
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping, Sequence
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import partial
 from types import TracebackType
 from typing import TYPE_CHECKING
 
@@ -43,13 +44,16 @@ from ._channel import Channel, Wake
 from .endpoint import parse_endpoint
 from .hooks import EventHooks, ScanDone
 from .pool import backend_sleep, event_loop_clock
-from .protocol.errors import CommandError, FinsError
+from .protocol.errors import CommandError, EndCodeError, FinsError
 from .protocol.values import Value
-from .tags import ReadPlan, parse_tag
+from .session.callback import CallbackBatch, start_requests
+from .tags import ReadPlan, TagNames, parse_tag
 from .transport.base import is_asyncio
 
 if TYPE_CHECKING:
+    from .client import Client
     from .pool import Pool, _Lease
+    from .session import Response
 
 logger = logging.getLogger("aiofins.poller")
 
@@ -146,8 +150,9 @@ class ScanGroup:
     plan: ReadPlan | None = None
     state: ScanState = ScanState.STOPPED
     _last: Mapping[str, TagReading] = field(default_factory=dict)
-    #: The values of the last scan when every tag was good in it (else None).
-    _last_good: dict[str, Value] | None = None
+    #: The values of the last scan, in the plan's tag order, when every tag was good in it
+    #: (else None).
+    _last_good: tuple[Value, ...] | None = None
     _wake: Wake = field(default_factory=Wake, repr=False)
     #: The error of the last failed scan while scans fail (logged once per outage).
     _failing: str | None = None
@@ -158,6 +163,17 @@ class ScanGroup:
     _missed_reported: int = 0
     #: The pool lease the group's scans borrow the endpoint's client with (kept between scans).
     _lease: _Lease | None = field(default=None, repr=False)
+    #: The scan in flight on the callback path (see :meth:`Poller._scan_soon`), if any:
+    #: (its requests, the lease, the client lent, when it started: loop clock, wall clock).
+    _scan: tuple[CallbackBatch, _Lease, Client, float, float] | None = field(
+        default=None, repr=False
+    )
+    #: What ends such a scan (the poller's :meth:`~Poller._scanned_soon` for this group).
+    _done: Callable[[list[Response] | None, BaseException | None], None] | None = field(
+        default=None, repr=False
+    )
+    #: A snapshot of the callback path for the group's task to deliver (backpressure).
+    _undelivered: Snapshot | None = field(default=None, repr=False)
 
     def _enter(self, state: ScanState) -> None:
         """The one place a group changes state."""
@@ -236,6 +252,7 @@ class Poller:
         """Start ``group``'s task and schedule its first scan now."""
         assert self._tg is not None
         group._wake.bind()
+        group._done = partial(self._scanned_soon, group)
         group._enter(ScanState.IDLE)
         self._tg.start_soon(self._run_group, group)
         self._plan_scan(self._now() if now is None else now, group)
@@ -277,6 +294,14 @@ class Poller:
             self._schedule.clear()
             self._timer_at = math.inf
             for group in self.groups.values():
+                scan = group._scan
+                if scan is not None:  # a scan on the callback path: given up
+                    group._scan = None
+                    scan[0].cancel()
+                    scan[1].release()
+                    if group._lease is None:
+                        group._lease = scan[1]
+                group._undelivered = None
                 if group.state is not ScanState.STOPPED:
                     group._enter(ScanState.STOPPED)
             self._channel.close()
@@ -293,6 +318,7 @@ class Poller:
         idle, due = ScanState.IDLE, ScanState.DUE
         wake = self._timer_wake
         loop = asyncio.get_running_loop() if is_asyncio() else None
+        scan_soon = self._scan_soon if loop is not None else None
         while True:
             if not schedule:
                 self._timer_at = math.inf
@@ -324,7 +350,8 @@ class Poller:
                     when += late * interval
                 if group.state is idle:
                     group._enter(due)
-                    group._wake.set()
+                    if scan_soon is None or not scan_soon(group):
+                        group._wake.set()  # the group's task scans
                 else:
                     late += 1
                 if late:
@@ -363,22 +390,19 @@ class Poller:
         try:
             while True:
                 await wake.wait()
-                group._enter(ScanState.SCANNING)
-                snapshot = await self.scan_once(group)
-                if snapshot is not None and not channel.send_nowait(snapshot):
-                    group._enter(ScanState.DELIVERING)  # full: wait for the consumer
+                if group.state is ScanState.DELIVERING:  # a callback scan's, the buffer full
+                    snapshot = group._undelivered
+                    group._undelivered = None
+                    assert snapshot is not None
                     await channel.send(snapshot)
+                else:
+                    group._enter(ScanState.SCANNING)
+                    snapshot = await self.scan_once(group)
+                    if snapshot is not None and not channel.send_nowait(snapshot):
+                        group._enter(ScanState.DELIVERING)  # full: wait for the consumer
+                        await channel.send(snapshot)
                 group._enter(ScanState.IDLE)
-                hooks = self._hooks
-                if hooks is not None and hooks.scan_done:
-                    skipped = group.missed - group._missed_reported
-                    group._missed_reported = group.missed
-                    hooks.emit(
-                        hooks.scan_done,
-                        ScanDone(
-                            group.name, group.scans, group.last_duration, skipped, group._failing
-                        ),
-                    )
+                self._scan_done(group)
         finally:
             logger.info(
                 "scan group %s stopped after %d scans (%d failed, %d missed)",
@@ -389,14 +413,94 @@ class Poller:
                 extra={"group": group.name, "endpoint": group.url},
             )
 
+    def _scan_done(self, group: ScanGroup) -> None:
+        """A scan ended (its snapshot delivered): the hooks' :class:`ScanDone`."""
+        hooks = self._hooks
+        if hooks is not None and hooks.scan_done:
+            skipped = group.missed - group._missed_reported
+            group._missed_reported = group.missed
+            hooks.emit(
+                hooks.scan_done,
+                ScanDone(group.name, group.scans, group.last_duration, skipped, group._failing),
+            )
+
+    def _scan_soon(self, group: ScanGroup) -> bool:
+        """Start ``group``'s due scan from the timer's own step (asyncio): its frames go out
+        now and the scan ends in the session's receive callback (:meth:`_scanned_soon`),
+        no task woken for it. False (nothing started, the group's task scans instead) when
+        it cannot start at once: the group's first scan (it compiles the plan), no session
+        ready to lend, a plan the client must check first, or the session's own conditions
+        (link open, breaker closed, a slot free: see
+        :func:`~aiofins.session.callback.start_requests`)."""
+        plan = group.plan
+        lease = group._lease
+        done = group._done
+        if plan is None or lease is None or done is None:
+            return False
+        client = lease.borrow_ready()
+        if client is None:
+            return False
+        if plan.cache.get("fits") is not client.limits:
+            lease.release()
+            return False
+        started = self._now()
+        request = start_requests(
+            client.session,
+            client._scan_commands(plan)[0],
+            done,
+            dest=client.dest,
+            timeout=group.timeout,
+        )
+        if request is None:
+            lease.release()
+            return False
+        group._lease = None  # in use (a scan_once beside this scan takes another)
+        group._scan = (request, lease, client, started, time.time())
+        group._enter(ScanState.SCANNING)
+        group.scans += 1
+        return True
+
+    def _scanned_soon(
+        self, group: ScanGroup, responses: list[Response] | None, error: BaseException | None
+    ) -> None:
+        """A scan of :meth:`_scan_soon` ended (called by the session): its snapshot goes to
+        the buffer, or, if the buffer is full, to the group's task to wait for room."""
+        scan = group._scan
+        if scan is None:  # (given up by the poller's exit)
+            return
+        group._scan = None
+        _, lease, client, started, stamp = scan
+        lease.release()
+        if group._lease is None:
+            group._lease = lease
+        plan = group.plan
+        assert plan is not None
+        values: tuple[Value, ...] | None = None
+        read: dict[str, Value] | None = None
+        bad: dict[str, str] = {}
+        if responses is not None:
+            try:
+                values, read = _decode(client, plan, responses, bad)
+            except FinsError as exc:
+                error = exc
+        elif isinstance(error, EndCodeError):
+            client._add_addressing_hint(error, client.dest)
+        snapshot = self._scanned(group, started, stamp, values, read, bad, error)
+        if snapshot is not None and not self._channel.send_nowait(snapshot):
+            group._enter(ScanState.DELIVERING)  # full: the group's task waits for room
+            group._undelivered = snapshot
+            group._wake.set()
+            return
+        group._enter(ScanState.IDLE)
+        self._scan_done(group)
+
     async def scan_once(self, group: ScanGroup) -> Snapshot | None:
         """Run one scan of ``group`` now; the snapshot (``None`` if nothing to deliver)."""
-        now = self._now
-        started = now()
+        started = self._now()
         stamp = time.time()
         group.scans += 1
-        error: str | None = None
-        values: dict[str, Value] = {}
+        error: FinsError | None = None
+        read: dict[str, Value] | None = None
         bad: dict[str, str] = {}  # tags whose words are no value of their type
         try:
             # Borrowed without ``async with``: a ready session is lent with no coroutine. The
@@ -412,11 +516,30 @@ class Poller:
                 plan = group.plan
                 if plan is None:
                     plan = group.plan = client.compile_tags(group.tags)
-                values = await client.read_tags(plan, timeout=group.timeout, errors=bad)
+                read = await client.read_tags(plan, timeout=group.timeout, errors=bad)
             finally:
                 lease.release()
-                group._lease = lease
+                if group._lease is None:
+                    group._lease = lease
         except FinsError as exc:
+            error = exc
+        return self._scanned(group, started, stamp, None, read, bad, error)
+
+    def _scanned(
+        self,
+        group: ScanGroup,
+        started: float,
+        stamp: float,
+        values: tuple[Value, ...] | None,
+        read: dict[str, Value] | None,
+        bad: dict[str, str],
+        exc: BaseException | None,
+    ) -> Snapshot | None:
+        """The snapshot of a scan that read ``values`` (in the plan's tag order) or ``read``
+        (by name; ``bad``: the tags that are no value of their type) or failed with
+        ``exc``, counted and logged; ``None`` if nothing to deliver."""
+        error: str | None = None
+        if exc is not None:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
             if group._failing is None:
@@ -428,38 +551,44 @@ class Poller:
                     extra={"group": group.name, "endpoint": group.url},
                 )
             group._failing = error
-        else:
-            if group._failing is not None:
-                group._failing = None
-                logger.info(
-                    "scan group %s: scans of %s succeed again",
-                    group.name,
-                    group.url,
-                    extra={"group": group.name, "endpoint": group.url},
-                )
-        group.last_duration = now() - started
+        elif group._failing is not None:
+            group._failing = None
+            logger.info(
+                "scan group %s: scans of %s succeed again",
+                group.name,
+                group.url,
+                extra={"group": group.name, "endpoint": group.url},
+            )
+        group.last_duration = self._now() - started
         changed: AbstractSet[str] = _UNCHANGED
         last = group._last
-        if error is None and not bad:  # the usual scan: every tag read, in the tag list's order
+        if error is None and not bad:  # the usual scan: every tag read
+            plan = group.plan
+            assert plan is not None
+            tag_names = plan.tag_names
+            names = tag_names.names
+            if values is None:
+                assert read is not None
+                values = tuple([read[name] for name in names])
             before = group._last_good
             if before is not None:  # so was the last one: compare values only
-                if values != before:  # (equal dicts: nothing changed, found in one C call)
+                if values != before:  # (equal tuples: nothing changed, found in one C call)
                     changed = {
-                        name
-                        for name, read in values.items()
-                        if not ((old := before.get(name, _NONE)) is read or old == read)
+                        names[i]
+                        for i, (old, new) in enumerate(zip(before, values, strict=True))
+                        if not (old is new or old == new)
                     }
             else:
                 changed = set()
-                for name, read in values.items():
+                for name, got in zip(names, values, strict=True):
                     previous = last.get(name)
                     if (
                         previous is None
                         or previous.quality is not _GOOD
-                        or not (previous.value is read or previous.value == read)
+                        or not (previous.value is got or previous.value == got)
                     ):
                         changed.add(name)
-            good = GoodReadings(values, stamp)  # a reading is made when asked for
+            good = _good_readings(tag_names, values, stamp)  # a reading is made when asked for
             group._last, group._last_good = good, values
             return self._deliver(group, stamp, good, changed, error)
         readings: dict[str, TagReading] = {}
@@ -468,7 +597,8 @@ class Poller:
             previous = last.get(name)
             failed = error if error is not None else bad.get(name)
             if failed is None:
-                value: Value | None = values[name]
+                assert read is not None
+                value: Value | None = read[name]
                 reading = _reading(value, _GOOD, stamp, None)
             elif previous is not None and previous.value is not None:
                 value = previous.value
@@ -521,33 +651,71 @@ _UNCHANGED: frozenset[str] = frozenset()
 
 
 class GoodReadings(Mapping[str, TagReading]):
-    """The readings of a scan in which every tag was read: built from the values when
-    looked up, so a scan nobody looks into costs no object per tag."""
+    """The readings of a scan in which every tag was read: the values in the tag list's
+    order, with the names (and their positions) shared by every scan of the plan; a
+    reading is built when looked up, so a scan nobody looks into costs no object per tag.
+    ``GoodReadings({name: value, ...}, stamp)`` builds one from a dict."""
 
-    __slots__ = ("_stamp", "_values")
+    __slots__ = ("_names", "_stamp", "_values")
 
-    def __init__(self, values: dict[str, Value], stamp: float) -> None:
-        self._values = values
+    _names: TagNames
+    _values: tuple[Value, ...]
+    _stamp: float
+
+    def __init__(self, values: Mapping[str, Value], stamp: float) -> None:
+        self._names = TagNames(tuple(values))
+        self._values = tuple(values.values())
         self._stamp = stamp
 
     def __getitem__(self, name: str) -> TagReading:
-        return _reading(self._values[name], _GOOD, self._stamp, None)
+        return _reading(self._values[self._names.index[name]], _GOOD, self._stamp, None)
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._values)
+        return iter(self._names.names)
 
     def __len__(self) -> int:
         return len(self._values)
 
     def __contains__(self, name: object) -> bool:
-        return name in self._values
+        return name in self._names.index
 
     def __repr__(self) -> str:
         return repr(dict(self.items()))
 
     def values_by_name(self) -> dict[str, Value]:
         """``{name: value}`` without a reading per tag."""
-        return dict(self._values)
+        return dict(zip(self._names.names, self._values, strict=True))
+
+
+def _good_readings(names: TagNames, values: tuple[Value, ...], stamp: float) -> GoodReadings:
+    """``GoodReadings`` of a plan's ``names`` (no dict made)."""
+    readings: GoodReadings = _new(GoodReadings)
+    readings._names = names
+    readings._values = values
+    readings._stamp = stamp
+    return readings
+
+
+def _decode(
+    client: Client, plan: ReadPlan, responses: list[Response], bad: dict[str, str]
+) -> tuple[tuple[Value, ...] | None, dict[str, Value] | None]:
+    """A callback scan's values from its responses (the plan's 0101 runs, then its 0104
+    frames), as :meth:`Client.read_tags` decodes them: in tag order where the plan decodes
+    in bulk, else by name (``bad``: the tags that are no value of their type)."""
+    n_runs = len(plan.runs)
+    run_words = [client._run_words(plan, i, responses[i]) for i in range(n_runs)]
+    multi: list[Sequence[int]] = []
+    if plan.multiple:
+        _, requests = client._scan_commands(plan)
+        multi = [
+            [item.value for item in m.decode_response(response.data).items]
+            for m, response in zip(requests, responses[n_runs:], strict=True)
+        ]
+    client.last_end_code = responses[-1].end_code
+    values = plan.decode_values(run_words, multi)
+    if values is not None:
+        return values, None
+    return None, plan.decode(run_words, multi, bad)
 
 
 _new = object.__new__

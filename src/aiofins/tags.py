@@ -19,6 +19,7 @@ import struct
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import chain
+from operator import itemgetter
 from typing import Any
 
 from .chunking import plan_multiple
@@ -170,6 +171,72 @@ class ReadPlan:
                 return self._run_steps(out, rest, flat, errors, True) if rest else out
         return self._run_steps({}, steps, flat, errors, False)
 
+    @property
+    def tag_names(self) -> TagNames:
+        """The tags' names in the tag list's order, with each one's position (made once per
+        plan, shared by the values of every scan: see :meth:`decode_values`)."""
+        names: TagNames | None = self.cache.get("names")
+        if names is None:
+            names = self.cache["names"] = TagNames(tuple(tag.name for tag in self.tags))
+        return names
+
+    def decode_values(
+        self, run_words: Sequence[Sequence[int]], multiple_values: Sequence[Sequence[int]]
+    ) -> tuple[Value, ...] | None:
+        """The tags' values in :attr:`tag_names` order, without a dict, when every tag of the
+        plan is decoded in bulk (numbers in Omron's word order, plain words, bits) and every
+        word is in range; else ``None``: then :meth:`decode` says what each tag holds (or
+        why it holds none). Results of the wrong length raise :class:`DecodeError`."""
+        fast: _Values | None = self.cache.get("values")
+        if fast is None:
+            fast = self.cache["values"] = self._compile_values()
+        if not fast:
+            return None
+        pack, unpack, bits, order = fast
+        decoder: _Decoder = self.cache["decoder"]
+        lengths, one_frame = decoder[1], decoder[2]
+        flat: Sequence[int]
+        if one_frame:
+            if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
+                raise self._length_error(run_words, multiple_values)
+            flat = run_words[0]
+        else:
+            if (tuple(map(len, run_words)), tuple(map(len, multiple_values))) != lengths:
+                raise self._length_error(run_words, multiple_values)
+            flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
+        try:
+            numbers: tuple[Value, ...] = unpack(pack(*flat))
+        except struct.error:  # a word out of range (not from a reply): decode() says which
+            return None
+        if bits:
+            numbers += tuple([flat[at] & mask != 0 for at, mask in bits])
+        return numbers if order is None else order(numbers)
+
+    def _compile_values(self) -> _Values:
+        """What :meth:`decode_values` needs: the bulk decoder's pack and unpack, its bits
+        as (word's index, mask), and the reordering of (numbers + bits) into tag order
+        (``None``: already in it); ``()`` if some tag is not decoded in bulk."""
+        decoder: _Decoder | None = self.cache.get("decoder")
+        if decoder is None:
+            decoder = self.cache["decoder"] = self._compile_decoder()
+        bulk = decoder[3]
+        if bulk is None or bulk[5]:
+            return ()
+        _, pack, unpack, names, bits, _ = bulk
+        position = {name: i for i, name in enumerate((*names, *(b[0] for b in bits)))}
+        perm = [position[tag.name] for tag in self.tags]
+        order: Callable[[tuple[Value, ...]], tuple[Value, ...]] | None
+        if perm == list(range(len(perm))):
+            order = None
+        elif len(perm) == 1:
+            only = perm[0]
+
+            def order(values: tuple[Value, ...]) -> tuple[Value, ...]:
+                return (values[only],)
+        else:
+            order = itemgetter(*perm)
+        return pack, unpack, tuple((at, mask) for _, at, mask in bits), order
+
     def _compile_decoder(self) -> _Decoder:
         steps = _compile_steps(self)
         lengths = (
@@ -232,6 +299,28 @@ class ReadPlan:
     def _text_of(self, name: str) -> str:
         return next((tag.text for tag in self.tags if tag.name == name), "?")
 
+
+class TagNames:
+    """A plan's tag names in order and each one's position: shared by every snapshot of
+    the plan, whose values are a tuple in that order."""
+
+    __slots__ = ("index", "names")
+
+    def __init__(self, names: tuple[str, ...]) -> None:
+        self.names = names
+        self.index = {name: i for i, name in enumerate(names)}
+
+
+#: A plan's tuple decoder (see ReadPlan._compile_values), or () if it has none.
+_Values = (
+    tuple[
+        Callable[..., bytes],
+        Callable[[bytes], tuple[Any, ...]],
+        tuple[tuple[int, int], ...],
+        "Callable[[tuple[Value, ...]], tuple[Value, ...]] | None",
+    ]
+    | tuple[()]
+)
 
 # Decoding steps: (tag name, op, index or indices into the flat results, argument).
 _BIT, _FLAG, _UINT16, _NUMBER, _OTHER = "bit", "flag", "uint16", "number", "other"
