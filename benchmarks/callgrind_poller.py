@@ -67,6 +67,22 @@ def _workload(n: int, ports: list[int], interval: float) -> None:
     asyncio.run(main())
 
 
+async def _answering(ports: list[int]) -> None:
+    """Wait until every PLC answers (they take a while to start on a busy machine)."""
+    import aiofins
+
+    deadline = time.monotonic() + 60
+    for port in ports:
+        while True:
+            try:
+                async with aiofins.connect(f"udp://127.0.0.1:{port}?node=1", timeout=0.5) as plc:
+                    await plc.read("D0", 1)
+                break
+            except aiofins.FinsError:
+                if time.monotonic() > deadline:
+                    raise
+
+
 @contextmanager
 def simulators(count: int, delay: int) -> Iterator[list[int]]:
     """``count`` virtual PLCs answering ``delay`` ms after each request; their ports."""
@@ -86,7 +102,7 @@ def simulators(count: int, delay: int) -> Iterator[list[int]]:
         for p in ports
     ]
     try:
-        time.sleep(3.0)  # let them start (a benchmark, not a test)
+        asyncio.run(_answering(ports))
         yield ports
     finally:
         for proc in procs:

@@ -62,6 +62,33 @@ def test_decode_gives_typed_values() -> None:
     assert plan.decode([words], []) == {"temp": 1.5, "flag": True, "n": -1}
 
 
+def test_values_decode_in_tag_order_without_a_dict() -> None:
+    """Numbers, bits and words of one frame come back as a tuple in the tag list's order
+    (bits between numbers too); the names and their positions are shared per plan."""
+    plan = compile_tags(
+        {"flag": "D102.01", "temp": "D100:float32", "n": "D103:int16", "u": "D104:uint32"}
+    )
+    words = [0x0000, 0x3FC0, 0x0002, 0xFFFF, 0x0001, 0x0002]
+    assert plan.decode_values([words], []) == (True, 1.5, -1, 0x20001)
+    assert plan.tag_names is plan.tag_names
+    assert plan.tag_names.names == ("flag", "temp", "n", "u")
+    assert plan.tag_names.index == {"flag": 0, "temp": 1, "n": 2, "u": 3}
+    with pytest.raises(DecodeError, match=r"expected 6 words, got 5"):
+        plan.decode_values([words[:5]], [])
+    assert plan.decode_values([[*words[:5], 0x10000]], []) is None  # not from a reply
+    one = compile_tags({"only": "D7:int16"})
+    assert one.decode_values([[0xFFFE]], []) == (-2,)
+    tags = {"a": "D0", "b": "D500", "c": "D1000.02"}
+    several = compile_tags(tags, max_multiple_elements=1)
+    assert several.frame_count == 3
+    assert several.decode_values([[1], [2], [4]], []) == (1, 2, True)
+    multiple = compile_tags(tags)
+    assert multiple.decode_values([], [[1, 2, 4]]) == (1, 2, True)
+    # BCD, strings and swapped word orders are decoded by name (decode), never here.
+    assert compile_tags({"b": "D0:bcd16"}).decode_values([[0x12]], []) is None
+    assert compile_tags({"s": "D0:uint32:BADC"}).decode_values([[1, 2]], []) is None
+
+
 def test_results_not_matching_the_plans_frames_are_refused() -> None:
     tags = compile_tags({"temp": "D100:float32", "w": "D300"}).tags
     plan = ReadPlan(tags, (WordRun(0x82, 100, 2),), ((MemoryAddress(0x82, 300, 0),),))
@@ -170,6 +197,12 @@ def test_decode_matches_each_types_own_codec(
         got = plan.decode(runs, multi, errors)
         assert repr(got) == repr(expected)  # (NaN equals itself here; the order counts too)
         assert set(errors) == failed
+        # Without a dict: the same values in the tag list's order, or None (tag by tag).
+        values = plan.decode_values(runs, multi)
+        assert plan.tag_names.names == tuple(tags)
+        if values is not None:
+            assert not failed
+            assert repr(values) == repr(tuple(expected[name] for name in tags))
 
 
 def test_words_out_of_range_are_decoded_tag_by_tag() -> None:

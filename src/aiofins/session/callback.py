@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from ..protocol.errors import EndCodeError
 from ..protocol.header import FinsAddress
@@ -37,6 +38,15 @@ logger = logging.getLogger("aiofins.session")
 #: ``done(responses, error)``: the responses in command order, or ``None`` and the error.
 Done = Callable[[list[Response] | None, BaseException | None], object]
 
+
+class _Flushing:
+    """Stands for the flush handle while :meth:`CallbackBatch.start` sends (see there)."""
+
+    def cancel(self) -> None:
+        pass
+
+
+_FLUSHING: Any = _Flushing()
 _CLOSED = BreakerState.CLOSED
 _OPEN = LinkState.OPEN
 
@@ -80,17 +90,16 @@ class CallbackBatch(Batch):
         session = self.session
         breaker = session._breaker
         error = self.error
-        where = session.transport.description
         if error is None:
             if breaker.failures:
-                call_answered(breaker, where)
+                call_answered(breaker, session.transport.description)
             results: list[Response] = self.results  # type: ignore[assignment]  # all filled
             self._call(done, results, None)
             return
         if isinstance(error, EndCodeError):  # the PLC answered
-            call_answered(breaker, where)
+            call_answered(breaker, session.transport.description)
         else:
-            call_ended(breaker, error, self.timeout, where)
+            call_ended(breaker, error, self.timeout, session.transport.description)
         self._call(done, None, error)
 
     def _call(
@@ -100,6 +109,12 @@ class CallbackBatch(Batch):
             done(results, error)
         except Exception:  # the caller's bug: logged here, never raised into the transport
             logger.exception("%s: a request's callback failed", self.session.transport.description)
+
+    def start(self) -> None:
+        # The first frames go out in start()'s own flush: no flush of the event loop's
+        # next step is scheduled for them (a handle and a callback saved per scan).
+        self.flush_handle = _FLUSHING
+        super().start()
 
     def cancel(self) -> None:
         """Give up without calling ``done``: unanswered commands' SIDs are quarantined,
