@@ -8,8 +8,10 @@ divided by 500 is the marginal cost of one scan (timer, lease, request, reply, d
 snapshot, channel, consumer), free of start-up, imports and the sessions' opening.
 
 The PLCs are virtual PLCs (``aiofins simulate``, separate processes: their work is not
-counted) that answer ``--delay`` ms after each request (default 40), as a PLC across a
-network does: the reply comes once the poller's event loop waits for it. (The C responder
+counted) that answer ``--delay`` ms after each request (default 10, under the 20 ms floor
+of the retransmission timeout), as a PLC across a network does: the reply comes once the
+poller's event loop waits for it. One PLC by default: with several, how many replies one
+event-loop pass finds varies from run to run, and the count with it. (The C responder
 answers within microseconds, while the poller under valgrind runs ~50 times slower: every
 reply would be in the socket before the poller looked, which no real scan sees.)
 ``--delay 0`` uses the C responders of ../shared/tools/perf instead.
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import logging
 import os
 import re
 import subprocess
@@ -71,6 +74,7 @@ async def _answering(ports: list[int]) -> None:
     """Wait until every PLC answers (they take a while to start on a busy machine)."""
     import aiofins
 
+    logging.getLogger("aiofins").setLevel(logging.ERROR)  # (the probes' timeouts)
     deadline = time.monotonic() + 60
     for port in ports:
         while True:
@@ -139,9 +143,9 @@ def _instructions(n: int, ports: list[int], interval: float, src: str | None) ->
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--src", help="the src/ directory of the tree to measure")
-    parser.add_argument("--plcs", type=int, default=10, help="C responders (default 10)")
-    parser.add_argument("--interval", type=float, default=0.2, help="seconds between scans")
-    parser.add_argument("--delay", type=int, default=40, help="ms before each reply (0: C)")
+    parser.add_argument("--plcs", type=int, default=1, help="PLCs (default 1)")
+    parser.add_argument("--interval", type=float, default=0.05, help="seconds between scans")
+    parser.add_argument("--delay", type=int, default=10, help="ms before each reply (0: C)")
     parser.add_argument(
         "--inner", nargs=3, metavar=("N", "PORTS", "INTERVAL"), help=argparse.SUPPRESS
     )
