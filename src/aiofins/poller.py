@@ -444,13 +444,17 @@ class Poller:
             lease.release()
             return False
         started = self._now()
-        request = start_requests(
-            client.session,
-            client._scan_commands(plan)[0],
-            done,
-            dest=client.dest,
-            timeout=group.timeout,
-        )
+        try:
+            request = start_requests(
+                client.session,
+                client._scan_commands(plan)[0],
+                done,
+                dest=client.dest,
+                timeout=group.timeout,
+            )
+        except Exception:  # a bug, not the PLC: the group's task scans (and says what)
+            logger.exception("scan group %s: the scan could not start", group.name)
+            request = None
         if request is None:
             lease.release()
             return False
@@ -473,6 +477,23 @@ class Poller:
         lease.release()
         if group._lease is None:
             group._lease = lease
+        try:
+            self._end_scan(group, client, started, stamp, responses, error)
+        except Exception:  # a bug, not the PLC: logged, and the group scans on
+            logger.exception("scan group %s: the scan could not end", group.name)
+            group.errors += 1
+            if group.state is ScanState.SCANNING:
+                group._enter(ScanState.IDLE)
+
+    def _end_scan(
+        self,
+        group: ScanGroup,
+        client: Client,
+        started: float,
+        stamp: float,
+        responses: list[Response] | None,
+        error: BaseException | None,
+    ) -> None:
         plan = group.plan
         assert plan is not None
         values: tuple[Value, ...] | None = None

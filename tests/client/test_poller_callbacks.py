@@ -272,3 +272,28 @@ async def test_uvloop_and_asyncio_share_one_scan_result(
     for snap in snaps:
         assert snap.values == want and list(snap.readings) == list(tags)
         assert {name: snap[name].value for name in tags} == want
+
+
+async def test_a_short_reply_fails_its_scan_and_the_group_goes_on() -> None:
+    short = True
+
+    def maybe_short(cmd: bytes) -> list[Reply]:
+        if short:
+            return [(0.0, reply(cmd, 0, b"\x00\x01"))]  # one word of the two asked
+        return answer(cmd)
+
+    async with udp_responder(maybe_short) as peer:
+        url = f"udp://127.0.0.1:{peer.port}"
+        async with Pool(timeout=1) as pool, Poller(pool) as poller:
+            group = poller.add_group("g", url, {"a": "D100", "b": "D101"}, interval=0.01)
+            bad = await take(poller, 3)
+            short = False
+            with anyio.fail_after(10):
+                async for good in poller:
+                    if good.error is None:
+                        break
+    for snap in bad:
+        assert snap.error is not None and snap.error.startswith("DecodeError: MEMORY AREA READ")
+        assert snap["a"].quality is Quality.ERROR and snap["a"].value is None
+    assert good.values == {"a": (1 << 12) ^ 100, "b": (1 << 12) ^ 101}
+    assert group.errors >= 3
