@@ -216,6 +216,9 @@ class Poller:
         self._timer_at = math.inf  # when the timer task wakes next
         self._timer_scope: anyio.CancelScope | None = None
         self._timer_wake = Wake()
+        #: Under asyncio: the running loop and the timer's next run (see _tick).
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._tick_handle: asyncio.TimerHandle | None = None
 
     def add_group(
         self,
@@ -261,7 +264,9 @@ class Poller:
         self._added += 1
         heapq.heappush(self._schedule, (when, self._added, group))
         if when < self._timer_at:  # earlier than the timer sleeps: wake it
-            if self._timer_scope is not None:  # (not asyncio: the timer sleeps in a scope)
+            if self._loop is not None:  # (asyncio: an event-loop timer)
+                self._arm(when)
+            elif self._timer_scope is not None:  # (the timer task sleeps in a scope)
                 self._timer_scope.cancel()
             else:
                 self._timer_wake.set()
@@ -310,15 +315,22 @@ class Poller:
         return self._channel
 
     async def _timer(self) -> None:
-        """The one timer of all groups: sleeps until the earliest scan time, wakes each group
+        """The one timer of all groups: sleeps until the earliest scan time, starts each group
         that is due, and puts its next scan time on the schedule (a group still busy then
-        misses that scan, counted)."""
+        misses that scan, counted). Under asyncio it is an event-loop timer instead (see
+        :meth:`_tick`), which this task arms and disarms."""
+        if is_asyncio():
+            self._loop = asyncio.get_running_loop()
+            try:
+                self._tick()
+                await anyio.sleep_forever()
+            finally:
+                if self._tick_handle is not None:
+                    self._tick_handle.cancel()
+                    self._tick_handle = None
+                self._loop = None
         clock, sleep, schedule = self._now, self._sleep, self._schedule
-        pop, push = heapq.heappop, heapq.heappush
-        idle, due = ScanState.IDLE, ScanState.DUE
         wake = self._timer_wake
-        loop = asyncio.get_running_loop() if is_asyncio() else None
-        scan_soon = self._scan_soon if loop is not None else None
         while True:
             if not schedule:
                 self._timer_at = math.inf
@@ -328,36 +340,61 @@ class Poller:
             when = schedule[0][0]
             if when > now + _TIMER_SLACK:
                 self._timer_at = when
-                if loop is not None:  # a timer handle that sets the wake-up: no cancel scope
-                    handle = loop.call_at(when, wake.set)
-                    try:
-                        await wake.wait()
-                    finally:
-                        handle.cancel()
-                else:
-                    with anyio.CancelScope() as scope:
-                        self._timer_scope = scope
-                        await sleep(when - now)
-                    self._timer_scope = None
+                with anyio.CancelScope() as scope:
+                    self._timer_scope = scope
+                    await sleep(when - now)
+                self._timer_scope = None
                 continue
             self._timer_at = -math.inf  # (awake: nothing need wake it)
-            now += _TIMER_SLACK
-            while schedule and schedule[0][0] <= now:
-                when, order, group = pop(schedule)
-                interval = group.interval
-                late = math.floor((now - when) / interval)  # scan times already gone
-                if late:
-                    when += late * interval
-                if group.state is idle:
-                    group._enter(due)
-                    if scan_soon is None or not scan_soon(group):
-                        group._wake.set()  # the group's task scans
-                else:
-                    late += 1
-                if late:
-                    group.missed += late
-                    self._missed(group, late, now)
-                push(schedule, (when + interval, order, group))
+            self._start_due(now + _TIMER_SLACK, None)
+
+    def _tick(self) -> None:
+        """The timer under asyncio: an event-loop timer that starts the due scans (each sent
+        from here, see :meth:`_scan_soon`) and re-arms itself for the next scan time. No
+        task wakes per scan time."""
+        self._tick_handle = None
+        schedule = self._schedule
+        try:
+            if schedule and schedule[0][0] <= self._now() + _TIMER_SLACK:
+                self._timer_at = -math.inf  # (running: nothing need re-arm it)
+                self._start_due(self._now() + _TIMER_SLACK, self._scan_soon)
+        except Exception:  # a bug: logged, and the timer goes on
+            logger.exception("the poller's timer failed")
+        finally:
+            self._timer_at = math.inf
+            if schedule:
+                self._arm(schedule[0][0])
+
+    def _arm(self, when: float) -> None:
+        """(asyncio) Run :meth:`_tick` at ``when`` instead of when it was due to run."""
+        assert self._loop is not None
+        if self._tick_handle is not None:
+            self._tick_handle.cancel()
+        self._timer_at = when
+        self._tick_handle = self._loop.call_at(when, self._tick)
+
+    def _start_due(self, now: float, scan_soon: Callable[[ScanGroup], bool] | None) -> None:
+        """Start every group whose scan time is ``now`` or earlier (from ``scan_soon`` if it
+        can, else on the group's task) and plan its next scan time."""
+        schedule = self._schedule
+        pop, push = heapq.heappop, heapq.heappush
+        idle, due = ScanState.IDLE, ScanState.DUE
+        while schedule and schedule[0][0] <= now:
+            when, order, group = pop(schedule)
+            interval = group.interval
+            late = math.floor((now - when) / interval)  # scan times already gone
+            if late:
+                when += late * interval
+            if group.state is idle:
+                group._enter(due)
+                if scan_soon is None or not scan_soon(group):
+                    group._wake.set()  # the group's task scans
+            else:
+                late += 1
+            if late:
+                group.missed += late
+                self._missed(group, late, now)
+            push(schedule, (when + interval, order, group))
 
     def _missed(self, group: ScanGroup, skipped: int, now: float) -> None:
         """Count missed scans; warn at the first and then at most once a minute per group."""
