@@ -1,9 +1,10 @@
 """Instructions per scan of the Poller, counted by callgrind (not timed).
 
-A :class:`~aiofins.Poller` (through a :class:`~aiofins.Pool`, stock asyncio) scans
-``--plcs`` PLCs on loopback UDP, each with ``bench_api.py``'s 20-tag, one-frame group, every
-``--interval`` seconds, and a consumer takes the snapshots. The run is made twice under
-``valgrind --tool=callgrind``, ending after 100 and after 600 snapshots; the difference
+A :class:`~aiofins.Poller` (through a :class:`~aiofins.Pool`; stock asyncio, or uvloop with
+``--loop uvloop``) scans ``--plcs`` PLCs on loopback UDP, each with ``bench_api.py``'s
+20-tag, one-frame group, every ``--interval`` seconds, and a consumer takes the snapshots.
+The run is made twice under ``valgrind --tool=callgrind``, ending after 100 and after 600
+snapshots; the difference
 divided by 500 is the marginal cost of one scan (timer, lease, request, reply, decode,
 snapshot, channel, consumer), free of start-up, imports and the sessions' opening.
 
@@ -21,7 +22,7 @@ Usage (valgrind must be installed)::
     python benchmarks/callgrind_poller.py                    # this tree
     python benchmarks/callgrind_poller.py --src ../old/src   # another tree
 
-``--inner N PORTS INTERVAL`` runs one workload without valgrind (what the outer run starts).
+``--inner N PORTS INTERVAL LOOP`` runs one workload without valgrind (what the outer run starts).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ SMALL, LARGE = 100, 600
 SIMULATE = (sys.executable, "-m", "aiofins", "simulate")
 
 
-def _workload(n: int, ports: list[int], interval: float) -> None:
+def _workload(n: int, ports: list[int], interval: float, loop: str = "asyncio") -> None:
     from bench_api import TAGS
 
     from aiofins.poller import Poller
@@ -67,6 +68,10 @@ def _workload(n: int, ports: list[int], interval: float) -> None:
                 if seen >= n:
                     break
 
+    if loop == "uvloop":
+        import uvloop
+
+        uvloop.install()
     asyncio.run(main())
 
 
@@ -115,7 +120,7 @@ def simulators(count: int, delay: int) -> Iterator[list[int]]:
             proc.wait()
 
 
-def _instructions(n: int, ports: list[int], interval: float, src: str | None) -> int:
+def _instructions(n: int, ports: list[int], interval: float, src: str | None, loop: str) -> int:
     env = dict(os.environ)
     if src:
         env["PYTHONPATH"] = os.path.abspath(src)
@@ -131,6 +136,7 @@ def _instructions(n: int, ports: list[int], interval: float, src: str | None) ->
             str(n),
             ",".join(map(str, ports)),
             str(interval),
+            loop,
         ]
         subprocess.run(command, check=True, env=env, capture_output=True, text=True)
         with open(out) as f:
@@ -145,25 +151,26 @@ def main() -> None:
     parser.add_argument("--src", help="the src/ directory of the tree to measure")
     parser.add_argument("--plcs", type=int, default=1, help="PLCs (default 1)")
     parser.add_argument("--interval", type=float, default=0.05, help="seconds between scans")
+    parser.add_argument("--loop", default="asyncio", choices=("asyncio", "uvloop"))
     parser.add_argument("--delay", type=int, default=10, help="ms before each reply (0: C)")
     parser.add_argument(
-        "--inner", nargs=3, metavar=("N", "PORTS", "INTERVAL"), help=argparse.SUPPRESS
+        "--inner", nargs=4, metavar=("N", "PORTS", "INTERVAL", "LOOP"), help=argparse.SUPPRESS
     )
     args = parser.parse_args()
     if args.inner:
-        n, ports, interval = args.inner
-        _workload(int(n), [int(p) for p in ports.split(",")], float(interval))
+        n, ports, interval, loop = args.inner
+        _workload(int(n), [int(p) for p in ports.split(",")], float(interval), loop)
         return
     from bench_api import responders
 
     peers = simulators(args.plcs, args.delay) if args.delay else responders(args.plcs)
     with peers as ports:
-        small = _instructions(SMALL, ports, args.interval, args.src)
-        large = _instructions(LARGE, ports, args.interval, args.src)
+        small = _instructions(SMALL, ports, args.interval, args.src, args.loop)
+        large = _instructions(LARGE, ports, args.interval, args.src, args.loop)
     per = (large - small) / (LARGE - SMALL)
     print(
         f"poller   {per / 1000:8.1f}k instructions per scan ({args.plcs} PLCs, "
-        f"replies after {args.delay} ms)",
+        f"replies after {args.delay} ms, {args.loop})",
         flush=True,
     )
 
