@@ -761,8 +761,11 @@ def _decode(
     frames), as :meth:`Client.read_tags` decodes them: in tag order where the plan decodes
     in bulk, else by name (``bad``: the tags that are no value of their type)."""
     n_runs = len(plan.runs)
-    run_words = [client._run_words(plan, i, responses[i]) for i in range(n_runs)]
     multi: list[Sequence[int]] = []
+    if n_runs == 1 and not plan.multiple:  # the usual small tag list: one frame
+        run_words = [client._run_words(plan, 0, responses[0])]
+    else:
+        run_words = [client._run_words(plan, i, responses[i]) for i in range(n_runs)]
     if plan.multiple:
         _, requests = client._scan_commands(plan)
         multi = [

@@ -19,7 +19,7 @@ import struct
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import chain
-from operator import itemgetter
+from operator import and_, itemgetter, truth
 from typing import Any
 
 from .chunking import plan_multiple
@@ -192,9 +192,7 @@ class ReadPlan:
             fast = self.cache["values"] = self._compile_values()
         if not fast:
             return None
-        pack, unpack, bits, order = fast
-        decoder: _Decoder = self.cache["decoder"]
-        lengths, one_frame = decoder[1], decoder[2]
+        one_frame, lengths, pack, unpack, bit_words, masks, order = fast
         flat: Sequence[int]
         if one_frame:
             if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
@@ -208,14 +206,15 @@ class ReadPlan:
             numbers: tuple[Value, ...] = unpack(pack(*flat))
         except struct.error:  # a word out of range (not from a reply): decode() says which
             return None
-        if bits:
-            numbers += tuple([flat[at] & mask != 0 for at, mask in bits])
+        if masks:  # each bit: its word & its mask, as a bool (no Python loop)
+            numbers += tuple(map(truth, map(and_, bit_words(flat), masks)))
         return numbers if order is None else order(numbers)
 
     def _compile_values(self) -> _Values:
-        """What :meth:`decode_values` needs: the bulk decoder's pack and unpack, its bits
-        as (word's index, mask), and the reordering of (numbers + bits) into tag order
-        (``None``: already in it); ``()`` if some tag is not decoded in bulk."""
+        """What :meth:`decode_values` needs: the frames' lengths as :meth:`decode` checks
+        them, the bulk decoder's pack and unpack, the bits' words (a getter of the flat
+        words) and masks, and the reordering of (numbers + bits) into tag order (``None``:
+        already in it); ``()`` if some tag is not decoded in bulk."""
         decoder: _Decoder | None = self.cache.get("decoder")
         if decoder is None:
             decoder = self.cache["decoder"] = self._compile_decoder()
@@ -224,18 +223,17 @@ class ReadPlan:
             return ()
         _, pack, unpack, names, bits, _ = bulk
         position = {name: i for i, name in enumerate((*names, *(b[0] for b in bits)))}
-        perm = [position[tag.name] for tag in self.tags]
-        order: Callable[[tuple[Value, ...]], tuple[Value, ...]] | None
-        if perm == list(range(len(perm))):
-            order = None
-        elif len(perm) == 1:
-            only = perm[0]
-
-            def order(values: tuple[Value, ...]) -> tuple[Value, ...]:
-                return (values[only],)
-        else:
-            order = itemgetter(*perm)
-        return pack, unpack, tuple((at, mask) for _, at, mask in bits), order
+        order = _getter([position[tag.name] for tag in self.tags], every=True)
+        bit_words = _getter([at for _, at, _ in bits]) or _no_items
+        return (
+            decoder[2],
+            decoder[1],
+            pack,
+            unpack,
+            bit_words,
+            tuple(mask for _, _, mask in bits),
+            order,
+        )
 
     def _compile_decoder(self) -> _Decoder:
         steps = _compile_steps(self)
@@ -311,16 +309,42 @@ class TagNames:
         self.index = {name: i for i, name in enumerate(names)}
 
 
+#: Picks items of a sequence by position, as a tuple.
+_Getter = Callable[[Sequence[Any]], tuple[Any, ...]]
+
 #: A plan's tuple decoder (see ReadPlan._compile_values), or () if it has none.
 _Values = (
     tuple[
+        int,
+        tuple[tuple[int, ...], tuple[int, ...]],
         Callable[..., bytes],
         Callable[[bytes], tuple[Any, ...]],
-        tuple[tuple[int, int], ...],
-        "Callable[[tuple[Value, ...]], tuple[Value, ...]] | None",
+        _Getter,
+        tuple[int, ...],
+        "_Getter | None",
     ]
     | tuple[()]
 )
+
+
+def _no_items(items: Sequence[Any]) -> tuple[Any, ...]:
+    return ()
+
+
+def _getter(positions: list[int], every: bool = False) -> _Getter | None:
+    """The items at ``positions`` as a tuple, in one C call; ``None`` for no positions
+    (and, given ``every``, for all the items in order, which need no getter)."""
+    if not positions or (every and positions == list(range(len(positions)))):
+        return None
+    if len(positions) == 1:
+        only = positions[0]
+
+        def one(items: Sequence[Any]) -> tuple[Any, ...]:
+            return (items[only],)
+
+        return one
+    return itemgetter(*positions)
+
 
 # Decoding steps: (tag name, op, index or indices into the flat results, argument).
 _BIT, _FLAG, _UINT16, _NUMBER, _OTHER = "bit", "flag", "uint16", "number", "other"
