@@ -297,3 +297,26 @@ async def test_a_short_reply_fails_its_scan_and_the_group_goes_on() -> None:
         assert snap["a"].quality is Quality.ERROR and snap["a"].value is None
     assert good.values == {"a": (1 << 12) ^ 100, "b": (1 << 12) ^ 101}
     assert group.errors >= 3
+
+
+async def test_a_plan_of_several_frames_and_strings_scans_on_the_callback_path(
+    sim: Simulator,
+) -> None:
+    """0101 and 0104 frames pipelined in one callback scan; a string tag (no bulk decode)
+    decoded by name."""
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    tags = {"s": "D0:string:400", "x": "D5000", "y": "D9000.03"}
+    async with Pool(timeout=1) as pool:
+        async with pool.client(url) as plc:
+            await plc.write_value("D0", "hello", "string:400")
+            await plc.write("D5000", [7])
+            await plc.write("D9000", [8])
+            plan = plc.compile_tags(tags)
+            assert (len(plan.runs), len(plan.multiple)) == (1, 1)
+        async with Poller(pool) as poller:
+            tasks = count_task_scans(poller)
+            poller.add_group("g", url, tags, interval=0.01)
+            snaps = await take(poller, 4)
+    for snap in snaps:
+        assert snap.error is None and snap.values == {"s": "hello", "x": 7, "y": True}
+    assert tasks == (["g"] if is_asyncio() else ["g"] * 4)
