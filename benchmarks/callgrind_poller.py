@@ -4,9 +4,9 @@ A :class:`~aiofins.Poller` (through a :class:`~aiofins.Pool`; stock asyncio, or 
 ``--loop uvloop``) scans ``--plcs`` PLCs on loopback UDP, each with ``bench_api.py``'s
 20-tag, one-frame group, every ``--interval`` seconds, and a consumer takes the snapshots.
 The run is made twice under ``valgrind --tool=callgrind``, ending after 100 and after 600
-snapshots; the difference
-divided by 500 is the marginal cost of one scan (timer, lease, request, reply, decode,
-snapshot, channel, consumer), free of start-up, imports and the sessions' opening.
+snapshots; the difference divided by 500 is the marginal cost of one scan (timer, lease,
+request, reply, decode, snapshot, channel, consumer), free of start-up, imports and the
+sessions' opening.
 
 The PLCs are virtual PLCs (``aiofins simulate``, separate processes: their work is not
 counted) that answer ``--delay`` ms after each request (default 10, under the 20 ms floor
