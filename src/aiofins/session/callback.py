@@ -142,11 +142,10 @@ def start_requests(
     ``None`` (nothing sent) when it cannot start at once: not under asyncio, no synchronous
     send, the link not open, the breaker not closed, or no slot of ``dest`` free.
     """
-    transport = session.transport
     if (
-        not session.on_asyncio
-        or transport.fast_send is None
-        or session.link_state is not _OPEN
+        not session._asyncio
+        or session.transport.fast_send is None
+        or session._link.state is not _OPEN
         or session._breaker.state is not _CLOSED
         or not commands
     ):
