@@ -1,9 +1,12 @@
 """A polling engine: scan groups over one or many PLCs, delivered as timestamped snapshots.
 
 Each scan group reads its tag list (compiled once into the fewest frames, see
-:mod:`aiofins.tags`) from one endpoint every ``interval`` seconds, in its own task, through a
-:class:`~aiofins.pool.Pool`, so a slow or dead PLC never delays the others. One timer task
-keeps every group's next scan time and wakes the groups that are due. Scans are
+:mod:`aiofins.tags`) from one endpoint every ``interval`` seconds, through a
+:class:`~aiofins.pool.Pool`, on its own, so a slow or dead PLC never delays the others. One
+timer keeps every group's next scan time and starts the groups that are due: under asyncio
+it sends a scan's frames itself and the scan ends in the session's receive callback
+(:func:`~aiofins.session.callback.start_requests`), no task woken; otherwise, and whenever
+that cannot start at once, the group's own task scans. Scans are
 deadline-driven: a scan that overruns makes the group skip the scan times it missed (counted in
 :attr:`ScanGroup.missed`), never queue them up. Snapshots go through a bounded buffer; when the
 consumer is slower than the scans, groups wait for room (backpressure) and the scans they miss
