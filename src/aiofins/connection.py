@@ -130,6 +130,20 @@ async def _ipv4_of(host: str, port: int) -> str | None:
     return str(infos[0][4][0]) if infos else None
 
 
+def _ip_address(host: str) -> str | None:
+    """``host`` in the one spelling of its IP address; ``None`` if it is a name."""
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        return None
+
+
+def needs_lookup(endpoint: Endpoint) -> bool:
+    """Whether a session to ``endpoint`` needs a host name looked up (:func:`lookup`):
+    not for an IP address or a serial device."""
+    return endpoint.scheme != "serial" and _ip_address(endpoint.host) is None
+
+
 async def peer_link(endpoint: Endpoint) -> str:
     """Where a session to ``endpoint`` sends its frames, as sessions are told apart by the
     PLC: a host name is resolved as the UDP transport resolves it (``localhost`` and
@@ -138,11 +152,8 @@ async def peer_link(endpoint: Endpoint) -> str:
     connect fails on its own), is the link as written."""
     if endpoint.scheme == "serial":
         return endpoint.link
-    try:  # an IP address needs no lookup (a worker thread's round trip per new session)
-        literal = str(ipaddress.ip_address(endpoint.host))
-    except ValueError:
-        pass
-    else:
+    literal = _ip_address(endpoint.host)
+    if literal is not None:  # no lookup: a worker thread's round trip per new session
         return f"{endpoint.scheme}://{url_host(literal)}:{endpoint.port}"
     kind = socket.SOCK_DGRAM if endpoint.scheme == "udp" else socket.SOCK_STREAM
     try:

@@ -64,6 +64,7 @@ from .connection import (
     DEFAULT_TIMEOUT,
     check_options,
     default_addresses,
+    needs_lookup,
     peer_link,
     pooled_connect,
     request_timeout,
@@ -484,10 +485,16 @@ class Pool:
         if timeout is None:  # the request timeout the endpoint's sessions get
             default = float(self.connect_options.get("timeout", DEFAULT_TIMEOUT))
             timeout = request_timeout(endpoint, default)
-        deadline = self._now() + timeout  # for the name lookup and the connection
+        deadline: float | None = None  # for the name lookup and the connection
         resolved: _Resolved | None = None
+        if not needs_lookup(endpoint):  # at once: no second turn at the lock for it
+            resolved = await self._resolve(endpoint)
         while True:  # twice at most: a new session's names are looked up outside the lock
             async with self._lock:
+                if deadline is None:
+                    # From the borrower's first turn: queueing behind other borrowers (a
+                    # Poller starting 1,000 groups at once) is the pool's own work.
+                    deadline = self._now() + timeout
                 found = await self._choose(endpoint, url, timeout, resolved)
                 if found is not None:
                     entry = found
