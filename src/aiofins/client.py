@@ -9,7 +9,6 @@ route's limits and send the chunks pipelined.
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar, overload
 
@@ -25,7 +24,7 @@ from ._callplan import (
 from ._commands import CommandMethods
 from .protocol.areas import MemoryAddress
 from .protocol.commands import Request, operation_for
-from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite, MultipleMemoryAreaRead
+from .protocol.commands.memory import MemoryAreaWrite
 from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, DecodeError, EndCodeError
 from .protocol.guard import changes, check_read_only
@@ -223,9 +222,7 @@ class Client(CommandMethods):
         return self.dest if dest is None else FinsAddress.of(dest)
 
     def _add_addressing_hint(self, exc: EndCodeError, target: FinsAddress) -> None:
-        """End codes that usually mean wrong node addressing say which addresses to check."""
-        if exc.end_code.code in _ADDRESSING_END_CODES:
-            exc.args = (f"{exc}. {_addressing_hint(target, self.session.source)}",)
+        add_addressing_hint(exc, target, self.session.source)
 
     async def call(
         self,
@@ -485,7 +482,7 @@ class Client(CommandMethods):
             plan = self.compile_tags(tags)
         n_runs = len(plan.runs)
         if n_runs == 1 and not plan.multiple:  # the usual small list: one frame, no task
-            mrc, src, params, _, _ = self._run_read(plan, 0)
+            mrc, src, params, _, _ = plan.run_read(0)
             if timeout is not None and (type(timeout) is not float or not timeout > 0.0):
                 timeout, _ = _call_options(timeout, None)  # checked as execute() checks it
             try:  # (the session directly: no coroutine of execute() per scan)
@@ -496,10 +493,10 @@ class Client(CommandMethods):
                 self._add_addressing_hint(exc, self.dest)
                 raise
             self.last_end_code = response.end_code
-            return plan.decode((self._run_words(plan, 0, response),), (), errors)
-        commands, multiple = self._scan_commands(plan)
+            return plan.decode((plan.run_words(0, response.data),), (), errors)
+        commands, multiple = plan.scan_commands()
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
-        run_words = [self._run_words(plan, i, responses[i]) for i in range(n_runs)]
+        run_words = [plan.run_words(i, responses[i].data) for i in range(n_runs)]
         multi: list[Sequence[int]] = [
             [item.value for item in m.decode_response(response.data).items]
             for m, response in zip(multiple, responses[n_runs:], strict=True)
@@ -533,44 +530,12 @@ class Client(CommandMethods):
             )
         plan.cache["fits"] = limits
 
-    def _scan_commands(
-        self, plan: ReadPlan
-    ) -> tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]]:
-        """The plan's commands for one pipelined scan (its 0101 runs, then its 0104 frames)
-        and its 0104 requests, built once per plan."""
-        built: tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]] | None
-        built = plan.cache.get("scan")
-        if built is None:
-            multiple = [MultipleMemoryAreaRead(addresses=addresses) for addresses in plan.multiple]
-            commands = [self._run_read(plan, i)[:3] for i in range(len(plan.runs))]
-            commands += [(m.MRC, m.SRC, m.encode()) for m in multiple]
-            built = plan.cache["scan"] = (commands, multiple)
-        return built
 
-    def _run_read(self, plan: ReadPlan, i: int) -> tuple[int, int, bytes, MemoryAreaRead, Any]:
-        """The 0101 command of the plan's run ``i`` (MRC, SRC, parameters, request, unpacker),
-        built once per plan."""
-        reads: list[Any] | None = plan.cache.get("reads")
-        if reads is None:
-            reads = plan.cache["reads"] = [None] * len(plan.runs)
-        read = reads[i]
-        if read is None:
-            r = plan.runs[i]
-            new = MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count)
-            unpack = struct.Struct(f">{r.count}H").unpack if new.element_size == 2 else None
-            read = reads[i] = (new.MRC, new.SRC, new.encode(), new, unpack)
-        return read  # type: ignore[no-any-return]
-
-    def _run_words(self, plan: ReadPlan, i: int, response: Response) -> Sequence[int]:
-        """The words of the plan's run ``i`` from its response, unpacked in one step."""
-        request: MemoryAreaRead
-        _, _, _, request, unpack = self._run_read(plan, i)
-        data = response.data
-        if unpack is None or len(data) != 2 * request.count:
-            values: tuple[int, ...] = request.decode_response(data).values  # raises if short
-            return values
-        words: tuple[int, ...] = unpack(data)
-        return words
+def add_addressing_hint(exc: EndCodeError, target: FinsAddress, source: FinsAddress) -> None:
+    """End codes that usually mean wrong node addressing (a request from ``source`` to
+    ``target``) say which addresses to check."""
+    if exc.end_code.code in _ADDRESSING_END_CODES:
+        exc.args = (f"{exc}. {_addressing_hint(target, source)}",)
 
 
 def _call_options(timeout: float | None, retries: int | None) -> tuple[float | None, int | None]:

@@ -44,6 +44,7 @@ import anyio
 from anyio.abc import TaskGroup
 
 from ._channel import Channel, Wake
+from .client import add_addressing_hint
 from .endpoint import parse_endpoint
 from .hooks import EventHooks, ScanDone
 from .pool import backend_sleep, event_loop_clock
@@ -487,7 +488,7 @@ class Poller:
         try:
             request = start_requests(
                 client.session,
-                client._scan_commands(plan)[0],
+                plan.scan_commands()[0],
                 done,
                 dest=client.dest,
                 timeout=group.timeout,
@@ -545,7 +546,7 @@ class Poller:
             except FinsError as exc:
                 error = exc
         elif isinstance(error, EndCodeError):
-            client._add_addressing_hint(error, client.dest)
+            add_addressing_hint(error, client.dest, client.session.source)
         snapshot = self._scanned(group, started, stamp, values, read, bad, error)
         if snapshot is not None and not self._channel.send_nowait(snapshot):
             group._enter(ScanState.DELIVERING)  # full: the group's task waits for room
@@ -777,11 +778,11 @@ def _decode(
     n_runs = len(plan.runs)
     multi: list[Sequence[int]] = []
     if n_runs == 1 and not plan.multiple:  # the usual small tag list: one frame
-        run_words = [client._run_words(plan, 0, responses[0])]
+        run_words = [plan.run_words(0, responses[0].data)]
     else:
-        run_words = [client._run_words(plan, i, responses[i]) for i in range(n_runs)]
+        run_words = [plan.run_words(i, responses[i].data) for i in range(n_runs)]
     if plan.multiple:
-        _, requests = client._scan_commands(plan)
+        _, requests = plan.scan_commands()
         multi = [
             [item.value for item in m.decode_response(response.data).items]
             for m, response in zip(requests, responses[n_runs:], strict=True)

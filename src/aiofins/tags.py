@@ -25,6 +25,7 @@ from typing import Any
 from .chunking import plan_multiple
 from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress, check_span
+from .protocol.commands.memory import MemoryAreaRead, MultipleMemoryAreaRead
 from .protocol.errors import AddressError, CommandError, DecodeError
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
 from .protocol.wordcodec import NUMBER_CODES
@@ -123,6 +124,44 @@ class ReadPlan:
     @property
     def frame_count(self) -> int:
         return len(self.runs) + len(self.multiple)
+
+    def scan_commands(
+        self,
+    ) -> tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]]:
+        """The commands ``(mrc, src, parameters)`` of one pipelined scan (its 0101 runs,
+        then its 0104 frames) and its 0104 requests, built once per plan."""
+        built: tuple[list[tuple[int, int, bytes]], list[MultipleMemoryAreaRead]] | None
+        built = self.cache.get("scan")
+        if built is None:
+            multiple = [MultipleMemoryAreaRead(addresses=addresses) for addresses in self.multiple]
+            commands = [self.run_read(i)[:3] for i in range(len(self.runs))]
+            commands += [(m.MRC, m.SRC, m.encode()) for m in multiple]
+            built = self.cache["scan"] = (commands, multiple)
+        return built
+
+    def run_read(self, i: int) -> tuple[int, int, bytes, MemoryAreaRead, Any]:
+        """The 0101 command of run ``i`` (MRC, SRC, parameters, request, unpacker of its
+        words), built once per plan."""
+        reads: list[Any] | None = self.cache.get("reads")
+        if reads is None:
+            reads = self.cache["reads"] = [None] * len(self.runs)
+        read = reads[i]
+        if read is None:
+            r = self.runs[i]
+            new = MemoryAreaRead(MemoryAddress(r.area_code, r.word, 0), r.count)
+            unpack = struct.Struct(f">{r.count}H").unpack if new.element_size == 2 else None
+            read = reads[i] = (new.MRC, new.SRC, new.encode(), new, unpack)
+        return read  # type: ignore[no-any-return]
+
+    def run_words(self, i: int, data: bytes) -> Sequence[int]:
+        """The words of run ``i`` from its reply's data, unpacked in one step (data of the
+        wrong size raises :class:`DecodeError` saying so)."""
+        _, _, _, request, unpack = self.run_read(i)
+        if unpack is None or len(data) != 2 * request.count:
+            values: tuple[int, ...] = request.decode_response(data).values
+            return values
+        words: tuple[int, ...] = unpack(data)
+        return words
 
     def describe(self) -> list[str]:
         lines = [str(run) for run in self.runs]
