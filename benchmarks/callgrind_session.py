@@ -10,6 +10,10 @@ of interpreter start-up and imports. Cases:
 - ``request``: sequential ``await session.request(0x01, 0x01, params)``;
 - ``many``: ``session.request_many`` of 100 commands at a time, window 50
   (``max_in_flight=50``), per command;
+- ``tasks``: 50 tasks on one session (``max_in_flight=50``), each awaiting
+  ``session.request`` in a loop, per request;
+- ``reads``: the same 50 tasks calling ``plc.read("D100", 1)`` of a
+  :class:`~aiofins.client.Client` over that session (the public API), per read;
 - ``paced``: sequential requests 5 ms apart (a poller's pace: each answered long before its
   retransmission timeout), with the default ``rto_bounds``, 100 and 600 requests; also
   prints how often the deadline watcher woke (its task ran) in the larger run.
@@ -41,10 +45,12 @@ from typing import Any
 
 SMALL, LARGE = 2_000, 12_000
 BATCH = 100
+TASKS = 50
 PACED_SMALL, PACED_LARGE, PACE = 100, 600, 0.005
 
 
 def _workload(case: str, n: int, adaptive: bool) -> None:
+    from aiofins.client import Client
     from aiofins.protocol.header import FinsAddress
     from aiofins.session import Session
     from aiofins.transport.base import Transport
@@ -102,6 +108,19 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
                 request = session.request
                 for _ in range(n):
                     await request(0x01, 0x01, params, idempotent=True)
+            elif case in ("tasks", "reads"):
+                request = session.request
+                read = Client(session).read
+
+                async def caller(count: int) -> None:
+                    if case == "tasks":
+                        for _ in range(count):
+                            await request(0x01, 0x01, params, idempotent=True)
+                    else:
+                        for _ in range(count):
+                            await read("D100", 1)
+
+                await asyncio.gather(*(caller(n // TASKS) for _ in range(TASKS)))
             elif case == "paced":
                 watcher: Any = session._watcher  # counts its task's wake-ups
                 wakes = 0

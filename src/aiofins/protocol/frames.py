@@ -39,6 +39,16 @@ pack_head = struct.Struct("9sBBB").pack
 
 _unpack_key = struct.Struct(">I").unpack_from
 
+#: ``(ICF, key, MRC, SRC, end code)`` of a reply, the key as :func:`reply_key` gives it, in
+#: one call (``struct.error`` when the frame is shorter than :data:`MIN_REPLY_SIZE`): what
+#: the session matches each reply by.
+unpack_reply_head = struct.Struct(">B5xIBBH").unpack_from
+#: The ICF values of a response (bit 6 set, bits 1-5 clear; bit 0 and bit 7 either way:
+#: some servers set bit 0).
+RESPONSE_ICFS = frozenset({0x40, 0x41, 0xC0, 0xC1})
+#: End code bit 15: a relay error (the end code comes from a relay point).
+RELAY_ERROR_BIT = 0x8000
+
 
 def reply_key(frame: bytes) -> int:
     """``SNA SA1 SA2 SID`` of a reply as one integer: the ``DNA DA1 DA2 SID`` of its command."""

@@ -14,9 +14,10 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
+from struct import error as StructError
 from time import monotonic
 from types import TracebackType
-from typing import Any
+from typing import Any, NoReturn
 
 import anyio
 from anyio.abc import TaskGroup
@@ -37,12 +38,16 @@ from ..protocol.errors import (
 from ..protocol.frames import (
     BUSY_CODES,
     ERROR_BITS,
+    MIN_RELAY_REPLY_SIZE,
+    RELAY_ERROR_BIT,
+    RESPONSE_ICFS,
     check_command,
     end_code_error,
     header_prefix,
     key_address,
     pack_head,
     reply_end_code,
+    unpack_reply_head,
 )
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
@@ -78,9 +83,6 @@ from .watcher import DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
-#: The answers ``logger.isEnabledFor`` caches (cleared by logging on every level change): a
-#: cached ``False`` spares the hot path that call, once per frame sent and received.
-_LEVELS: dict[int, bool] = getattr(logger, "_cache", {})
 
 _NORMAL = EndCode(0)
 _CLOSED_BREAKER = BreakerState.CLOSED
@@ -207,6 +209,9 @@ class Session:
         self._deadlines = self._watcher.deadlines
         self._fifo = self._watcher.fifo  # the in-order part, appended to inline
         self._flags_logged = 0  # CPU error flags (0040/0080) already logged
+        #: Whether each frame sent and received is logged (DEBUG): asked of logging once per
+        #: call and once per burst of a batch (see :meth:`log_frames`), not per frame.
+        self._log_frames = logger.isEnabledFor(_DEBUG)
         self._poll_skip = self._poll_backoff = self._poll_streak = 0
         self._turn_due = False  # the next polled request yields to the event loop instead
         in_flight = InFlight(self.sids.pending)
@@ -342,27 +347,28 @@ class Session:
 
         (The unused second argument lets asyncio call this as ``datagram_received``.)
         """
-        if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
+        if self._log_frames:
             log_frame(self.transport.description, "received", frame)
-        if len(frame) < 14:
+        try:
+            icf, key, mrc, src, raw = unpack_reply_head(frame)
+        except StructError:  # shorter than a reply's header, command code and end code
             self.stats.malformed += 1
             return
-        key = (frame[6] << 24) | (frame[7] << 16) | (frame[8] << 8) | frame[9]
         sids = self.sids if space is None else space.sids
         pending = sids.pending
         p = pending.get(key)
         if p is None:
             p = match_wildcard(pending, key)
-            if p is None and frame[12] & 0x80 and len(frame) >= 16:
+            if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
                 p = match_relay_error(pending, frame)
             if p is None:
                 log_unmatched(self, key, sids)
                 return
             key = p.key
-        if frame[10] != p.mrc or frame[11] != p.src or frame[0] & 0x7E != 0x40:
+        if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
             self.stats.mismatched += 1
             return
-        if frame[12] & 0x80 and len(frame) < 16:
+        if raw >= RELAY_ERROR_BIT and len(frame) < MIN_RELAY_REPLY_SIZE:
             self.stats.malformed += 1
             return
         del pending[key]
@@ -379,21 +385,9 @@ class Session:
         if r is None:  # sent again: a reply to another transmission may follow
             linger = sids.resent_linger(p, now, self.rto_bounds[1])
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
-        elif n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
-            linger = sids.linger
-        else:  # RFC 6298 (2.2, 2.3); Karn: only replies to a single send are timed
-            srtt = r.srtt
-            if srtt:
-                err = latency - srtt
-                r.srtt = srtt = srtt + 0.125 * err
-                var = r.rttvar = r.rttvar + 0.25 * ((err if err > 0 else -err) - r.rttvar)
-            else:
-                r.srtt = srtt = latency
-                var = r.rttvar = 0.5 * latency
-            if self._adaptive:  # (over a stream state.rto stays 0: see start())
-                rto = srtt + 4 * var
-                low, high = self.rto_bounds
-                r.rto = low if rto < low else high if rto > high else rto
+        else:
+            if not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
+                r.sample(latency, self.rto_bounds if self._adaptive else None)
             linger = sids.linger
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
@@ -584,22 +578,24 @@ class Session:
         pending = sids.pending
         # SidSpace.take(), inlined (a call saved per request): a change to one is a change
         # to both.
-        key = mine.base | mine.cursor
+        sid = mine.cursor
+        key = mine.base | sid
         if (
             key in pending
             or key in sids.quarantine
-            or sids.lingering.get(key, 0.0) > now
+            or ((lingering := sids.lingering) and lingering.get(key, 0.0) > now)
             or (sids.routed and sids.sid_taken(key))
         ):
             found = sids.allocate(mine)
             if found is None:
                 return None
             key = found
+            sid = key & 0xFF
         else:
-            mine.cursor = (key + 1) & 0xFF
+            mine.cursor = sid + 1 if sid < 255 else 0
         # Built before the request is registered: bad parameters (not bytes) raise here and
         # leave nothing behind.
-        frame = pack_head(mine.prefix, key & 0xFF, mrc, src) + params
+        frame = pack_head(mine.prefix, sid, mrc, src) + params
         p.key = key
         p.mrc = mrc
         p.src = src
@@ -634,7 +630,7 @@ class Session:
         hooks = self._hooks
         if hooks is not None and hooks.request_sent:
             self.emit(hooks.request_sent, RequestSent, p)
-        if _LEVELS.get(_DEBUG) is not False and logger.isEnabledFor(_DEBUG):
+        if self._log_frames:
             log_frame(self.transport.description, "sent", frame)
         return frame
 
@@ -757,87 +753,63 @@ class Session:
             raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which
-        end = monotonic() + timeout
+        end = (now := monotonic()) + timeout  # (now: read again after any wait below)
+        self._log_frames = logger.isEnabledFor(_DEBUG)
         if self._breaker.state is not _CLOSED_BREAKER:
             await admit_call(self._breaker, self.stats, dest, self.transport.description)
+            now = monotonic()
+        p: Pending | None = None
         busy = 0
         try:
             while True:
-                p: Pending | None = None
+                transport = self.transport
+                if transport.fast_send is None and not transport.is_open:
+                    await self._link.ensure_open(end - monotonic())
+                    now = monotonic()
+                state = self._last_state if dest is self._last_dest else self.dest_state(dest)
+                slots = state.slots
+                if slots.in_flight < slots.limit and not slots.waiters:
+                    slots.in_flight += 1
+                else:
+                    await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
+                    now = monotonic()
+                fut: asyncio.Future[bytes] | None = None
+                if self._asyncio:
+                    p = _new(AsyncioPending)  # start() sets every field
+                    p.fut = fut = self._loop.create_future()
+                else:
+                    p = EventPending(0, mrc, src)
+                p.slots = slots  # given back when no longer useful (see the watcher)
                 try:
-                    transport = self.transport
-                    if transport.fast_send is None and not transport.is_open:
-                        await self._link.ensure_open(end - monotonic())
-                    state = self._last_state if dest is self._last_dest else self.dest_state(dest)
-                    slots = state.slots
-                    if slots.in_flight < slots.limit and not slots.waiters:
-                        slots.in_flight += 1
-                    else:
-                        await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
-                    try:
-                        fut: asyncio.Future[bytes] | None = None
-                        if self._asyncio:
-                            fut = self._loop.create_future()
-                            p = _new(AsyncioPending)  # start() sets every field
-                            p.fut = fut
-                        else:
-                            p = EventPending(0, mrc, src)
-                        p.slots = slots  # given back when no longer useful (see the watcher)
-                        now = monotonic()
-                        sent = self.start(
-                            p, state, mrc, src, params, retries, now, end, attempt_timeout
+                    frame = self.start(
+                        p, state, mrc, src, params, retries, now, end, attempt_timeout
+                    )
+                    if frame is None:  # no free SID at hand: wait for one (none taken if not)
+                        command = (mrc, src, params)
+                        frame, transport, now = await start_when_free(
+                            self, p, state, command, retries, end, attempt_timeout, timeout
                         )
-                        if sent is None:  # no free SID at hand: wait for one
-                            sent, transport, now = await start_when_free(
-                                self,
-                                p,
-                                state,
-                                (mrc, src, params),
-                                retries,
-                                end,
-                                attempt_timeout,
-                                timeout,
-                            )
-                        frame = sent
-                        try:
-                            fast_send = transport.fast_send
-                            if fast_send is not None:
-                                fast_send(frame)
-                            else:
-                                await transport.send(frame, end - now)
-                            # Read-after-send (see _polled): for a request alone in flight.
-                            if len(self._pending) == 1:
-                                poll = transport.poll_now
-                                if poll is not None:
-                                    if self._poll_skip:
-                                        self._poll_skip -= 1
-                                        self._poll_streak = 0
-                                    elif self._turn_due:  # fair turn (asyncio only): a yield
-                                        self._turn_due = False
-                                        await asyncio.sleep(0)
-                                    else:
-                                        poll()
-                                        self._polled(p.done)
-                            else:  # concurrent callers: see _polled
-                                self._poll_skip = _POLL_MAX_BACKOFF
-                            frame = await (p.wait() if fut is None else fut)
-                        except BaseException as exc:
-                            # Cancelled or failed to send: a reply may still come.
-                            self.abandon(p, timeout, isinstance(exc, FinsTimeout))
-                            raise
-                    finally:
-                        if p is None or p.slots is not None:  # (else given back already)
-                            if slots.waiters:
-                                slots.release()  # hands the slot to the first waiter
-                            else:
-                                slots.in_flight -= 1
-                except Expired:
-                    assert p is not None
-                    raise FinsTimeout(
-                        self.timeout_message(dest, mrc, src, timeout, p.attempts)
-                    ) from None
-                except ConnectionLost as exc:
-                    await raise_after_a_turn(exc)
+                    try:
+                        if (fast_send := transport.fast_send) is not None:
+                            fast_send(frame)
+                        else:
+                            await transport.send(frame, end - now)
+                        if len(self._pending) != 1:  # concurrent callers: see _read_after_send
+                            self._poll_skip = _POLL_MAX_BACKOFF
+                        elif (poll := transport.poll_now) is not None and self._read_after_send(
+                            poll, p
+                        ):
+                            await asyncio.sleep(0)  # a fair turn
+                        frame = await (p.wait() if fut is None else fut)
+                    except BaseException as exc:  # cancelled, or the send failed or timed out
+                        self.abandon(p, timeout, isinstance(exc, FinsTimeout))  # (if unanswered)
+                        raise
+                finally:
+                    if p.slots is not None:  # (else given back already: see the watcher)
+                        if slots.waiters:
+                            slots.release()  # hands the slot to the first waiter
+                        else:
+                            slots.in_flight -= 1
                 response = self.response(frame)
                 if response is not None:
                     if self._breaker.failures:
@@ -845,9 +817,27 @@ class Session:
                     return response
                 await self._busy_pause_or_raise(frame, busy, end, mrc, src)
                 busy += 1
+                now = monotonic()
         except BaseException as exc:
-            call_ended(self._breaker, exc, timeout, self.transport.description)
-            raise
+            await self._call_failed(exc, p, dest, timeout)
+
+    async def _call_failed(
+        self, exc: BaseException, p: Pending | None, dest: FinsAddress, timeout: float
+    ) -> NoReturn:
+        """A call of :meth:`request` ends with ``exc`` (``p``: its latest request): the
+        breaker learns it; a request given up after its deadline is raised as a
+        :class:`FinsTimeout` saying after how many attempts; a lost link after a turn of the
+        event loop (see :func:`raise_after_a_turn`)."""
+        where = self.transport.description
+        if isinstance(exc, Expired):
+            assert p is not None
+            error = FinsTimeout(self.timeout_message(dest, p.mrc, p.src, timeout, p.attempts))
+            call_ended(self._breaker, error, timeout, where)
+            raise error from None
+        call_ended(self._breaker, exc, timeout, where)
+        if isinstance(exc, ConnectionLost):
+            await raise_after_a_turn(exc)
+        raise exc
 
     async def _busy_pause_or_raise(
         self, frame: bytes, busy: int, end: float, mrc: int, src: int
@@ -864,8 +854,9 @@ class Session:
             call_answered(self._breaker, self.transport.description)
         raise self.end_code_failure(frame, mrc, src)
 
-    def _polled(self, answered: bool) -> None:
-        """Score a read-after-send (``poll_now`` right after the send, request alone in flight).
+    def _read_after_send(self, poll: Callable[[], None], p: Pending) -> bool:
+        """Read the transport right after sending ``p``, alone in flight (its ``poll_now``);
+        whether the caller yields to the event loop instead (a fair turn is due).
 
         A peer on the same core often answers during the send itself: the request then
         completes without an event-loop pass. Adaptive: after one miss the next request tries
@@ -886,7 +877,15 @@ class Session:
         Under trio the wait for a reply already there is a checkpoint all the same, so the
         request still yields; what the read saves is the reader task's wake-up.
         """
-        if answered:
+        if self._poll_skip:
+            self._poll_skip -= 1
+            self._poll_streak = 0
+            return False
+        if self._turn_due:  # (asyncio only)
+            self._turn_due = False
+            return True
+        poll()
+        if p.done:  # answered
             self._poll_backoff = 0
             streak = self._poll_streak + 1
             if streak >= _POLL_STREAK and self._asyncio:
@@ -898,6 +897,7 @@ class Session:
             self._poll_skip = backoff
             self._poll_backoff = min(2 * backoff or 1, _POLL_MAX_BACKOFF)
             self._poll_streak = 0
+        return False
 
     async def request_many(
         self,

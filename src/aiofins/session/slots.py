@@ -297,3 +297,21 @@ class DestState:
         self.rto = 0.0
         #: Held by the one request looking for a free SID while all 256 are taken.
         self.sid_lock: anyio.Lock | None = None
+
+    def sample(self, latency: float, bounds: tuple[float, float] | None) -> None:
+        """Update the estimate with one round trip (RFC 6298 2.2, 2.3; Karn: only replies
+        to a single transmission are timed) and, with ``bounds`` (low, high), the
+        retransmission timeout within them (without: over a reliable stream ``rto`` stays
+        unset, see :meth:`Session.start`)."""
+        srtt = self.srtt
+        if srtt:
+            err = latency - srtt
+            self.srtt = srtt = srtt + 0.125 * err
+            var = self.rttvar = self.rttvar + 0.25 * ((err if err > 0 else -err) - self.rttvar)
+        else:
+            self.srtt = srtt = latency
+            var = self.rttvar = 0.5 * latency
+        if bounds is not None:
+            rto = srtt + 4 * var
+            low, high = bounds
+            self.rto = low if rto < low else high if rto > high else rto
