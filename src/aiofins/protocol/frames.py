@@ -8,6 +8,7 @@ reply is matched by, and the exception a non-normal end code maps to. No I/O, no
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 from .endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from .errors import CommandError, FinsError, RelayError, error_for_end_code
@@ -91,6 +92,24 @@ def check_command(mrc: int, src: int, params: bytes) -> None:
         raise CommandError(
             f"{len(params)} parameter bytes exceed the FINS limit of {MAX_PARAMETER_SIZE}"
         )
+
+
+_PARAMETER_TYPES = frozenset({bytes, bytearray, memoryview})
+
+
+def check_commands(commands: Sequence[tuple[int, int, bytes]]) -> None:
+    """:func:`check_command` for each of ``commands`` (``(mrc, src, params)``). When every
+    one fits, as nearly always, that is found in a few passes over the whole list in C;
+    the loop that says which does not only runs when one may not."""
+    try:
+        mrcs, srcs, blocks = zip(*commands, strict=True)
+        bytes(mrcs + srcs)  # every code an int in 0..255 (else ValueError or TypeError)
+        if {*map(type, blocks)} <= _PARAMETER_TYPES and max(map(len, blocks)) <= MAX_PARAMETER_SIZE:
+            return
+    except (TypeError, ValueError):  # (and when there are none)
+        pass
+    for mrc, src, params in commands:
+        check_command(mrc, src, params)
 
 
 def end_code_error(frame: bytes, mrc: int, src: int) -> FinsError:

@@ -31,8 +31,8 @@ from ..protocol.errors import (
     ConnectionLost,
     FinsTimeout,
 )
-from ..protocol.frames import check_command, end_code_error
-from ..protocol.header import MAX_PARAMETER_SIZE, FinsAddress
+from ..protocol.frames import check_command, check_commands, end_code_error
+from ..protocol.header import FinsAddress
 from .response import Response
 from .slots import DestState, Pending
 
@@ -72,20 +72,18 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
 class BatchPending(Pending):
     """One command of a batch on the wire; the receive callback hands its reply to the batch.
 
-    Made with ``__new__`` alone (no ``__init__`` call per command): :meth:`Batch.send` sets
+    Made with ``__new__`` alone (no ``__init__`` call per command): :meth:`Batch.flush` sets
     the batch's fields, :meth:`Session.start` the rest."""
 
-    __slots__ = ("attempt", "batch", "busy", "index")
+    __slots__ = ("batch", "index")
 
     batch: Batch
     index: int
-    attempt: int
-    busy: int
 
     def wake(self, frame: bytes) -> None:
         """The receive callback matched a reply to this command (already out of the pending
-        table): store its result and send the batch's next command, or end the batch.
-        (Here rather than in a method of the batch: one call less per reply.)"""
+        table): store its result and let the slot carry the batch's next command, or end
+        the batch. (Here rather than in a method of the batch: one call less per reply.)"""
         batch = self.batch
         if batch.fut.done():
             return
@@ -110,14 +108,18 @@ class BatchPending(Pending):
                 and not batch.state.slots.waiters
             ):
                 batch.next = following + 1  # the common case of slot_free, inlined
-                batch.send(following)
+                if batch.flush_handle is None:
+                    batch.flush_handle = session.loop.call_soon(batch.flush)
             else:
                 batch.slot_free()
             return
-        pause = session.busy_pause(frame, self.busy)
+        index = self.index
+        busy = batch.busy.get(index, 0)
+        pause = session.busy_pause(frame, busy)
         if pause is not None:
             session.stats.busy_retries += 1
-            batch.later(pause, self.index, self.attempt, self.busy + 1)
+            batch.busy[index] = busy + 1
+            batch.later(pause, index)
             return
         batch.finish(session.end_code_failure(frame, self.mrc, self.src))
 
@@ -126,9 +128,18 @@ class BatchPending(Pending):
 
 
 class Batch:
-    """The state of one :func:`request_many` call on the asyncio fast path."""
+    """The state of one :func:`request_many` call on the asyncio fast path.
+
+    Commands go out in bursts: a slot freed by a reply in the receive callback only moves
+    :attr:`next` on; at the end of that event-loop step :meth:`flush` starts (SID, frame,
+    registration, deadline: :meth:`Session.start`) and sends every command the step freed
+    a slot for, together: the peer gets a burst instead of a wake-up per frame, and what
+    is the same for the whole burst (the clock, the transport, the logging level) is
+    looked up once."""
 
     __slots__ = (
+        "again",
+        "busy",
         "commands",
         "count",
         "dest",
@@ -139,12 +150,12 @@ class Batch:
         "held",
         "next",
         "on_response",
-        "outbox",
         "remaining",
         "results",
         "retries",
         "session",
         "sid_waits",
+        "started",
         "state",
         "timeout",
         "window",
@@ -171,67 +182,102 @@ class Batch:
         self.window = window
         self.results: list[Response | None] = [None] * len(commands)
         self.remaining = len(commands)
-        self.next = 0  # the next command not yet sent
+        self.next = 0  # commands given a slot: the next one not yet given one
+        self.started = 0  # commands started (sent): those up to next start in the next flush
         self.held = 0  # slots of the destination this batch holds
+        #: Commands to start again in the next flush (busy, or after waiting for a SID).
+        self.again: list[int] = []
+        #: Command index -> busy end codes (2604/2605) it got so far.
+        self.busy: dict[int, int] = {}
         self.handles: set[asyncio.TimerHandle] = set()
         #: Command index -> when it first found no free SID (it gives up after ``timeout``).
         self.sid_waits: dict[int, float] = {}
         self.error: BaseException | None = None
-        self.outbox: list[tuple[BatchPending, bytes]] = []
         self.flush_handle: asyncio.Handle | None = None
         self.fut: asyncio.Future[None] = session.loop.create_future()
 
     # -- sending ------------------------------------------------------------------------
 
-    def send(self, index: int, attempt: int = 0, busy: int = 0) -> None:
-        """Send command ``index`` on a slot this batch holds (with a fresh SID)."""
-        if self.fut.done():
+    def flush(self) -> None:
+        """Start and send every command due: those a slot was freed for since the last
+        flush, and those to send again. One burst: the clock is read and the logging level
+        asked once for all of it (see :meth:`Session.log_frames_now`); each command is
+        started (the request hooks and the frame's log run then) and the burst sent."""
+        self.flush_handle = None
+        first, last = self.started, self.next
+        again = self.again
+        if (first == last and not again) or self.fut.done():
             return
+        self.started = last
+        if again:
+            self.again = []
+            due: Sequence[int] = [*again, *range(first, last)]
+        else:
+            due = range(first, last)
+        session = self.session
+        session.log_frames_now()
+        start, state, commands, retries = session.start, self.state, self.commands, self.retries
+        sid_waits = self.sid_waits
+        now = monotonic()
+        end = now + self.timeout
+        frames = []
+        for index in due:
+            mrc, src, params = commands[index]
+            p = _new_pending(BatchPending)  # session.start() sets the fields of every request
+            p.fut = None
+            p.slots = None  # the batch holds its slots (see held)
+            p.batch = self
+            p.index = index
+            frame = start(p, state, mrc, src, params, retries, now, end, None)
+            if frame is None:  # no free SID of the transport's own
+                self.sid_elsewhere(p, now, end)
+                continue
+            if sid_waits:
+                sid_waits.pop(index, None)
+            frames.append(frame)
+        if not frames:
+            return
+        transport = session.transport
+        try:
+            send_many = transport.fast_send_many
+            if send_many is not None:  # one write for all (FINS/TCP)
+                send_many(frames)
+                return
+            fast_send = transport.fast_send
+            if fast_send is None:
+                raise ConnectionLost(f"{transport.description} is closed")
+            for frame in frames:
+                fast_send(frame)
+        except BaseException as exc:  # (cleanup() gives up what this batch has in flight)
+            self.finish(exc)
+
+    def sid_elsewhere(self, p: BatchPending, now: float, end: float) -> None:
+        """Command ``p.index`` found every SID of the transport's own taken: sent at once on
+        an extra SID space that has one (another is opened meanwhile if none has), else
+        tried again shortly, keeping its slot, at most until the batch's ``timeout``."""
         session = self.session
         state = self.state
-        now = monotonic()
-        mrc, src, params = self.commands[index]
-        p = _new_pending(BatchPending)  # session.start() sets the fields of every request
-        p.fut = None
-        p.slots = None  # the batch holds its slots (see held)
-        p.batch = self
-        p.index = index
-        p.attempt = attempt
-        p.busy = busy
-        end = now + self.timeout
-        frame = session.start(p, state, mrc, src, params, self.retries, now, end, None)
-        if frame is None:  # another SID space's (opened meanwhile if none is open)
-            got = session.spare_sid(state, now)
-            if got is not None:
-                space = got[1]
-                space.dest_state(state).cursor = got[0] & 0xFF
-                frame = session.start(
-                    p, state, mrc, src, params, self.retries, now, end, None, space
-                )
-                assert frame is not None
-                self.send_on(space, p, frame)
-                return
-        if frame is None:  # every SID in use: try again shortly, keeping the slot
-            since = self.sid_waits.setdefault(index, now)
-            if index == self.next - 1 or len(self.sid_waits) == 1:
-                session.stats.sid_exhausted += 1
-            if now - since >= self.timeout:
-                self.finish(session.no_free_sid(state, self.timeout))
-                return
-            self.later(_SID_WAIT, index, attempt, busy)
-            return
-        if self.sid_waits:
+        index = p.index
+        got = session.spare_sid(state, now)
+        if got is not None:
+            key, space = got
+            space.dest_state(state).cursor = key & 0xFF
+            mrc, src, params = self.commands[index]
+            frame = session.start(p, state, mrc, src, params, self.retries, now, end, None, space)
+            assert frame is not None
             self.sid_waits.pop(index, None)
-        # Sent at the end of this event-loop step, together with the other frames queued in
-        # it: the peer then gets a burst instead of a wake-up per frame.
-        self.outbox.append((p, frame))
-        if self.flush_handle is None:
-            self.flush_handle = session.loop.call_soon(self.flush)
+            self.send_on(space, p, frame)
+            return
+        since = self.sid_waits.setdefault(index, now)
+        if index == self.next - 1 or len(self.sid_waits) == 1:
+            session.stats.sid_exhausted += 1
+        if now - since >= self.timeout:
+            self.finish(session.no_free_sid(state, self.timeout))
+            return
+        self.later(_SID_WAIT, index)
 
     def send_on(self, space: ExtraSpace, p: BatchPending, frame: bytes) -> None:
         """Send ``p`` at once on an extra SID space's own transport."""
-        if self.sid_waits:
-            self.sid_waits.pop(p.index, None)
         try:
             fast_send = space.transport.fast_send
             if fast_send is None:
@@ -241,45 +287,19 @@ class Batch:
             self.abandon(p)
             self.finish(exc)
 
-    def flush(self) -> None:
-        """Send the frames queued in this event-loop step."""
-        self.flush_handle = None
-        outbox = self.outbox
-        if not outbox:
-            return
-        self.outbox = []
-        transport = self.session.transport
-        send_many = transport.fast_send_many
-        if send_many is not None:  # one write for all (FINS/TCP)
-            if self.fut.done():
-                return
-            live = [item for item in outbox if not item[0].done]
-            if live:
-                try:
-                    send_many([frame for _, frame in live])
-                except BaseException as exc:
-                    for p, _ in live:
-                        self.abandon(p)
-                    self.finish(exc)
-            return
-        fast_send = transport.fast_send
-        for p, frame in outbox:
-            if p.done or self.fut.done():
-                continue
-            try:
-                if fast_send is None:
-                    raise ConnectionLost(f"{self.session.transport.description} is closed")
-                fast_send(frame)
-            except BaseException as exc:
-                self.abandon(p)
-                self.finish(exc)
+    def send(self, index: int) -> None:
+        """Start and send command ``index`` again (on the slot this batch holds for it)."""
+        self.again.append(index)
+        if self.flush_handle is None:
+            self.flush()
 
-    def later(self, delay: float, index: int, attempt: int, busy: int) -> None:
+    def later(self, delay: float, index: int) -> None:
+        """:meth:`send` command ``index`` again after ``delay`` seconds."""
         handle: asyncio.TimerHandle
 
         def fire() -> None:
             self.handles.discard(handle)
-            self.send(index, attempt, busy)
+            self.send(index)
 
         handle = self.session.loop.call_later(delay, fire)
         self.handles.add(handle)
@@ -289,26 +309,25 @@ class Batch:
         slots = self.state.slots
         while self.held < self.window and slots.try_acquire():
             self.held += 1
-        while self.next < len(self.commands) and self.next < self.held:
-            self.next += 1
-            self.send(self.next - 1)
+        self.next = max(self.next, min(self.held, self.count))
         self.flush()
 
     def slot_free(self) -> None:
-        """A command of this batch completed: its slot goes to the next command, if any.
+        """A command of this batch completed: its slot goes to the next command, if any
+        (started in the next flush).
 
         Other callers waiting for the destination get the slot first (keeping one for the
         batch); otherwise free slots are taken up to the window.
         """
         slots = self.state.slots
-        n = len(self.commands)
+        n = self.count
         if self.next < n and not (slots.waiters and self.held > 1):
             self.next += 1  # the freed slot carries the next command
-            self.send(self.next - 1)
             while self.held < self.window and self.next < n and slots.try_acquire():
                 self.held += 1
                 self.next += 1
-                self.send(self.next - 1)
+            if self.flush_handle is None:
+                self.flush_handle = self.session.loop.call_soon(self.flush)
         else:
             self.held -= 1
             slots.release()  # to the first waiter of the destination, if any
@@ -346,7 +365,7 @@ class Batch:
         if self.flush_handle is not None:
             self.flush_handle.cancel()
             self.flush_handle = None
-        self.outbox.clear()
+        self.again.clear()
         # Sent and not answered: this batch's entries of the pending table (a scan, once).
         mine = [
             p
@@ -383,13 +402,7 @@ async def request_many(
         retries = session.retries if idempotent else 0
     elif retries < 0:
         raise CommandError(f"retries {retries} must not be negative")
-    for mrc, src, params in commands:
-        if (
-            type(params) is not bytes
-            or len(params) > MAX_PARAMETER_SIZE
-            or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF)
-        ):
-            check_command(mrc, src, params)  # raises the error that says which (if any)
+    check_commands(commands)
     if window is not None and window < 1:
         raise CommandError(f"window {window} must be at least 1")
     if not commands:

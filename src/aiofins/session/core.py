@@ -422,6 +422,12 @@ class Session:
         if self._deadlines.heap:
             self._deadlines.prune(len(pending))
 
+    def log_frames_now(self) -> None:
+        """Ask logging whether the frames sent and received are logged (DEBUG) from now
+        on: once per call (:meth:`request` does it inline) and per burst of a batch, not
+        per frame; a change of level shows from the next call or burst."""
+        self._log_frames = logger.isEnabledFor(_DEBUG)
+
     def emit(self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any) -> None:
         """Hand one request event (:class:`RequestSent`, :class:`ResponseReceived`,
         :class:`RequestRetried`, :class:`RequestTimedOut`) about ``p`` to ``handlers``: the
@@ -754,7 +760,7 @@ class Session:
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which
         end = (now := monotonic()) + timeout  # (now: read again after any wait below)
-        self._log_frames = logger.isEnabledFor(_DEBUG)
+        self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
         if self._breaker.state is not _CLOSED_BREAKER:
             await admit_call(self._breaker, self.stats, dest, self.transport.description)
             now = monotonic()
