@@ -88,7 +88,7 @@ class BatchPending(Pending):
         if batch.fut.done():
             return
         session = batch.session
-        response = session.response(frame)
+        response = session.response(frame, self.end_code)
         if response is not None:
             batch.results[self.index] = response
             if batch.on_response is not None:

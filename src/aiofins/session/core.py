@@ -46,7 +46,6 @@ from ..protocol.frames import (
     header_prefix,
     key_address,
     pack_head,
-    reply_end_code,
     unpack_reply_head,
 )
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
@@ -208,6 +207,7 @@ class Session:
         self._watcher = DeadlineWatcher(self, self._breaker, self._hooks)
         self._deadlines = self._watcher.deadlines
         self._fifo = self._watcher.fifo  # the in-order part, appended to inline
+        self._heap = self._deadlines.heap  # the rest (see Deadlines)
         self._flags_logged = 0  # CPU error flags (0040/0080) already logged
         #: Whether each frame sent and received is logged (DEBUG): asked of logging once per
         #: call and once per burst of a batch (see :meth:`log_frames`), not per frame.
@@ -356,7 +356,7 @@ class Session:
             return
         sids = self.sids if space is None else space.sids
         pending = sids.pending
-        p = pending.get(key)
+        p = pending.pop(key, None)  # (put back below if the reply is not its)
         if p is None:
             p = match_wildcard(pending, key)
             if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
@@ -365,14 +365,17 @@ class Session:
                 log_unmatched(self, key, sids)
                 return
             key = p.key
+            del pending[key]
         if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
+            pending[key] = p
             self.stats.mismatched += 1
             return
         if raw >= RELAY_ERROR_BIT and len(frame) < MIN_RELAY_REPLY_SIZE:
+            pending[key] = p
             self.stats.malformed += 1
             return
-        del pending[key]
         p.done = True
+        p.end_code = raw
         now = monotonic()
         sids.recent[key] = now
         latency = now - p.sent_at
@@ -405,7 +408,7 @@ class Session:
                 hooks.response_received,
                 ResponseReceived,
                 p,
-                reply_end_code(frame),
+                raw,
                 latency,
                 p.attempts,
             )
@@ -419,7 +422,7 @@ class Session:
             elif len(fifo) > 64 + 4 * len(pending):
                 # A slow request at the front keeps answered ones behind it: compact, rarely.
                 self._deadlines.prune(len(pending))
-        if self._deadlines.heap:
+        if self._heap:
             self._deadlines.prune(len(pending))
 
     def log_frames_now(self) -> None:
@@ -653,18 +656,18 @@ class Session:
         else:
             self.stats.cancelled += 1
 
-    def response(self, frame: bytes) -> Response | None:
-        """The response a reply carries if its end code is a normal completion (counted;
-        CPU error flags logged), else ``None`` (see :meth:`busy_pause`)."""
-        raw = (frame[12] << 8) | frame[13]
-        if raw & ERROR_BITS:
+    def response(self, frame: bytes, end_code: int) -> Response | None:
+        """The response a reply carries if its end code (``end_code``, as the receive path
+        read it: :attr:`Pending.end_code`) is a normal completion (counted; CPU error flags
+        logged), else ``None`` (see :meth:`busy_pause`)."""
+        if end_code & ERROR_BITS:
             return None
         self.stats.completed += 1
         response: Response = _new(Response)  # new_response(), inlined
-        if raw:
+        if end_code:
             where = self.transport.description
-            self._flags_logged = cpu_flags_seen(where, raw, self._flags_logged)
-            _set_end_code(response, EndCode(raw))
+            self._flags_logged = cpu_flags_seen(where, end_code, self._flags_logged)
+            _set_end_code(response, EndCode(end_code))
         else:
             _set_end_code(response, _NORMAL)
         _set_data(response, frame[14:])
@@ -779,12 +782,13 @@ class Session:
                 else:
                     await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
                     now = monotonic()
-                fut: asyncio.Future[bytes] | None = None
+                fut: asyncio.Future[bytes] | None
                 if self._asyncio:
                     p = _new(AsyncioPending)  # start() sets every field
                     p.fut = fut = self._loop.create_future()
                 else:
                     p = EventPending(0, mrc, src)
+                    fut = None
                 p.slots = slots  # given back when no longer useful (see the watcher)
                 try:
                     frame = self.start(
@@ -800,12 +804,11 @@ class Session:
                             fast_send(frame)
                         else:
                             await transport.send(frame, end - now)
-                        if len(self._pending) != 1:  # concurrent callers: see _read_after_send
-                            self._poll_skip = _POLL_MAX_BACKOFF
-                        elif (poll := transport.poll_now) is not None and self._read_after_send(
-                            poll, p
-                        ):
-                            await asyncio.sleep(0)  # a fair turn
+                        if (poll := transport.poll_now) is not None:  # see _read_after_send
+                            if len(self._pending) != 1:  # concurrent callers
+                                self._poll_skip = _POLL_MAX_BACKOFF
+                            elif self._read_after_send(poll, p):
+                                await asyncio.sleep(0)  # a fair turn
                         frame = await (p.wait() if fut is None else fut)
                     except BaseException as exc:  # cancelled, or the send failed or timed out
                         self.abandon(p, timeout, isinstance(exc, FinsTimeout))  # (if unanswered)
@@ -816,7 +819,7 @@ class Session:
                             slots.release()  # hands the slot to the first waiter
                         else:
                             slots.in_flight -= 1
-                response = self.response(frame)
+                response = self.response(frame, p.end_code)
                 if response is not None:
                     if self._breaker.failures:
                         call_answered(self._breaker, self.transport.description)

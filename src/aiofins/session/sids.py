@@ -80,15 +80,16 @@ class SidSpace:
         (``None``: all 256 are in flight, quarantined or lingering). Cheap when the next
         one is free, as it nearly always is. ``Session.start()`` inlines it: keep the two
         alike."""
-        key = state.base | state.cursor
+        sid = state.cursor
+        key = state.base | sid
         if (
             key in self.pending
             or key in self.quarantine
-            or self.lingering.get(key, 0.0) > now
+            or ((lingering := self.lingering) and lingering.get(key, 0.0) > now)
             or (self.routed and self.sid_taken(key))
         ):
             return self.allocate(state)
-        state.cursor = (key + 1) & 0xFF
+        state.cursor = sid + 1 if sid < 255 else 0
         return key
 
     def sid_taken(self, key: int) -> bool:

@@ -50,14 +50,18 @@ class Pending:
     ``None`` for subclasses that wake their caller through :meth:`wake`. ``deadline`` is
     when the current attempt ends (a retransmission or, for the last, the call's end);
     ``rtt`` the destination whose round-trip estimate a reply updates (``None`` once sent
-    again: Karn's rule, an ambiguous sample is not taken).
+    again: Karn's rule, an ambiguous sample is not taken). ``end_code`` is set when the
+    reply comes (the receive path reads it with the rest of the reply's head).
     """
+
+    end_code: int
 
     __slots__ = (
         "abandoned",
         "attempts",
         "deadline",
         "done",
+        "end_code",
         "fut",
         "key",
         "mrc",
