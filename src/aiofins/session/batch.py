@@ -41,7 +41,6 @@ if TYPE_CHECKING:
     from .spaces import ExtraSpace
 
 _NORMAL = EndCode(0)
-_new_pending = object.__new__
 _DEBUG = logging.DEBUG
 logger = logging.getLogger("aiofins.session")
 #: Pause before trying again when all 256 SIDs of the destination are busy or quarantined.
@@ -72,10 +71,12 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
 class BatchPending(Pending):
     """One command of a batch on the wire; the receive callback hands its reply to the batch.
 
-    Made with ``__new__`` alone (no ``__init__`` call per command): :meth:`Batch.flush` sets
-    the batch's fields, :meth:`Session.start` the rest."""
+    Made bare, ``BatchPending()`` (no ``__init__`` to run): :meth:`Batch.flush` sets the
+    batch's fields, :meth:`Session.start` the rest."""
 
     __slots__ = ("batch", "index")
+
+    __init__ = object.__init__
 
     batch: Batch
     index: int
@@ -223,7 +224,7 @@ class Batch:
         frames = []
         for index in due:
             mrc, src, params = commands[index]
-            p = _new_pending(BatchPending)  # session.start() sets the fields of every request
+            p = BatchPending()  # session.start() sets the fields of every request
             p.fut = None
             p.slots = None  # the batch holds its slots (see held)
             p.batch = self

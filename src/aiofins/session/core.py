@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
+from functools import partial
 from struct import error as StructError
 from time import monotonic
 from types import TracebackType
@@ -202,6 +203,8 @@ class Session:
         self._background: Background | None = None
         self._asyncio = False
         self._loop: Any = None  # the running asyncio loop, if any
+        #: Makes the future a request awaits under asyncio (see __aenter__).
+        self._new_future: Any = None
         self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
         #: The one timer: retransmits or gives up the requests that are due.
         self._watcher = DeadlineWatcher(self, self._breaker, self._hooks)
@@ -274,7 +277,11 @@ class Session:
     async def __aenter__(self) -> Session:
         self._asyncio = is_asyncio()
         if self._asyncio:
-            self._loop = asyncio.get_running_loop()
+            self._loop = loop = asyncio.get_running_loop()
+            self._new_future = loop.create_future
+            if type(loop).create_future is asyncio.BaseEventLoop.create_future:
+                # asyncio's own: the same future, made without that method's Python call.
+                self._new_future = partial(asyncio.Future, loop=loop)
             self._watcher.clock = self._loop.time
             self._watcher.loop = self._loop
         else:
@@ -764,7 +771,7 @@ class Session:
             check_command(mrc, src, params)  # raises the error that says which
         end = (now := monotonic()) + timeout  # (now: read again after any wait below)
         self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
-        if self._breaker.state is not _CLOSED_BREAKER:
+        if self._breaker.failures:  # (none: the breaker is closed)
             await admit_call(self._breaker, self.stats, dest, self.transport.description)
             now = monotonic()
         p: Pending | None = None
@@ -784,8 +791,8 @@ class Session:
                     now = monotonic()
                 fut: asyncio.Future[bytes] | None
                 if self._asyncio:
-                    p = _new(AsyncioPending)  # start() sets every field
-                    p.fut = fut = self._loop.create_future()
+                    p = AsyncioPending()  # start() sets every field
+                    p.fut = fut = self._new_future()
                 else:
                     p = EventPending(0, mrc, src)
                     fut = None
@@ -809,7 +816,10 @@ class Session:
                                 self._poll_skip = _POLL_MAX_BACKOFF
                             elif self._read_after_send(poll, p):
                                 await asyncio.sleep(0)  # a fair turn
-                        frame = await (p.wait() if fut is None else fut)
+                        if fut is not None:
+                            frame = await fut
+                        else:
+                            frame = await p.wait()
                     except BaseException as exc:  # cancelled, or the send failed or timed out
                         self.abandon(p, timeout, isinstance(exc, FinsTimeout))  # (if unanswered)
                         raise

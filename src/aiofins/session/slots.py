@@ -118,24 +118,16 @@ class Pending:
 
 
 class AsyncioPending(Pending):
-    """Waits on a bare asyncio future: the cheapest wake-up asyncio has."""
+    """Waits on a bare asyncio future: the cheapest wake-up asyncio has.
+
+    Made bare, ``AsyncioPending()`` (no ``__init__`` to run): :meth:`Session.start` sets
+    every field, the caller :attr:`fut` and :attr:`slots`."""
 
     __slots__ = ()
 
-    fut: asyncio.Future[bytes]
+    __init__ = object.__init__
 
-    def __init__(self, mrc: int, src: int, fut: asyncio.Future[bytes]) -> None:
-        # Pending.__init__ inlined; the key, times and plan are set by Session.start().
-        self.key = 0
-        self.mrc = mrc
-        self.src = src
-        self.done = False
-        self.fut = fut
-        self.plan: Plan | Retransmission | None = None
-        self.attempts = 1
-        self.abandoned = False
-        self.space = None
-        self.slots = None
+    fut: asyncio.Future[bytes]
 
     def wake(self, frame: bytes) -> None:
         if not self.fut.done():
