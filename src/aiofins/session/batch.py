@@ -33,6 +33,7 @@ from ..protocol.errors import (
 )
 from ..protocol.frames import check_command, check_commands, end_code_error
 from ..protocol.header import FinsAddress
+from .messages import no_free_sid, no_response
 from .response import Response
 from .slots import DestState, Pending
 
@@ -273,7 +274,7 @@ class Batch:
         if index == self.next - 1 or len(self.sid_waits) == 1:
             session.stats.sid_exhausted += 1
         if now - since >= self.timeout:
-            self.finish(session.no_free_sid(state, self.timeout))
+            self.finish(no_free_sid(session, state, self.timeout))
             return
         self.later(_SID_WAIT, index)
 
@@ -340,9 +341,7 @@ class Batch:
         if self.fut.done():
             return
         if isinstance(exc, FinsTimeout):
-            exc = FinsTimeout(
-                self.session.timeout_message(self.dest, p.mrc, p.src, self.timeout, p.attempts)
-            )
+            exc = no_response(self.session, self.dest, p.mrc, p.src, self.timeout, p.attempts)
         self.finish(exc)
 
     # -- ending -------------------------------------------------------------------------

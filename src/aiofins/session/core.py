@@ -57,6 +57,7 @@ from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, ca
 from .link import Link
 from .log import cpu_flags_seen, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
+from .messages import no_response
 from .options import check_options
 from .response import (
     RING_MASK,
@@ -74,8 +75,6 @@ from .slots import (
     EventPending,
     Pending,
     SlotQueue,
-    SlotTimeout,
-    no_free_sid_message,
 )
 from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
 from .states import LinkState
@@ -244,6 +243,7 @@ class Session:
             self._hooks,
             self._adopt_local_node,
             self.sids.forget,
+            self.fail_all,
         )
 
     # ----------------------------------------------------------------- link state
@@ -289,7 +289,7 @@ class Session:
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
-        background = Background(tg, self._background_failed)
+        background = Background(tg, self._link.background_failed)
         self._background = self._link.background = self._watcher.background = background
         self._spaces.background = background
         try:
@@ -462,60 +462,19 @@ class Session:
             logger.debug("%s: frame dropped: %s", where, reason, extra={"endpoint": where})
 
     def connection_lost(self, exc: BaseException | None) -> None:
-        link = self._link
-        if link.state is LinkState.SHUT:
-            return
-        self.stats.disconnects += 1
-        if isinstance(exc, FinsError):
-            err: FinsError = exc
-        else:
-            err = ConnectionLost(f"connection to {self.transport.description} lost: {exc}")
-            err.__cause__ = exc
-        if link.state is LinkState.OPEN:
-            logger.info(
-                "connection to %s lost: %s",
-                self.transport.description,
-                err,
-                extra={"endpoint": self.transport.description},
-            )
-            link.lost()
-        self.fail_all(err)
-
-    def _background_failed(self, exc: Exception) -> None:
-        """A background task (the transport's reader, a retransmission) raised: the link is
-        considered lost (requests in flight fail with :class:`ConnectionLost`), logged and
-        counted; the caller's task group never sees it."""
-        self.stats.background_errors += 1
-        where = self.transport.description
-        logger.warning(
-            "%s: background task failed: %r", where, exc, exc_info=exc, extra={"endpoint": where}
-        )
-        err = ConnectionLost(f"connection to {where} failed: {exc or type(exc).__name__}")
-        err.__cause__ = exc
-        if self._link.state is LinkState.OPEN:
-            self.stats.disconnects += 1
-            self._link.lost()
-        self.fail_all(err)
+        self._link.connection_lost(exc)
 
     def fail_all(self, exc: BaseException) -> None:
-        now = monotonic()
-        sids = self.sids
-        for p in sids.drain():
-            # The link is gone; should it come back under the same SID space, a late reply
-            # must not reach a newer request.
-            sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
-            p.fail(exc)
+        """Fail every request in flight on the session's own transport with ``exc`` (the
+        link failed or the session closes), their SIDs quarantined."""
+        self.sids.fail_all(exc, self.quarantine_until)
         if not self._spaces.extra:  # (else their requests' deadlines stay)
             self._deadlines.clear()
 
     def _fail_space(self, space: ExtraSpace, exc: BaseException) -> None:
         """``space``'s link failed or it closes: its requests fail, their SIDs quarantined
         (its transport is closed next: a late reply can no longer reach anyone)."""
-        now = monotonic()
-        sids = space.sids
-        for p in sids.drain():
-            sids.abandon(p, self.quarantine_until(now, now - p.sent_at))
-            p.fail(exc)
+        space.sids.fail_all(exc, self.quarantine_until)
 
     # ----------------------------------------------------------------- deadlines
 
@@ -698,19 +657,6 @@ class Session:
         self.stats.end_code_errors += 1
         return end_code_error(frame, mrc, src)
 
-    def timeout_message(
-        self, dest: FinsAddress, mrc: int, src: int, timeout: float, attempts: int = 1
-    ) -> str:
-        s = self.source
-        tries = "1 attempt" if attempts == 1 else f"{attempts} attempts"
-        return (
-            f"no response to command {mrc:02X}{src:02X} from {dest} in {tries} within "
-            f"{timeout} s via {self.transport.description}. Check the destination node "
-            f"(DA1={dest.node}) and unit (DA2={dest.unit}) match the PLC, that our source node "
-            f"(SA1={s.node}) is not used by another client and is allowed by the PLC's node "
-            f"settings, the port, and that the PLC is reachable"
-        )
-
     @property
     def loop(self) -> Any:
         """The running asyncio event loop (``None`` under other backends)."""
@@ -724,13 +670,6 @@ class Session:
     async def ensure_open(self, timeout: float | None = None) -> None:
         """Open the link if it is closed, waiting at most ``timeout`` (see :class:`Link`)."""
         await self._link.ensure_open(timeout)
-
-    def no_free_sid(self, state: DestState, timeout: float) -> SlotTimeout:
-        """The error of a call that found no free SID of ``state`` within ``timeout``."""
-        sids = self.sids
-        return SlotTimeout(
-            no_free_sid_message(state.address, timeout, sids.quarantine, len(sids.lingering))
-        )
 
     async def request(
         self,
@@ -811,15 +750,11 @@ class Session:
                             fast_send(frame)
                         else:
                             await transport.send(frame, end - now)
-                        if (poll := transport.poll_now) is not None:  # see _read_after_send
-                            if len(self._pending) != 1:  # concurrent callers
-                                self._poll_skip = _POLL_MAX_BACKOFF
-                            elif self._read_after_send(poll, p):
-                                await asyncio.sleep(0)  # a fair turn
-                        if fut is not None:
-                            frame = await fut
-                        else:
-                            frame = await p.wait()
+                        if (poll := transport.poll_now) is not None and self._read_after_send(
+                            poll, p
+                        ):
+                            await asyncio.sleep(0)  # a fair turn
+                        frame = await (p.wait() if fut is None else fut)
                     except BaseException as exc:  # cancelled, or the send failed or timed out
                         self.abandon(p, timeout, isinstance(exc, FinsTimeout))  # (if unanswered)
                         raise
@@ -850,7 +785,7 @@ class Session:
         where = self.transport.description
         if isinstance(exc, Expired):
             assert p is not None
-            error = FinsTimeout(self.timeout_message(dest, p.mrc, p.src, timeout, p.attempts))
+            error = no_response(self, dest, p.mrc, p.src, timeout, p.attempts)
             call_ended(self._breaker, error, timeout, where)
             raise error from None
         call_ended(self._breaker, exc, timeout, where)
@@ -874,8 +809,9 @@ class Session:
         raise self.end_code_failure(frame, mrc, src)
 
     def _read_after_send(self, poll: Callable[[], None], p: Pending) -> bool:
-        """Read the transport right after sending ``p``, alone in flight (its ``poll_now``);
-        whether the caller yields to the event loop instead (a fair turn is due).
+        """Read the transport right after sending ``p`` if it is alone in flight (``poll``:
+        the transport's ``poll_now``); whether the caller yields to the event loop instead
+        (a fair turn is due).
 
         A peer on the same core often answers during the send itself: the request then
         completes without an event-loop pass. Adaptive: after one miss the next request tries
@@ -896,6 +832,9 @@ class Session:
         Under trio the wait for a reply already there is a checkpoint all the same, so the
         request still yields; what the read saves is the reader task's wake-up.
         """
+        if len(self._pending) != 1:  # concurrent callers
+            self._poll_skip = _POLL_MAX_BACKOFF
+            return False
         if self._poll_skip:
             self._poll_skip -= 1
             self._poll_streak = 0

@@ -74,6 +74,7 @@ class Link:
         hooks: EventHooks | None,
         on_open: Callable[[], None],
         on_fresh: Callable[[], None],
+        fail: Callable[[BaseException], None],
     ) -> None:
         self.transport = transport
         self.sink = sink
@@ -82,6 +83,7 @@ class Link:
         self.hooks = hooks
         self.on_open = on_open
         self.on_fresh = on_fresh
+        self.fail = fail
         self.background: Background | None = None
         self.state = LinkState.CLOSED
         self.since = monotonic()
@@ -145,6 +147,40 @@ class Link:
         """The open link failed (counted by the caller): closed until the next call."""
         if self.state is LinkState.OPEN:
             self.set_state(LinkState.CLOSED)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        """The transport says its link ended (``exc``: why): counted, logged, the link
+        closed until the next call, the requests in flight failed (``fail``) with a
+        :class:`ConnectionLost` (or ``exc`` itself if it is a FINS error)."""
+        if self.state is LinkState.SHUT:
+            return
+        self.stats.disconnects += 1
+        where = self.transport.description
+        if isinstance(exc, FinsError):
+            err: FinsError = exc
+        else:
+            err = ConnectionLost(f"connection to {where} lost: {exc}")
+            err.__cause__ = exc
+        if self.state is LinkState.OPEN:
+            logger.info("connection to %s lost: %s", where, err, extra={"endpoint": where})
+            self.lost()
+        self.fail(err)
+
+    def background_failed(self, exc: Exception) -> None:
+        """A background task (the transport's reader, a retransmission) raised: the link is
+        considered lost (requests in flight fail with :class:`ConnectionLost`), logged and
+        counted; the caller's task group never sees it."""
+        self.stats.background_errors += 1
+        where = self.transport.description
+        logger.warning(
+            "%s: background task failed: %r", where, exc, exc_info=exc, extra={"endpoint": where}
+        )
+        err = ConnectionLost(f"connection to {where} failed: {exc or type(exc).__name__}")
+        err.__cause__ = exc
+        if self.state is LinkState.OPEN:
+            self.stats.disconnects += 1
+            self.lost()
+        self.fail(err)
 
     async def ensure_open(self, timeout: float | None = None) -> None:
         """Open the transport if it is closed, waiting for it at most ``timeout`` seconds.

@@ -19,6 +19,7 @@ or connections would own one per socket.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from time import monotonic
 
@@ -151,6 +152,16 @@ class SidSpace:
         pending = list(self.pending.values())
         self.pending.clear()
         return pending
+
+    def fail_all(self, exc: BaseException, until: Callable[[float, float], float]) -> None:
+        """Fail every request in flight with ``exc`` (the link failed): each taken out of
+        the table and its SID quarantined until ``until(now, time since it was sent)``
+        (should the link come back under the same space, a late reply must not reach a
+        newer request)."""
+        now = monotonic()
+        for p in self.drain():
+            self.abandon(p, until(now, now - p.sent_at))
+            p.fail(exc)
 
     def forget(self) -> None:
         """A fresh socket or connection: no late reply can reach it, every SID is free."""

@@ -183,18 +183,6 @@ class SlotTimeout(FinsTimeout):
     """
 
 
-def no_free_sid_message(
-    dest: object, timeout: float, quarantine: dict[int, float], lingering: int = 0
-) -> str:
-    return (
-        f"no free SID for {dest} within {timeout} s: all 256 are in flight, quarantined or "
-        f"lingering ({len(quarantine)} SIDs of this session wait for late replies to requests "
-        f"that timed out or were cancelled, {lingering} linger after their reply in case a "
-        "duplicate follows; a SID is free again when its late reply arrives or its "
-        "quarantine or linger ends)"
-    )
-
-
 class _Waiter:
     __slots__ = ("error", "event", "granted", "traceback")
 

@@ -34,6 +34,7 @@ from ..protocol.errors import ConnectionLost
 from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .background import Background
+from .messages import no_free_sid
 from .nodes import SOURCE_NODES
 from .sids import SID_WAIT, SidSpace
 from .slots import DestState, Pending
@@ -523,7 +524,7 @@ async def sid_anywhere(
                     continue
                 wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
                 await anyio.sleep(wait)
-    raise session.no_free_sid(state, timeout)
+    raise no_free_sid(session, state, timeout)
 
 
 async def start_when_free(
