@@ -25,10 +25,9 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from ..protocol.errors import EndCodeError
 from ..protocol.header import FinsAddress
 from .batch import Batch, Command
-from .breaker import BreakerState, call_answered, call_ended
+from .breaker import BreakerState
 from .core import Session
 from .response import Response
 from .states import LinkState
@@ -87,20 +86,13 @@ class CallbackBatch(Batch):
                 slots.release()
         else:
             self.cleanup()
-        session = self.session
-        breaker = session._breaker
         error = self.error
+        self.session.tell_breaker(error, self.timeout)
         if error is None:
-            if breaker.failures:
-                call_answered(breaker, session.transport.description)
             results: list[Response] = self.results  # type: ignore[assignment]  # all filled
             self._call(done, results, None)
-            return
-        if isinstance(error, EndCodeError):  # the PLC answered
-            call_answered(breaker, session.transport.description)
         else:
-            call_ended(breaker, error, self.timeout, session.transport.description)
-        self._call(done, None, error)
+            self._call(done, None, error)
 
     def _call(
         self, done: Done, results: list[Response] | None, error: BaseException | None
@@ -143,10 +135,10 @@ def start_requests(
     send, the link not open, the breaker not closed, or no slot of ``dest`` free.
     """
     if (
-        not session._asyncio
+        not session.on_asyncio
         or session.transport.fast_send is None
-        or session._link.state is not _OPEN
-        or session._breaker.state is not _CLOSED
+        or session.link_state is not _OPEN
+        or session.breaker_state is not _CLOSED
         or not commands
     ):
         return None

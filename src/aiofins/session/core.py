@@ -894,16 +894,25 @@ class Session:
                 window=window,
                 on_response=on_response,
             )
-        except EndCodeError:
-            call_answered(breaker, self.transport.description)
-            raise
         except BaseException as exc:
-            timeout = self.timeout if timeout is None else timeout
-            call_ended(breaker, exc, timeout, self.transport.description)
+            self.tell_breaker(exc, self.timeout if timeout is None else timeout)
             raise
         if breaker.failures:
             call_answered(breaker, self.transport.description)
         return responses
+
+    def tell_breaker(self, error: BaseException | None, timeout: float) -> None:
+        """How a call that did not go through :meth:`request` ended (``None``: answered;
+        an end code: the PLC answered all the same; else the call's failure after
+        ``timeout``), for the destination's circuit breaker."""
+        breaker = self._breaker
+        if error is None:
+            if breaker.failures:
+                call_answered(breaker, self.transport.description)
+        elif isinstance(error, EndCodeError):
+            call_answered(breaker, self.transport.description)
+        else:
+            call_ended(breaker, error, timeout, self.transport.description)
 
     def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None:
         """For a batch that found no free SID of the transport's own: one of an open extra
