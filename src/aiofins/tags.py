@@ -185,17 +185,7 @@ class ReadPlan:
         if decoder is None:
             decoder = self.cache["decoder"] = self._compile_decoder()
         steps, lengths, one_frame, bulk = decoder
-        # Every scan decodes here: compare the frames' lengths in one step and check each
-        # frame only to say which one is wrong.
-        flat: Sequence[int]
-        if one_frame:  # one 0101 frame: index its words as they are
-            if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
-                raise self._length_error(run_words, multiple_values)
-            flat = run_words[0]
-        else:
-            if (tuple(map(len, run_words)), tuple(map(len, multiple_values))) != lengths:
-                raise self._length_error(run_words, multiple_values)
-            flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
+        flat = self._flat(run_words, multiple_values, one_frame, lengths)
         if bulk is not None:
             template, pack, unpack, names, bits, rest = bulk
             try:
@@ -232,15 +222,7 @@ class ReadPlan:
         if not fast:
             return None
         one_frame, lengths, pack, unpack, bit_words, masks, order = fast
-        flat: Sequence[int]
-        if one_frame:
-            if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
-                raise self._length_error(run_words, multiple_values)
-            flat = run_words[0]
-        else:
-            if (tuple(map(len, run_words)), tuple(map(len, multiple_values))) != lengths:
-                raise self._length_error(run_words, multiple_values)
-            flat = list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
+        flat = self._flat(run_words, multiple_values, one_frame, lengths)
         try:
             numbers: tuple[Value, ...] = unpack(pack(*flat))
         except struct.error:  # a word out of range (not from a reply): decode() says which
@@ -321,6 +303,25 @@ class ReadPlan:
                     if listed:
                         del out[name]
         return out
+
+    def _flat(
+        self,
+        run_words: Sequence[Sequence[int]],
+        multiple_values: Sequence[Sequence[int]],
+        one_frame: int,
+        lengths: tuple[tuple[int, ...], tuple[int, ...]],
+    ) -> Sequence[int]:
+        """The words of a scan's frames in plan order. Every scan decodes here: the frames'
+        lengths are compared with the plan's in one step, each frame checked only to say
+        which one is wrong (:class:`DecodeError`). ``one_frame``: the words of a plan of one
+        0101 frame (indexed as they are), else 0."""
+        if one_frame:
+            if len(run_words) != 1 or multiple_values or len(run_words[0]) != one_frame:
+                raise self._length_error(run_words, multiple_values)
+            return run_words[0]
+        if (tuple(map(len, run_words)), tuple(map(len, multiple_values))) != lengths:
+            raise self._length_error(run_words, multiple_values)
+        return list(chain(chain.from_iterable(run_words), chain.from_iterable(multiple_values)))
 
     def _length_error(
         self, run_words: Sequence[Sequence[int]], multiple_values: Sequence[Sequence[int]]
