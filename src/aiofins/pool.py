@@ -487,8 +487,6 @@ class Pool:
             timeout = request_timeout(endpoint, default)
         deadline: float | None = None  # for the name lookup and the connection
         resolved: _Resolved | None = None
-        if not needs_lookup(endpoint):  # at once: no second turn at the lock for it
-            resolved = await self._resolve(endpoint)
         while True:  # twice at most: a new session's names are looked up outside the lock
             async with self._lock:
                 if deadline is None:
@@ -533,8 +531,9 @@ class Pool:
         self, endpoint: Endpoint, url: str, timeout: float, resolved: _Resolved | None
     ) -> _Entry | None:
         """The entry to lend for ``endpoint``: an open one, or a new one; ``None`` if a new
-        one is needed and its names are not looked up yet (``resolved``: the caller looks
-        them up without the lock, then asks again). Called with the lock held."""
+        one is needed and its host name is not looked up yet (``resolved``: the caller looks
+        it up without the lock, then asks again; an IP address is resolved here, as it
+        needs no lookup). Called with the lock held."""
         key = endpoint.key
         entries = [e for e in self._entries.get(key, []) if e.state in _LIVE]
         usable = [e for e in entries if e.state is not EntryState.CLOSING]
@@ -555,7 +554,9 @@ class Pool:
         if idle is not None and self._count(_LIVE) >= self.max_sessions:
             return idle  # the pool is full: share the busy session
         if resolved is None:
-            return None
+            if needs_lookup(endpoint):
+                return None  # looked up without the lock, then asked again
+            resolved = await self._resolve(endpoint)  # an address: no lookup to wait for
         return await self._open(endpoint, url, timeout, resolved, extra=bool(usable))
 
     async def _resolve(self, endpoint: Endpoint) -> _Resolved:
