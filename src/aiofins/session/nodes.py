@@ -63,8 +63,7 @@ class SourceNodes:
         """A node nobody uses towards ``peer`` (254 down, none of ``avoid``), now held;
         ``None`` if all 254 are taken."""
         with self._lock:
-            taken = self._in_use(peer).union(avoid)
-            node = next((n for n in range(254, 0, -1) if n not in taken), None)
+            node = _free(self._in_use(peer).union(avoid))
             if node is not None:
                 self._hold(peer, node)
             return node
@@ -98,7 +97,7 @@ class SourceNodes:
                 )
             taken = used.union(avoid)
             if not named and node in taken:
-                free = next((n for n in range(254, 0, -1) if n not in taken), None)
+                free = _free(taken)
                 if free is None:
                     raise CommandError(f"{peer}: no free FINS source node for another session")
                 node = free
@@ -123,6 +122,11 @@ class SourceNodes:
             del self._held[peer]
         if cool_until > self._clock():
             self._cooling.setdefault(peer, {})[node] = cool_until
+
+
+def _free(taken: frozenset[int]) -> int | None:
+    """The highest node (254 down) not in ``taken``; ``None`` if all are."""
+    return next((n for n in range(254, 0, -1) if n not in taken), None)
 
 
 #: The source nodes of every session and pool of this process.
