@@ -366,14 +366,15 @@ class Batch:
             self.flush_handle.cancel()
             self.flush_handle = None
         self.again.clear()
-        # Sent and not answered: this batch's entries of the pending table (a scan, once).
-        mine = [
-            p
-            for p in self.session.requests_in_flight()
-            if isinstance(p, BatchPending) and p.batch is self
-        ]
-        for p in mine:
-            self.abandon(p)
+        if self.remaining:  # (all answered: none of them is in the pending table)
+            # Sent and not answered: this batch's entries of the pending table (a scan, once).
+            mine = [
+                p
+                for p in self.session.requests_in_flight()
+                if isinstance(p, BatchPending) and p.batch is self
+            ]
+            for p in mine:
+                self.abandon(p)
         slots = self.state.slots
         while self.held:
             self.held -= 1

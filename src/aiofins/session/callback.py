@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any
 
 from ..protocol.header import FinsAddress
 from .batch import Batch, Command
@@ -38,14 +37,6 @@ logger = logging.getLogger("aiofins.session")
 Done = Callable[[list[Response] | None, BaseException | None], object]
 
 
-class _Flushing:
-    """Stands for the flush handle while :meth:`CallbackBatch.start` sends (see there)."""
-
-    def cancel(self) -> None:
-        pass
-
-
-_FLUSHING: Any = _Flushing()
 _CLOSED = BreakerState.CLOSED
 _OPEN = LinkState.OPEN
 
@@ -79,13 +70,7 @@ class CallbackBatch(Batch):
         if done is None:  # cancelled
             return
         self.done = None
-        if self.error is None and not self.handles and self.flush_handle is None:
-            slots = self.state.slots  # every command answered: only the slots to give back
-            while self.held:
-                self.held -= 1
-                slots.release()
-        else:
-            self.cleanup()
+        self.cleanup()
         error = self.error
         self.session.tell_breaker(error, self.timeout)
         if error is None:
@@ -101,12 +86,6 @@ class CallbackBatch(Batch):
             done(results, error)
         except Exception:  # the caller's bug: logged here, never raised into the transport
             logger.exception("%s: a request's callback failed", self.session.transport.description)
-
-    def start(self) -> None:
-        # The first frames go out in start()'s own flush: no flush of the event loop's
-        # next step is scheduled for them (a handle and a callback saved per scan).
-        self.flush_handle = _FLUSHING
-        super().start()
 
     def cancel(self) -> None:
         """Give up without calling ``done``: unanswered commands' SIDs are quarantined,
