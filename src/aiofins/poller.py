@@ -652,18 +652,7 @@ class Poller:
                         changed.add(name)
             good = _good_readings(tag_names, values, stamp)  # a reading is made when asked for
             group._last, group._last_good = good, values
-            if self.changes_only:
-                return self._deliver(group, stamp, good, changed, error)
-            return _snapshot(
-                group.name,
-                group.url,
-                group.scans,
-                stamp,
-                group.last_duration,
-                good,
-                frozenset(changed) if changed else _UNCHANGED,
-                None,
-            )
+            return self._deliver(group, stamp, good, changed, None)
         readings: dict[str, TagReading] = {}
         changed = set()
         for name in group.tags:
