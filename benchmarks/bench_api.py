@@ -53,6 +53,7 @@ from bench_session import (
     PERF_TOOLS,
     c_baseline,
     free_port,
+    free_ports,
     raw_baseline,
     start_responder,
 )
@@ -322,11 +323,7 @@ TAGS = {
 def responders(count: int) -> Iterator[list[int]]:
     subprocess.run(["make", "-s", "-C", str(PERF_TOOLS)], check=True)
     exe = PERF_TOOLS / "bin" / "fins_responder"
-    ports: list[int] = []
-    while len(ports) < count:
-        port = free_port()
-        if port not in ports:
-            ports.append(port)
+    ports = free_ports(count)
     procs = [
         subprocess.Popen([str(exe), "-p", str(p), "-q"], stderr=subprocess.DEVNULL) for p in ports
     ]

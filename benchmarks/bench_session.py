@@ -81,6 +81,16 @@ def free_port() -> int:
     raise RuntimeError("no free port")
 
 
+def free_ports(count: int) -> list[int]:
+    """``count`` different ports, each as :func:`free_port` finds one."""
+    ports: list[int] = []
+    while len(ports) < count:
+        port = free_port()
+        if port not in ports:
+            ports.append(port)
+    return ports
+
+
 def start_responder(port: int, cpu: int | None) -> subprocess.Popen[bytes]:
     subprocess.run(["make", "-s", "-C", str(PERF_TOOLS)], check=True)
     cmd = [str(PERF_TOOLS / "bin/fins_responder"), "-p", str(port), "-q"]

@@ -95,13 +95,9 @@ async def _answering(ports: list[int]) -> None:
 @contextmanager
 def simulators(count: int, delay: int) -> Iterator[list[int]]:
     """``count`` virtual PLCs answering ``delay`` ms after each request; their ports."""
-    from bench_session import free_port
+    from bench_session import free_ports
 
-    ports: list[int] = []
-    while len(ports) < count:
-        port = free_port()
-        if port not in ports:
-            ports.append(port)
+    ports = free_ports(count)
     procs = [
         subprocess.Popen(
             [*SIMULATE, "--udp", f"127.0.0.1:{p}", "--node", "1", "--delay", str(delay)],
