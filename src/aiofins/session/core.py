@@ -719,7 +719,7 @@ class Session:
             while True:
                 transport = self.transport
                 if transport.fast_send is None and not transport.is_open:
-                    await self._link.ensure_open(end - monotonic())
+                    await self._link.ensure_open(end - monotonic(), call_timeout=timeout)
                     now = monotonic()
                 state = self._last_state if dest is self._last_dest else self.dest_state(dest)
                 slots = state.slots

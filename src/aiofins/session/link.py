@@ -182,8 +182,11 @@ class Link:
             self.lost()
         self.fail(err)
 
-    async def ensure_open(self, timeout: float | None = None) -> None:
-        """Open the transport if it is closed, waiting for it at most ``timeout`` seconds.
+    async def ensure_open(
+        self, timeout: float | None = None, *, call_timeout: float | None = None
+    ) -> None:
+        """Open the transport if it is closed, waiting for it at most ``timeout`` seconds
+        (``call_timeout``: the whole call's, which the error names; default ``timeout``).
 
         One connection attempt at a time, run in the background (bounded by the transport's
         own connect timeout) and shared by every caller that comes while it runs. A caller
@@ -221,7 +224,8 @@ class Link:
                 await attempt.done.wait()
             if not attempt.done.is_set():
                 raise FinsTimeout(
-                    f"no connection to {self.transport.description} within {timeout:.3g} s: "
+                    f"no connection to {self.transport.description} within "
+                    f"{timeout if call_timeout is None else call_timeout:.3g} s: "
                     "a connection attempt is still in progress (a later call uses it once "
                     "it succeeds)"
                 )
