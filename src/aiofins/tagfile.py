@@ -25,6 +25,7 @@ one :class:`TagFileError`, each as ``FILE:LINE: message``.
 from __future__ import annotations
 
 import csv
+import io
 import logging
 import re
 from collections.abc import Iterable
@@ -56,6 +57,8 @@ CX_TYPES: dict[str, str | None] = {
     "ULINT_BCD": None,  # 16 BCD digits: no value type of ours holds it
 }
 _CX_STRING = re.compile(r"^STRING\s*(?:[(\[:]\s*(\d+)\s*[)\]]?)?$", re.IGNORECASE)
+#: Characters a cell may hold (a name, an address, a type, a comment), at most.
+MAX_CELL = 4096
 _CX_CONSTANT = "NUMBER"
 
 _NAME_COLUMNS = ("name", "symbol", "tag")
@@ -84,6 +87,8 @@ def cx_type(text: str) -> str | None:
     if m:
         if not m.group(1):
             raise CommandError("STRING needs its size in bytes, e.g. STRING(16)")
+        if len(m.group(1)) > 5:  # a size of thousands of digits is no size (nor a cheap int)
+            raise CommandError(f"STRING size of {len(m.group(1))} digits: at most 1998 bytes")
         return f"string:{m.group(1)}"
     return None
 
@@ -107,26 +112,17 @@ def load_tags(path: str | Path, *, encoding: str = "utf-8-sig") -> dict[str, str
 
 def parse_tags_text(text: str, source: str = "<tags>") -> dict[str, str]:
     """:func:`load_tags` on text already read (``source`` names it in messages)."""
-    lines = [
-        (number, line)
-        for number, line in enumerate(text.splitlines(), start=1)
-        if line.strip() and not line.lstrip().startswith(("#", "//"))
-    ]
-    if not lines:
+    problems: list[str] = []
+    rows = _rows(text, source, problems)
+    if not rows:
+        if problems:
+            raise TagFileError(problems)
         raise TagFileError([f"{source}: no tags"])
-    delimiter = _delimiter(lines[0][1])
-    rows = [
-        (number, [cell.strip() for cell in row])
-        for (number, line), row in zip(
-            lines, csv.reader((line for _, line in lines), delimiter=delimiter), strict=True
-        )
-    ]
     columns = _header(rows[0][1])
     if columns is not None:
         rows = rows[1:]
     tags: dict[str, str] = {}
     first_line: dict[str, int] = {}
-    problems: list[str] = []
     for number, cells in rows:
         where = f"{source}:{number}"
         try:
@@ -155,8 +151,62 @@ def parse_tags_text(text: str, source: str = "<tags>") -> dict[str, str]:
     if not tags and not problems:
         problems.append(f"{source}: no tags")
     if problems:
-        raise TagFileError(problems)
+        raise TagFileError(sorted(problems, key=lambda p: _line_of(p, source)))
     return tags
+
+
+def _line_of(problem: str, source: str) -> int:
+    number = problem[len(source) + 1 :].partition(":")[0]
+    return int(number) if number.isdigit() else 0
+
+
+def _rows(text: str, source: str, problems: list[str]) -> list[tuple[int, list[str]]]:
+    """The rows of a tag file with the line each starts on: blank rows and rows starting
+    with ``#`` or ``//`` skipped, quoted cells spanning lines (a CX-Programmer comment)
+    kept whole. A row with a cell over :data:`MAX_CELL` characters is a problem."""
+    first = next(
+        (
+            line
+            for line in text.splitlines()
+            if line.strip() and not line.lstrip().startswith(("#", "//"))
+        ),
+        None,
+    )
+    if first is None:
+        return []
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=_delimiter(first[:MAX_CELL]))
+    rows: list[tuple[int, list[str]]] = []
+    start = 1
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            break
+        except csv.Error as exc:  # a cell over csv's own limit (128 kB), a stray NUL, ...
+            problems.append(f"{source}:{start}: {_cell_problem(exc)}")
+            start = reader.line_num + 1
+            continue
+        number, start = start, reader.line_num + 1
+        if not row or not "".join(row).strip():
+            continue
+        if row[0].lstrip().startswith(("#", "//")):
+            continue
+        long = next((cell for cell in row if len(cell) > MAX_CELL), None)
+        if long is not None:
+            problems.append(
+                f"{source}:{number}: a cell of {len(long)} characters "
+                f"(at most {MAX_CELL}): {long[:40]!r}..."
+            )
+            continue
+        rows.append((number, [cell.strip() for cell in row]))
+    return rows
+
+
+def _cell_problem(exc: csv.Error) -> str:
+    text = str(exc)
+    if "field limit" in text:
+        return f"a cell longer than csv's limit ({csv.field_size_limit()} characters)"
+    return f"not CSV: {text}"
 
 
 def _delimiter(first: str) -> str:

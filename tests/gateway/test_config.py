@@ -206,3 +206,76 @@ def test_the_cli_checks_a_config_and_reports_mistakes(tmp_path: Path) -> None:
         timeout=60,
     )
     assert bad_shard.returncode == 2 and "0 <= I < N" in bad_shard.stderr
+
+
+def test_mqtt_limits_are_checked_before_anything_connects(tmp_path: Path) -> None:
+    """``keepalive = 70000`` and a 70,000-character client id passed ``--check`` and killed
+    the daemon at its first connect; topics the broker would refuse are caught too."""
+    text = f"""\
+[mqtt]
+keepalive = 70000
+client_id = "{"c" * 70000}"
+gateway_topic = "$SYS/{{gateway}}"
+plc_status_topic = "fins/{{plc}}/st\\u0000"
+
+[[groups]]
+name = "g"
+tags = {{ x = "D0" }}
+topic = "{"t" * 70000}/{{plc}}"
+
+[[plcs]]
+name = "p1"
+url = "udp://10.0.0.5"
+"""
+    path = tmp_path / "limits.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    problems = info.value.problems
+
+    def line_of(fragment: str) -> int:
+        (hit,) = [p for p in problems if fragment in p]
+        return int(hit.split(":")[1])
+
+    assert line_of("keepalive must be 1..65535 seconds") == 2
+    assert line_of("client_id has 70000 bytes, at most 65535") == 3
+    assert line_of("gateway_topic must not be empty, start with '$'") == 4
+    assert line_of("plc_status_topic must not be empty, start with '$' or contain NUL") == 5
+    assert line_of("PLC 'p1' group 'g''s topic has 70003 bytes") == 13
+    result = subprocess.run(
+        [sys.executable, "-m", "aiofins.cli", "gateway", "--check", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert len(result.stderr.splitlines()) == len(problems)
+    assert len(result.stderr) < 2000  # the 70,000-character values are not echoed whole
+    assert all(line.startswith(f"{path}:") for line in result.stderr.splitlines())
+
+
+def test_a_malformed_tag_file_is_reported_by_check_with_its_lines(tmp_path: Path) -> None:
+    (tmp_path / "tags.csv").write_text(
+        "Name,Data Type,Address / Value,Rack Location,Usage,Comment\n"
+        'sp,INT,D100,,Work,"first line\nsecond line, with a comma"\n'
+        f"big,STRING[{'9' * 5000}],D200,,,\n"
+        f'huge,INT,D1,,,"{"x" * 200_000}"\n'
+        "ok,REAL,D300,,,\n"
+    )
+    path = tmp_path / "gw.toml"
+    path.write_text(
+        '[[groups]]\nname = "g"\ntags_file = "tags.csv"\n'
+        '[[plcs]]\nname = "p1"\nurl = "udp://10.0.0.5"\n'
+    )
+    result = subprocess.run(
+        [sys.executable, "-m", "aiofins.cli", "gateway", "--check", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    lines = result.stderr.splitlines()
+    csv = tmp_path / "tags.csv"
+    assert len(lines) == 2, lines
+    assert lines[0].startswith(f"{path}:3: {csv}:4: a cell of 5008 characters")
+    assert lines[1].startswith(f"{path}:3: {csv}:5: a cell longer than csv's limit")

@@ -142,3 +142,44 @@ async def test_loaded_tags_read_from_a_virtual_plc(anyio_backend: object) -> Non
         "Setpoint": -5,
         "Recipe": "MIX",
     }
+
+
+def test_a_multi_line_quoted_comment_is_one_cell_and_lines_stay_right(tmp_path: Path) -> None:
+    """Valid CSV that crashed the loader (each physical line was parsed on its own)."""
+    path = write(
+        tmp_path,
+        "Name,Data Type,Address / Value,Rack Location,Usage,Comment\r\n"
+        'sp,INT,D100,,Work,"the setpoint\r\n# not a comment: inside quotes\r\n\r\nends here"\r\n'
+        "// a comment line\r\n"
+        "temp,REAL,D102,,Work,plain\r\n"
+        "bad,REAL,,,Work,\r\n",
+    )
+    with pytest.raises(TagFileError) as info:
+        load_tags(path)
+    assert info.value.problems == [f"{path}:8: tag 'bad' has no address"]
+    path.write_text(path.read_text().replace("bad,REAL,,,Work,\n", ""))
+    assert load_tags(path) == {"sp": "D100:int16", "temp": "D102:float32"}
+
+
+def test_cells_and_type_sizes_are_bounded(tmp_path: Path) -> None:
+    """A cell over 128 kB (csv's own limit) and ``STRING[5000 digits]`` raised csv.Error and
+    ValueError out of load_tags; every bound is a FILE:LINE problem now."""
+    path = write(
+        tmp_path,
+        "name,address,type\n"
+        f"long,D0,STRING[{'9' * 5000}]\n"
+        f"digits,D0,STRING({'9' * 3000})\n"
+        f"spec,D0,int16:{'9' * 4000}\n"
+        f'"{"n" * 200_000}",D0,uint16\n'
+        f"{'m' * 5000},D0,uint16\n"
+        "fine,D2,uint16\n",
+    )
+    with pytest.raises(TagFileError) as info:
+        load_tags(path)
+    problems = info.value.problems
+    assert [p.split(": ", 1)[0] for p in problems] == [f"{path}:{n}" for n in (2, 3, 4, 5, 6)]
+    assert "a cell of 5008 characters (at most 4096)" in problems[0]
+    assert "STRING size of 3000 digits: at most 1998 bytes" in problems[1]
+    assert "a length of 4000 digits" in problems[2]
+    assert "csv's limit" in problems[3]
+    assert "a cell of 5000 characters" in problems[4]

@@ -252,12 +252,12 @@ class _Reader:
         where = self.lines.at(path, index, key)
         if not ok:
             names = " or ".join(_KIND_NAMES.get(k, k.__name__) for k in kinds)
-            self.problem(where, f"{key} must be {names}, got {value!r}")
+            self.problem(where, f"{key} must be {names}, got {_shown(value)}")
             return default
         if check is not None:
             message = check(value)
             if message:
-                self.problem(where, f"{key} {message}, got {value!r}")
+                self.problem(where, f"{key} {message}, got {_shown(value)}")
                 return default
         return value
 
@@ -288,14 +288,14 @@ class _Reader:
         config = MqttConfig(
             host=get("host", str),
             port=get("port", int, _port),
-            client_id=get("client_id", str),
+            client_id=get("client_id", str, _client_id),
             username_env=get("username_env", str),
             password_env=get("password_env", str),
             tls=get("tls", bool),
             ca_file=get("ca_file", str),
             cert_file=get("cert_file", str),
             key_file=get("key_file", str),
-            keepalive=get("keepalive", int, _positive),
+            keepalive=get("keepalive", int, _keepalive),
             backoff_min=float(backoff_min),
             backoff_max=float(get("backoff_max", (int, float), _positive)),
             timeout=float(get("timeout", (int, float), _positive)),
@@ -520,21 +520,41 @@ class _Reader:
         plcs: tuple[PlcConfig, ...],
         groups: Mapping[str, GroupConfig],
     ) -> None:
-        """Every PLC and group publishes on a topic of its own."""
+        """Every PLC and group publishes on a topic of its own, each a valid MQTT topic."""
         if "{plc}" not in mqtt.plc_status_topic:
             self.problem(
                 self.lines.at("mqtt", -1, "plc_status_topic"), "plc_status_topic needs {plc}"
             )
+        client_id = mqtt.client_id or f"aiofins-gateway-{gateway}-000"
+        if len(client_id.encode()) > MAX_MQTT_STRING:
+            self.problem(
+                self.lines.at("gateway", -1, "name"),
+                f"the MQTT client id made of the gateway name has {len(client_id.encode())} "
+                f"bytes (at most {MAX_MQTT_STRING})",
+            )
+        bad = _topic_problem(render(mqtt.gateway_topic, gateway=gateway))
+        if bad:
+            self.problem(self.lines.at("mqtt", -1, "gateway_topic"), f"gateway_topic {bad}")
         owner: dict[str, str] = {}
         plcs = tuple({plc.name: plc for plc in reversed(plcs)}.values())[::-1]  # first of a name
         for plc in plcs:
             status = render(mqtt.plc_status_topic, gateway=gateway, plc=plc.name)
             owner[status] = f"the status of PLC {plc.name!r}"
+            bad = _topic_problem(status)
+            if bad:
+                self.problem(
+                    self.lines.at("mqtt", -1, "plc_status_topic"),
+                    f"plc_status_topic for PLC {plc.name!r} {bad}",
+                )
         for i, plc in enumerate(plcs):
             for g in plc.groups:
                 group = groups[g]
                 topic = render(group.topic, gateway=gateway, plc=plc.name, group=g)
                 what = f"PLC {plc.name!r} group {g!r}"
+                longest = max((len(t) for t in group.writable), default=0)
+                bad = _topic_problem(f"{topic}/set/{'x' * longest}/reply" if longest else topic)
+                if bad:
+                    self.problem(self.lines.at("plcs", i, "name"), f"{what}'s topic {bad}")
                 if topic in owner:
                     self.problem(
                         self.lines.at("plcs", i, "name"),
@@ -542,6 +562,12 @@ class _Reader:
                         "(give the groups' topic templates {plc} and {group})",
                     )
                 owner[topic] = what
+
+
+def _shown(value: object, limit: int = 60) -> str:
+    """``repr(value)``, cut short: a 70,000-character value is not echoed whole."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
 
 
 def tag_message(name: str, spec: str, exc: Exception) -> str:
@@ -590,6 +616,43 @@ def _positive(value: float) -> str | None:
     return None if value > 0 and math.isfinite(value) else "must be a positive number"
 
 
+#: Bytes an MQTT string (a topic, the client id) may have: its length is two bytes.
+MAX_MQTT_STRING = 65535
+#: Seconds of keep-alive MQTT can carry (two bytes).
+MAX_KEEPALIVE = 65535
+
+
+def _keepalive(value: int) -> str | None:
+    if 1 <= value <= MAX_KEEPALIVE:
+        return None
+    return f"must be 1..{MAX_KEEPALIVE} seconds (MQTT carries it in two bytes)"
+
+
+def _client_id(value: str) -> str | None:
+    size = len(value.encode())
+    if not value:
+        return "must not be empty (leave it out for aiofins-gateway-NAME)"
+    if size > MAX_MQTT_STRING:
+        return f"has {size} bytes, at most {MAX_MQTT_STRING} (an MQTT string)"
+    if any(ord(c) < 0x20 or ord(c) == 0x7F for c in value):
+        return "must not contain control characters"
+    return None
+
+
+def _topic_problem(topic: str) -> str | None:
+    """Why ``topic`` (rendered) is not a topic the gateway can publish on, or None."""
+    size = len(topic.encode())
+    if size > MAX_MQTT_STRING:
+        return f"has {size} bytes, at most {MAX_MQTT_STRING} (an MQTT string)"
+    if not topic or "\x00" in topic:
+        return "must not be empty or contain NUL"
+    if topic.startswith("$"):
+        return f"{topic[:40]!r} starts with '$' (reserved for the broker)"
+    if "+" in topic or "#" in topic:
+        return f"{topic[:40]!r} contains an MQTT wildcard"
+    return None
+
+
 def _port(value: int) -> str | None:
     return None if 1 <= value <= 65535 else "must be a port number 1..65535"
 
@@ -609,6 +672,8 @@ def _topic(fields: set[str]) -> Callable[[str], str | None]:
             )
         if "+" in template or "#" in template:
             return "must not contain MQTT wildcards"
+        if template.startswith("$") or "\x00" in template or not template:
+            return "must not be empty, start with '$' or contain NUL"
         try:
             template.format(**{f: "x" for f in fields})
         except (ValueError, IndexError, KeyError) as exc:

@@ -297,6 +297,8 @@ def parse_value_type(
         raise CommandError(f"cannot read value type {spec!r}; e.g. float32, int32:ABCD, string:16")
     name = m.group(1).lower()
     name = _ALIASES.get(name, name)
+    if m.group(2) and len(m.group(2)) > 5:  # no int() of thousands of digits
+        raise CommandError(f"a length of {len(m.group(2))} digits in {spec[:40]!r}...: too long")
     length = int(m.group(2)) if m.group(2) else 0
     if name == "string" and not length:
         raise CommandError("a string type needs its length in bytes, e.g. string:16")
