@@ -100,7 +100,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler: Handler = args.func
     logger = logging.getLogger("aiofins")
     level = logger.level
-    log_handler = logs.configure(args.verbose, args.log_format)
+    log_handler = logs.configure(
+        args.verbose,
+        args.log_format,
+        log_level=args.log_level,
+        default=getattr(args, "log_default", logging.ERROR),
+    )
     try:
         return handler(args)
     except KeyboardInterrupt:

@@ -36,8 +36,8 @@ def add_parser(sub: SubParsers) -> None:
     p.add_argument("config", help="the gateway's TOML configuration")
     p.add_argument("--shard", metavar="I/N", help="poll only shard I of N (env AIOFINS_SHARD)")
     p.add_argument("--check", action="store_true", help="check the configuration and exit")
-    p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
-    p.set_defaults(func=run)
+    # Logging options are the shared ones (cli/logs.py); the daemon logs at INFO by default.
+    p.set_defaults(func=run, log_default=logging.INFO)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,9 +63,6 @@ def run(args: argparse.Namespace) -> int:
     except ImportError as exc:
         print(f"aiofins gateway needs: pip install 'aiofins[gateway]' ({exc})", file=sys.stderr)
         return 2
-    logging.basicConfig(
-        level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
-    )
 
     async def main() -> None:
         gateway = Gateway(config, shard=shard)

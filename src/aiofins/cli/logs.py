@@ -1,10 +1,19 @@
-"""``-v``/``-vv`` and ``--log-format text|json``: where the command line sends aiofins' logs.
+"""The one logging set-up of the command line: ``-v``/``-vv``, ``--log-level`` and
+``--log-format text|json``, for every command the gateway daemon included.
 
-The library installs no handler (stdlib convention); the command line installs one on
-stderr for the ``aiofins`` logger: ERROR by default (the commands say what went wrong, and
-warn about CPU error flags, themselves), INFO and WARNING with ``-v``, DEBUG (every frame)
-with ``-vv``. ``--log-format json`` writes one JSON object a line with the record's
-``extra`` fields (endpoint, node, sid, command, group, ...) as keys.
+The library installs no handler of its own (only a ``NullHandler``, the stdlib convention);
+while a command runs, the command line installs exactly one handler, on stderr, on the
+``aiofins`` logger, so each record is printed once, in one format. Its level:
+
+* ``--log-level LEVEL`` (``DEBUG``, ``INFO``, ``WARNING``, ``ERROR``, ``CRITICAL``) when
+  given: it wins over ``-v``;
+* else ``-v`` INFO (lifecycle and warnings), ``-vv`` DEBUG (every frame);
+* else the command's default: ERROR for one-shot commands (they report failures
+  themselves), INFO for ``aiofins gateway`` (a daemon's log is its operators' record).
+
+``--log-format json`` writes one JSON object a line with the record's ``extra`` fields
+(endpoint, node, sid, command, group, ...) as keys. The options go before or after the
+command (``aiofins -v read ...`` and ``aiofins read ... -v`` both work).
 """
 
 from __future__ import annotations
@@ -22,7 +31,11 @@ _STANDARD = frozenset(vars(logging.LogRecord("", 0, "", 0, "", (), None))) | {
     "taskName",
 }
 
+#: The level of no ``-v``'s default, ``-v`` and ``-vv``.
 LEVELS = (logging.ERROR, logging.INFO, logging.DEBUG)
+#: ``--log-level`` choices.
+LEVEL_NAMES = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+TEXT_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
 
 class JsonFormatter(logging.Formatter):
@@ -44,6 +57,15 @@ class JsonFormatter(logging.Formatter):
         return json.dumps(document)
 
 
+def _level_name(text: str) -> str:
+    name = text.strip().upper()
+    if name not in LEVEL_NAMES:
+        raise argparse.ArgumentTypeError(
+            f"unknown level {text!r}; give one of {', '.join(LEVEL_NAMES)}"
+        )
+    return name
+
+
 def add_arguments(parser: argparse.ArgumentParser, *, top: bool) -> None:
     """The logging options; on a subcommand's parser they override the top-level ones only
     when given (``aiofins -v read ...`` and ``aiofins read ... -v`` both work)."""
@@ -56,6 +78,14 @@ def add_arguments(parser: argparse.ArgumentParser, *, top: bool) -> None:
         **({"default": 0} if top else default),
     )
     parser.add_argument(
+        "--log-level",
+        type=_level_name,
+        metavar="LEVEL",
+        help="log at this level (DEBUG, INFO, WARNING, ERROR, CRITICAL); wins over -v "
+        "(default: ERROR, INFO for the gateway daemon)",
+        **({"default": None} if top else default),
+    )
+    parser.add_argument(
         "--log-format",
         choices=("text", "json"),
         help="log lines as text (default) or one JSON object each",
@@ -63,15 +93,32 @@ def add_arguments(parser: argparse.ArgumentParser, *, top: bool) -> None:
     )
 
 
-def configure(verbose: int, log_format: str, stream: TextIO | None = None) -> logging.Handler:
-    """Send the ``aiofins`` logger's records to ``stream`` (stderr) at the level ``-v``
-    chose; returns the handler installed."""
+def level(verbose: int, log_level: str | None, default: int = logging.ERROR) -> int:
+    """The level the options choose: ``--log-level`` if given, else ``-v``/``-vv``, else
+    the command's ``default``."""
+    if log_level is not None:
+        return logging.getLevelName(_level_name(log_level))  # type: ignore[no-any-return]
+    if verbose:
+        return LEVELS[min(verbose, len(LEVELS) - 1)]
+    return default
+
+
+def configure(
+    verbose: int,
+    log_format: str,
+    stream: TextIO | None = None,
+    *,
+    log_level: str | None = None,
+    default: int = logging.ERROR,
+) -> logging.Handler:
+    """Send the ``aiofins`` logger's records to ``stream`` (stderr) at the level the options
+    chose (see :func:`level`); returns the one handler installed."""
     handler = logging.StreamHandler(stream if stream is not None else sys.stderr)
     if log_format == "json":
         handler.setFormatter(JsonFormatter())
     else:
-        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        handler.setFormatter(logging.Formatter(TEXT_FORMAT))
     logger = logging.getLogger("aiofins")
     logger.addHandler(handler)
-    logger.setLevel(LEVELS[min(verbose, len(LEVELS) - 1)])
+    logger.setLevel(level(verbose, log_level, default))
     return handler
