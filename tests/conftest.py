@@ -11,6 +11,13 @@ from typing import Any
 
 import pytest
 
+from aiofins.simulator.serial import SerialSettings
+
+#: A pty takes only 8N1 (tcsetattr refuses 7E2, the default of the client and simulator):
+#: the client URL's options and the simulator's settings that tests on ptys pin.
+PTY_8N1 = "bytesize=8&parity=N&stopbits=1"
+PTY_LINE = SerialSettings(bytesize=8, parity="N", stopbits=1)
+
 #: An anyio backend: a name, or a name and its options.
 Backend = str | tuple[str, dict[str, Any]]
 

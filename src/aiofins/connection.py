@@ -26,9 +26,12 @@ import anyio
 from .client import Client
 from .endpoint import (
     MAX_SID_SPACES,
+    RESILIENCE_SETTINGS,
+    SERIAL_DEFAULTS,
     SERIAL_SETTINGS,
     Endpoint,
     node_from_host,
+    option_span,
     option_value,
     parse_endpoint,
 )
@@ -99,17 +102,11 @@ def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
             ),
             gather_writes=bool(options.get("tcp_gather_writes", True)),
         )
-    settings: dict[str, Any] = dict(endpoint.options)
+    settings: dict[str, Any] = dict(SERIAL_DEFAULTS)
+    settings.update(endpoint.options)
     settings.update({k: v for k, v in options.items() if k in SERIAL_SETTINGS})
-    return SerialTransport(
-        endpoint.device,
-        baudrate=int(option_value("baudrate", settings.get("baudrate", 9600))),
-        bytesize=int(option_value("bytesize", settings.get("bytesize", 8))),
-        parity=str(option_value("parity", settings.get("parity", "N"))),
-        stopbits=float(option_value("stopbits", settings.get("stopbits", 1))),
-        unit=int(option_value("unit", settings.get("unit", 0))),
-        response_wait=int(option_value("response_wait", settings.get("response_wait", 0))),
-    )
+    checked: dict[str, Any] = {name: option_value(name, settings[name]) for name in SERIAL_SETTINGS}
+    return SerialTransport(endpoint.device, **checked)
 
 
 async def lookup(host: str, port: int, *, family: int = 0, kind: int = 0) -> list[Any]:
@@ -230,7 +227,33 @@ _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "hooks": lambda v: _hooks(v),
     "dest": lambda v: FinsAddress.of(v),
     "src": lambda v: FinsAddress.of(v),
+    "breaker_threshold": lambda v: whole_number("breaker_threshold", v, 0),
+    "breaker_cooldown": lambda v: _pair("breaker_cooldown", v),
+    "reconnect_backoff": lambda v: _pair("reconnect_backoff", v),
 }
+
+
+def _pair(name: str, value: object) -> tuple[float, float]:
+    """A keyword's ``(min, max)`` seconds (text is a URL's spelling, not a keyword's)."""
+    if not isinstance(value, (tuple, list)):
+        raise CommandError(f"{name} must be a pair (min, max) of seconds; got {shown(value)}")
+    return option_span(name, value)
+
+
+def _resilience(endpoint: Endpoint | None, given: Mapping[str, Any]) -> dict[str, Any]:
+    """The circuit breaker's and the reconnection's settings for the session: each keyword
+    given, else the URL's option, else the session's default (left out)."""
+    settings: dict[str, Any] = {}
+    for name in sorted(RESILIENCE_SETTINGS):
+        value = given.get(name)
+        text = None if value is not None or endpoint is None else endpoint.option(name)
+        if name == "breaker_threshold":
+            value = value if text is None else option_value(name, text)
+        elif value is not None or text is not None:
+            value = option_span(name, value if text is None else text)
+        if value is not None:
+            settings[name] = value
+    return settings
 
 
 def _sid_spaces(endpoint: Endpoint | None, spaces: int | None) -> int | None:
@@ -270,6 +293,9 @@ def connect(
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
     read_only: bool = False,
     hooks: EventHooks | None = None,
+    breaker_threshold: int | None = None,
+    breaker_cooldown: tuple[float, float] | None = None,
+    reconnect_backoff: tuple[float, float] | None = None,
     **transport_options: Any,
 ) -> AbstractAsyncContextManager[Client]:
     """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
@@ -301,6 +327,15 @@ def connect(
     :mod:`aiofins.protocol.guard`). ``hooks`` (:class:`~aiofins.EventHooks`) receive the
     session's request and link events (see docs/observability.md).
 
+    Resilience: after ``breaker_threshold`` calls in a row that got no answer (default 5;
+    0: never) the circuit breaker opens and calls fail at once with
+    :class:`~aiofins.CircuitOpen` while one probe at a time tests the link, the probes
+    ``breaker_cooldown=(min, max)`` seconds apart (default ``(0.05, 2.0)``, doubling); a lost
+    link (FINS/TCP, serial) is opened again after ``reconnect_backoff=(min, max)`` seconds
+    (default ``(0.05, 5.0)``, doubling). The URL spells them ``?breaker_threshold=2``,
+    ``?breaker_cooldown=0.1,5``, ``?reconnect_backoff=0.5,30``. See
+    :mod:`aiofins.session.breaker`.
+
     ``transport=`` instead of a URL runs the client over a transport made by the caller, e.g.
     :class:`~aiofins.transport.MemoryTransport` around a virtual PLC (tests without sockets);
     ``dest`` then defaults to ``0.1.0`` and ``src`` to ``0.254.0``.
@@ -326,6 +361,9 @@ def connect(
         word_order=word_order,
         read_only=read_only,
         hooks=hooks,
+        breaker_threshold=breaker_threshold,
+        breaker_cooldown=breaker_cooldown,
+        reconnect_backoff=reconnect_backoff,
         source_held=False,
         **transport_options,
     )
@@ -355,6 +393,9 @@ async def _connect(
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
     read_only: bool = False,
     hooks: EventHooks | None = None,
+    breaker_threshold: int | None = None,
+    breaker_cooldown: tuple[float, float] | None = None,
+    reconnect_backoff: tuple[float, float] | None = None,
     source_held: bool,
     **transport_options: Any,
 ) -> AsyncIterator[Client]:
@@ -374,6 +415,9 @@ async def _connect(
             "hooks": hooks,
             "dest": dest,
             "src": src,
+            "breaker_threshold": breaker_threshold,
+            "breaker_cooldown": breaker_cooldown,
+            "reconnect_backoff": reconnect_backoff,
         }
     )
     check_options(transport_options)
@@ -420,6 +464,14 @@ async def _connect(
             retries=retries,
             max_sid_spaces=_sid_spaces(endpoint, max_sid_spaces),
             hooks=hooks,
+            **_resilience(
+                endpoint,
+                {
+                    "breaker_threshold": breaker_threshold,
+                    "breaker_cooldown": breaker_cooldown,
+                    "reconnect_backoff": reconnect_backoff,
+                },
+            ),
         )
         async with session:
             if (

@@ -42,6 +42,10 @@ from aiofins.protocol.errors import CommandError, ConnectionLost
         ("udp://127.0.0.1?max_sid_spaces=0", "max_sid_spaces must be a whole number, 1..254"),
         ("tcp://127.0.0.1?max_sid_spaces=x", "max_sid_spaces must be a whole number, 1..254"),
         ("serial:///dev/ttyS0?max_sid_spaces=2", "unknown serial option 'max_sid_spaces'"),
+        ("udp://h?breaker_threshold=-1", "breaker_threshold must be a whole number, at least 0"),
+        ("udp://h?breaker_cooldown=2", "breaker_cooldown must be MIN,MAX seconds"),
+        ("tcp://h?reconnect_backoff=5,1", "reconnect_backoff must be MIN,MAX seconds"),
+        ("serial:///dev/ttyS0?reconnect_backoff=a,b", "reconnect_backoff must be MIN,MAX"),
     ],
 )
 def test_bad_option_values_are_refused_naming_the_url(url: str, message: str) -> None:
@@ -105,7 +109,11 @@ def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
         ("udp://127.0.0.1", "udp://127.0.0.1:9600"),
         ("udp://127.0.0.1:9600?node=07&timeout=0.30", "udp://127.0.0.1:9600?node=7&timeout=0.3"),
         ("udp://127.0.0.1?timeout=.3&node=7", "udp://127.0.0.1:9600?node=7&timeout=0.3"),
-        ("udp://127.0.0.1?dest=3.5&node=1&node=7", "udp://127.0.0.1:9600?dest=3.5.0&node=1"),
+        ("udp://127.0.0.1?dest=3.5&timeout=1", "udp://127.0.0.1:9600?dest=3.5.0&timeout=1.0"),
+        (
+            "udp://h?reconnect_backoff=0.5,30&breaker_threshold=02",
+            "udp://h:9600?breaker_threshold=2&reconnect_backoff=0.5,30.0",
+        ),
         ("tcp://h?src=0.10", "tcp://h:9600?src=0.10.0"),
         ("udp://[0:0:0:0:0:0:0:1]:9601?node=1", "udp://[::1]:9601?node=1"),
         ("tcp://[FE80:0::1%eth0]", "tcp://[fe80::1%eth0]:9600"),
@@ -115,8 +123,8 @@ def test_ipv6_hosts_keep_their_brackets_in_keys_and_messages() -> None:
         ("tcp://h?max_sid_spaces=4", "tcp://h:9600?max_sid_spaces=4"),
         ("tcp://h?max_sid_spaces=2", "tcp://h:9600"),  # the default for FINS/TCP
         (
-            "serial:///dev/ttyS0?parity=e&baudrate=19200",
-            "serial:///dev/ttyS0?baudrate=19200&parity=E",
+            "serial:///dev/ttyS0?parity=o&baudrate=19200",
+            "serial:///dev/ttyS0?baudrate=19200&parity=O",
         ),
     ],
 )
@@ -138,12 +146,27 @@ def test_serial_defaults_are_those_connect_uses() -> None:
     transport = make_transport(parse_endpoint("serial:///dev/ttyS0"))
     for name, value in SERIAL_DEFAULTS.items():
         assert getattr(transport, name) == value, name
-    assert parse_endpoint("serial:///dev/ttyS0?unit=0&parity=N&baudrate=9600").key == (
+    assert parse_endpoint("serial:///dev/ttyS0?unit=0&parity=E&baudrate=9600").key == (
         "serial:///dev/ttyS0"
     )
-    assert parse_endpoint("serial:///dev/ttyS0?unit=1&parity=n&baudrate=9600").key == (
+    assert parse_endpoint("serial:///dev/ttyS0?unit=1&parity=e&baudrate=9600").key == (
         "serial:///dev/ttyS0?unit=1"
     )
+    assert parse_endpoint("serial:///dev/ttyS0?parity=N&bytesize=8&stopbits=1").key == (
+        "serial:///dev/ttyS0?bytesize=8&parity=N&stopbits=1.0"
+    )
+
+
+def test_serial_defaults_to_omrons_host_link_factory_setting_7e2() -> None:
+    """A CPU's Host Link port leaves the factory at 9600 baud, 7 data bits, even parity,
+    2 stop bits: a first try with a bare URL must not time out on 8N1."""
+    from aiofins.connection import make_transport
+    from aiofins.transport.serial import SerialTransport
+
+    for transport in (make_transport(parse_endpoint("serial:///dev/ttyS0")), SerialTransport("x")):
+        assert isinstance(transport, SerialTransport)
+        settings = (transport.baudrate, transport.bytesize, transport.parity, transport.stopbits)
+        assert settings == (9600, 7, "E", 2.0)
 
 
 @pytest.mark.anyio
@@ -189,3 +212,100 @@ async def test_an_ip_address_is_its_own_peer_link_with_no_lookup(
     # a name is still looked up (a failed lookup leaves the link as written)
     assert await peer_link(parse_endpoint("udp://plc.invalid")) == "udp://plc.invalid:9600"
     assert looked_up == ["plc.invalid"]
+
+
+@pytest.mark.parametrize(
+    ("url", "message"),
+    [
+        # the first value won, silently: here it switched the write guard off
+        ("udp://plc?read_only=0&read_only=1", r"option 'read_only' is given twice \('0' and '1'\)"),
+        ("tcp://plc?timeout=1&node=3&timeout=1", "option 'timeout' is given twice"),
+        ("serial:///dev/ttyS0?baudrate=9600&baudrate=19200", "option 'baudrate' is given twice"),
+        ("udp://plc?dest=0.3.0&node=3", r"\?node= and \?dest= both name the PLC's node"),
+    ],
+)
+def test_a_url_that_says_one_thing_twice_is_refused(url: str, message: str) -> None:
+    with pytest.raises(CommandError, match=message) as info:
+        parse_endpoint(url)
+    assert str(info.value).startswith(repr(url))
+
+
+@pytest.mark.parametrize(
+    ("url", "meant"),
+    [
+        # two slashes: the relative path dev/ttyUSB0 was opened
+        ("serial://dev/ttyUSB0", "did you mean serial:///dev/ttyUSB0?"),
+        ("serial://ttyUSB0", "did you mean serial:///dev/ttyUSB0?"),
+        ("serial:///COM3", "did you mean serial://COM3?"),
+        ("serial:/dev/ttyS1", "did you mean serial:///dev/ttyS1?"),
+        ("udp:/10.0.0.5", "did you mean udp://10.0.0.5?"),
+        ("tcp:10.0.0.5:9600", "did you mean tcp://10.0.0.5:9600?"),
+        ("fins://10.0.0.5", "did you mean udp://10.0.0.5?"),
+        ("upd://10.0.0.5", "did you mean udp://10.0.0.5?"),
+        ("udp://10.0.0.5/plc?node=5", "has no path .*did you mean udp://10.0.0.5\\?node=5\\?"),
+        ("udp://admin@10.0.0.5", "FINS has no user name or password"),
+        ("udp://10.0.0.5#x", "has no #fragment"),
+        ("udp://10.0.0.5?nod=3", "unknown option 'nod'; did you mean 'node'?"),
+        ("udp://10.0.0.5?baudrate=9600", "'baudrate': it is an option of serial URLs"),
+        ("udp://10.0.0.5?tcp_node=3", r"keyword of connect\(\) only, connect\(url, tcp_node=...\)"),
+    ],
+)
+def test_almost_right_urls_are_refused_with_the_form_meant(url: str, meant: str) -> None:
+    with pytest.raises(CommandError, match=meant):
+        parse_endpoint(url)
+
+
+@pytest.mark.parametrize(
+    ("url", "device"),
+    [
+        ("serial:///dev/ttyUSB0", "/dev/ttyUSB0"),
+        ("serial://COM3", "COM3"),
+        ("serial://socket://127.0.0.1:7000", "socket://127.0.0.1:7000"),
+        ("serial://loop://", "loop://"),
+    ],
+)
+def test_serial_devices_as_meant(url: str, device: str) -> None:
+    assert parse_endpoint(url).device == device
+
+
+@pytest.mark.parametrize(
+    "where",
+    ["connect", "pool", "cli", "gateway"],
+)
+@pytest.mark.anyio
+async def test_one_parser_refuses_a_repeated_option_everywhere(
+    anyio_backend: object, where: str
+) -> None:
+    """``connect()``, ``Pool``, the command line and the gateway's configuration take a URL
+    through the one parser: none of them leaves a client writable."""
+    url = "udp://127.0.0.1:1?read_only=0&read_only=1"
+    message = "option 'read_only' is given twice"
+    if where == "connect":
+        with pytest.raises(CommandError, match=message):
+            async with connect(url):
+                pass  # pragma: no cover
+    elif where == "pool":
+        from aiofins import Pool
+
+        async with Pool() as pool:
+            with pytest.raises(CommandError, match=message):
+                async with pool.client(url):
+                    pass  # pragma: no cover
+    elif where == "cli":
+        import subprocess
+        import sys
+
+        result = subprocess.run(
+            [sys.executable, "-m", "aiofins", "write", url, "D0", "1"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        assert result.returncode != 0 and message in result.stderr, result.stderr
+    else:
+        from aiofins.gateway.config import ConfigError, parse_config
+
+        text = '[[groups]]\nname = "g"\ninterval = 1\ntags = { a = "D0" }\n'
+        text += f'[[plcs]]\nname = "p"\nurl = "{url}"\n'
+        with pytest.raises(ConfigError, match=message):
+            parse_config(text)

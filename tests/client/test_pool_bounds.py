@@ -32,6 +32,7 @@ from aiofins.session.response import SESSION_COUNTERS
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
+from tests.conftest import PTY_8N1
 
 from ..session.test_session_tcp import TcpPeer, tcp_server
 
@@ -338,10 +339,10 @@ async def test_a_serial_device_carries_one_session(
 ) -> None:
     """Two keys of one device opened it twice: each read the other's replies."""
     _, host = pty_pair
-    url = f"serial://{host}?baudrate=9600"
+    url = f"serial://{host}?baudrate=9600&{PTY_8N1}"
     async with Pool() as pool, pool.client(url):
         with pytest.raises(CommandError, match="a serial line carries one session"):
-            async with pool.client(f"serial://{host}?baudrate=19200"):
+            async with pool.client(f"serial://{host}?baudrate=19200&{PTY_8N1}"):
                 pass
         async with pool.client(url):  # the same key: shared
             (stats,) = pool.stats(url).values()
@@ -352,11 +353,12 @@ async def test_serial_settings_at_their_defaults_share_the_session(
     pty_pair: tuple[str, str], anyio_backend: object
 ) -> None:
     """``serial://DEV`` and ``serial://DEV?baudrate=9600`` are the same settings: the second
-    was refused as "other settings" for the open device."""
+    was refused as "other settings" for the open device. (A pty takes only 8N1, which every
+    spelling pins.)"""
     _, host = pty_pair
     spellings = [
-        f"serial://{host}?baudrate=9600",
-        f"serial://{host}",
+        f"serial://{host}?baudrate=9600&{PTY_8N1}",
+        f"serial://{host}?{PTY_8N1}",
         f"serial://{host}?parity=n&unit=0&stopbits=1&bytesize=8&response_wait=0",
     ]
     async with (

@@ -79,7 +79,7 @@ async def hostlink_peer(path: str, handler: LineHandler) -> AsyncIterator[list[b
 
 def serial_session(path: str, **options: object) -> Session:
     return Session(
-        SerialTransport(path, baudrate=115200, unit=0),
+        SerialTransport(path, baudrate=115200, unit=0, bytesize=8, parity="N", stopbits=1),
         source=FinsAddress(0, 0, 0),
         dest=FinsAddress(0, 0, 0),
         **options,  # type: ignore[arg-type]

@@ -19,6 +19,7 @@ from anyio.streams.buffered import BufferedByteReceiveStream
 
 from aiofins.simulator import FaultPlan, FaultRule, Simulator, VirtualPLC, run_simulator
 from aiofins.simulator import tcp as tcp_server
+from tests.conftest import PTY_LINE
 
 pytestmark = pytest.mark.anyio
 
@@ -495,7 +496,7 @@ HOSTLINK_REPLY = b"@00FA00400000000101000000010002000300040005000600070008000900
 @pytest.mark.serial
 async def test_serial_worked_example(pty_pair: tuple[str, str]) -> None:
     server_end, host_end = pty_pair
-    async with run_simulator(make_plc(), serial=server_end) as sim:
+    async with run_simulator(make_plc(), serial=server_end, serial_settings=PTY_LINE) as sim:
         line = Line(host_end)
         try:
             await line.write(HOSTLINK_READ)
@@ -516,7 +517,7 @@ async def test_a_stray_at_sign_does_not_swallow_the_next_command(
     pty_pair: tuple[str, str],
 ) -> None:
     server_end, host_end = pty_pair
-    async with run_simulator(make_plc(), serial=server_end) as sim:
+    async with run_simulator(make_plc(), serial=server_end, serial_settings=PTY_LINE) as sim:
         line = Line(host_end)
         try:
             await line.write(b"@" + HOSTLINK_READ)
@@ -531,7 +532,9 @@ async def test_a_stray_at_sign_does_not_swallow_the_next_command(
 @pytest.mark.serial
 async def test_serial_unit_number_filter(pty_pair: tuple[str, str]) -> None:
     server_end, host_end = pty_pair
-    async with run_simulator(make_plc(), serial=server_end, serial_unit=1) as sim:
+    async with run_simulator(
+        make_plc(), serial=server_end, serial_settings=PTY_LINE, serial_unit=1
+    ) as sim:
         line = Line(host_end)
         try:
             await line.write(HOSTLINK_READ + b"@01FA000000000010182006400000A0F*\r")
@@ -595,7 +598,7 @@ def hostlink(body: bytes) -> bytes:
 async def test_serial_full_header_long_response_and_fault(pty_pair: tuple[str, str]) -> None:
     server_end, host_end = pty_pair
     plan = FaultPlan(per_command={0x0601: FaultRule(corrupt=1.0)}, seed=4)
-    async with run_simulator(make_plc(), serial=server_end, faults=plan):
+    async with run_simulator(make_plc(), serial=server_end, serial_settings=PTY_LINE, faults=plan):
         line = Line(host_end)
         try:
             # full header to network 0, node 0 (the CPU at the port), SID 07, read D100 x 2

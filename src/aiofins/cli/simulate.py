@@ -126,9 +126,24 @@ def register(subparsers: SubParsers) -> None:
     where.add_argument(
         "--baudrate", type=integer_in(1), default=9600, help="serial speed (default 9600)"
     )
-    where.add_argument("--bytesize", type=int, choices=(7, 8), default=8, help="serial data bits")
-    where.add_argument("--parity", choices=("N", "E", "O"), default="N", help="serial parity")
-    where.add_argument("--stopbits", type=int, choices=(1, 2), default=1, help="serial stop bits")
+    where.add_argument(
+        "--bytesize",
+        type=int,
+        choices=(7, 8),
+        default=7,
+        help="serial data bits (default 7: Omron's Host Link factory setting is 7E2)",
+    )
+    where.add_argument(
+        "--parity", choices=("N", "E", "O"), default="E", help="serial parity (default E)"
+    )
+    where.add_argument(
+        "--stopbits",
+        type=int,
+        choices=(1, 2),
+        default=2,
+        help="serial stop bits (default 2; a pty takes only 8N1: --bytesize 8 --parity N "
+        "--stopbits 1)",
+    )
     where.add_argument(
         "--max-connections",
         type=integer_in(1),

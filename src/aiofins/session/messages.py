@@ -22,10 +22,8 @@ def no_response(
     tries = "1 attempt" if attempts == 1 else f"{attempts} attempts"
     return FinsTimeout(
         f"no response to command {mrc:02X}{src:02X} from {dest} in {tries} within "
-        f"{timeout} s via {session.transport.description}. Check the destination node "
-        f"(DA1={dest.node}) and unit (DA2={dest.unit}) match the PLC, that our source node "
-        f"(SA1={s.node}) is not used by another client and is allowed by the PLC's node "
-        f"settings, the port, and that the PLC is reachable"
+        f"{timeout} s via {session.transport.description}. "
+        f"{session.transport.silence_advice(dest, s)}"
     )
 
 

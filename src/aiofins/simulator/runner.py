@@ -57,7 +57,11 @@ class Simulator:
         if self.tcp is not None:
             out.append(f"tcp://{_host(self.tcp.host)}:{self.tcp_port}")
         if self.serial is not None:
-            out.append(f"serial://{self.serial.device}")
+            options = self.serial.settings.url_options()
+            if self.serial.unit:
+                options.append(f"unit={self.serial.unit}")
+            query = "?" + "&".join(options) if options else ""
+            out.append(f"serial://{self.serial.device}{query}")
         return out
 
 

@@ -34,12 +34,24 @@ from .state import RESPONSE_TOO_LONG
 
 @dataclass(frozen=True, slots=True)
 class SerialSettings:
-    """Line settings. Ptys accept only 8N1 on Linux; real ports often use 7E2."""
+    """Line settings: by default Omron's Host Link factory setting, 9600 baud 7E2, as the
+    client's. Ptys accept only 8N1 on Linux: ``SerialSettings(bytesize=8, parity="N",
+    stopbits=1)`` there (and ``?bytesize=8&parity=N&stopbits=1`` in the client's URL)."""
 
     baudrate: int = 9600
-    bytesize: int = 8
-    parity: str = "N"
-    stopbits: float = 1
+    bytesize: int = 7
+    parity: str = "E"
+    stopbits: float = 2
+
+    def url_options(self) -> list[str]:
+        """The client URL's options for these settings (none for the client's defaults)."""
+        options = []
+        if self.baudrate != 9600:
+            options.append(f"baudrate={self.baudrate}")
+        if (self.bytesize, self.parity, self.stopbits) != (7, "E", 2):
+            stop = int(self.stopbits) if self.stopbits == int(self.stopbits) else self.stopbits
+            options.append(f"bytesize={self.bytesize}&parity={self.parity}&stopbits={stop}")
+        return options
 
 
 class SerialServer:

@@ -17,6 +17,7 @@ from collections.abc import Awaitable, Callable, Sized
 from typing import Any, Protocol
 
 from ..protocol.errors import FinsError
+from ..protocol.header import FinsAddress
 
 
 class FrameSink(Protocol):
@@ -111,6 +112,15 @@ class Transport(ABC):
         one when all 256 SIDs of this one are taken). ``None`` where the medium has a single
         link (a serial line)."""
         return None
+
+    def silence_advice(self, dest: FinsAddress, source: FinsAddress) -> str:
+        """What to check when a request to ``dest`` from ``source`` got no reply at all (the
+        end of a :class:`~aiofins.FinsTimeout`'s message): FINS addressing over a network."""
+        return (
+            f"Check the destination node (DA1={dest.node}) and unit (DA2={dest.unit}) match "
+            f"the PLC, that our source node (SA1={source.node}) is not used by another client "
+            "and is allowed by the PLC's node settings, the port, and that the PLC is reachable"
+        )
 
 
 #: What :func:`replies_awaited` answers for a sink without ``replies_awaited``: never empty.

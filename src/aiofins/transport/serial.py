@@ -14,13 +14,14 @@ pyserial is used in non-blocking mode with ``anyio.wait_readable`` (POSIX only).
 from __future__ import annotations
 
 import asyncio
+import errno
 import importlib
 from typing import Any
 
 import anyio
 
 from ..protocol.errors import CommandError, ConnectionLost, DecodeError
-from ..protocol.header import CommandFrame
+from ..protocol.header import CommandFrame, FinsAddress
 from ..protocol.hostlink import LineDecoder, decode_response, encode_command
 from .base import FrameSink, TaskSpawner, Transport, is_asyncio, wrap_os_error
 
@@ -80,7 +81,11 @@ class _SerialProtocol(asyncio.Protocol):
 
 
 class SerialTransport(Transport):
-    """Host Link FINS on a serial port (``/dev/ttyUSB0`` or any pyserial URL)."""
+    """Host Link FINS on a serial port (``/dev/ttyUSB0`` or any pyserial URL).
+
+    The line settings default to Omron's Host Link factory setting: 9600 baud, 7 data bits,
+    even parity, 2 stop bits (7E2), unit 0.
+    """
 
     max_in_flight = 1
     reconnectable = True
@@ -90,9 +95,9 @@ class SerialTransport(Transport):
         port: str,
         *,
         baudrate: int = 9600,
-        bytesize: int = 8,
-        parity: str = "N",
-        stopbits: float = 1,
+        bytesize: int = 7,
+        parity: str = "E",
+        stopbits: float = 2,
         unit: int = 0,
         response_wait: int = 0,
     ) -> None:
@@ -121,6 +126,49 @@ class SerialTransport(Transport):
     def description(self) -> str:
         return f"serial://{self.port}?baudrate={self.baudrate}&unit={self.unit}"
 
+    @property
+    def line(self) -> str:
+        """The line settings in the usual short form: ``9600 7E2``."""
+        stop = int(self.stopbits) if self.stopbits == int(self.stopbits) else self.stopbits
+        return f"{self.baudrate} {self.bytesize}{self.parity}{stop}"
+
+    def silence_advice(self, dest: FinsAddress, source: FinsAddress) -> str:
+        """What to check when the PLC on the line said nothing: the line, not the network."""
+        return (
+            f"Check the line settings match the PLC's serial port (here {self.line}: baudrate, "
+            "bytesize, parity, stopbits; Omron's Host Link factory setting is 9600 7E2), that "
+            "the port is in Host Link (SYSWAY) mode, the Host Link unit number (unit="
+            f"{self.unit} here, the PLC's in its serial port settings), and the wiring (TX and "
+            "RX crossed, RS-232C or RS-422A/485 as the port is, signal ground, an adapter's "
+            "2-wire/4-wire switch)"
+        )
+
+    def _open_advice(self, exc: BaseException) -> str:
+        """What to do about a port that would not open (after the error's own words)."""
+        number = getattr(exc, "errno", None)
+        if number is None and exc.args and isinstance(exc.args[0], int):
+            number = exc.args[0]  # termios.error is (errno, text)
+        text = str(exc)
+        if number == errno.EACCES or "Permission denied" in text:
+            return (
+                f"; this user may not open {self.port}: add it to the 'dialout' group "
+                "(sudo usermod -aG dialout $USER, then log in again; 'uucp' on some "
+                "distributions) or give the device a udev rule"
+            )
+        if number == errno.ENOENT or "No such file" in text:
+            return (
+                f"; there is no {self.port}: is the adapter plugged in? "
+                "python -m serial.tools.list_ports lists the ports"
+            )
+        if number == errno.EBUSY or "busy" in text.lower():
+            return f"; another program holds {self.port} (fuser {self.port} names it)"
+        if number == errno.EINVAL:
+            return (
+                f"; the device refused the line settings {self.line}: a pseudo-terminal (pty, "
+                "socat) takes only 8N1 (?bytesize=8&parity=N&stopbits=1)"
+            )
+        return ""
+
     def _settings(self) -> dict[str, Any]:
         return {
             "baudrate": self.baudrate,
@@ -146,8 +194,10 @@ class SerialTransport(Transport):
                 ser = package.serial_for_url(self.port, timeout=0, **self._settings())
                 self._serial = ser
                 task_group.start_soon(self._reader, ser, handler)
-        except (OSError, ValueError) as exc:
-            raise wrap_os_error(exc, f"cannot open {self.description}") from exc
+        except Exception as exc:  # OSError, SerialException, ValueError, termios.error
+            wrapped = wrap_os_error(exc, f"cannot open {self.description}")
+            wrapped.args = (f"{wrapped}{self._open_advice(exc)}",)
+            raise wrapped from exc
 
     async def _reader(self, ser: Any, handler: _LineHandler) -> None:
         exc: BaseException | None = None
