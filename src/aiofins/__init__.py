@@ -1,5 +1,6 @@
 """aiofins: async Omron FINS client, protocol codec and virtual PLC."""
 
+import logging
 from importlib.metadata import PackageNotFoundError, version
 
 from .client import Client
@@ -34,6 +35,11 @@ from .protocol.errors import (
 from .protocol.header import FinsAddress
 from .tagfile import TagFileError, load_tags
 from .transport.memory import MemoryTransport
+
+# A library leaves logging to the application: without a handler of its own, the "aiofins"
+# records would reach logging's last resort and print WARNINGs on stderr of a script that
+# handles FinsTimeout itself. (The command line configures logging in aiofins/cli/logs.py.)
+logging.getLogger("aiofins").addHandler(logging.NullHandler())
 
 try:
     __version__ = version("aiofins")  #: The installed distribution's version (pyproject.toml).
