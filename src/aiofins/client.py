@@ -358,8 +358,12 @@ class Client(CommandMethods):
                 MemoryAreaWrite(plan.start, b""), dest=dest, timeout=timeout, retries=retries
             )
         for i, (offset, n, _) in enumerate(frames):
+            try:
+                params = plan.params(i, values)
+            except CommandError as exc:
+                raise unfit_word(exc, address, values, plan.element_size) from None
             response = await self.execute(
-                0x01, 0x02, plan.params(i, values), dest=dest, timeout=timeout, retries=retries
+                0x01, 0x02, params, dest=dest, timeout=timeout, retries=retries
             )
             if response.data:
                 raise DecodeError(
@@ -536,6 +540,49 @@ def add_addressing_hint(exc: EndCodeError, target: FinsAddress, source: FinsAddr
     ``target``) say which addresses to check."""
     if exc.end_code.code in _ADDRESSING_END_CODES:
         exc.args = (f"{exc}. {_addressing_hint(target, source)}",)
+
+
+def unfit_word(
+    error: CommandError, address: AddressLike, values: Sequence[object], size: int
+) -> CommandError:
+    """``error`` (a value :meth:`Client.write` cannot put in a word) as a message that names
+    the typed write taking the value: a word holds a whole number 0..65535."""
+    if size != 2:
+        return error
+    for value in values:
+        fix = type_for_value(value)
+        if fix is not None:
+            kind, what = fix
+            text = shown(value)
+            return CommandError(
+                f"{text} is no word value (a word holds a whole number 0..65535); to write it "
+                f"as {what}, use write_value({str(address)!r}, {text}, {kind!r}) "
+                f"(write_values for several; on the command line: --type {kind})"
+            )
+    return error
+
+
+def type_for_value(value: object) -> tuple[str, str] | None:
+    """The value type that holds ``value`` where a word cannot, and what it is
+    (``("float32", "a REAL (2 words; ...)")``); ``None`` for a word value or no value."""
+    if isinstance(value, str):
+        return (
+            f"string:{max(2, len(value) + len(value) % 2)}",
+            "text (one word per two characters)",
+        )
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    if isinstance(value, float):
+        return ("float32", "a REAL (2 words; 'float64' for an LREAL, 4 words)")
+    if 0 <= value <= 0xFFFF:
+        return None
+    if -0x8000 <= value < 0:
+        return ("int16", "an INT (1 word)")
+    if -0x80000000 <= value <= 0xFFFFFFFF:
+        return ("int32", "a DINT (2 words)") if value < 0 else ("uint32", "a UDINT (2 words)")
+    if -(1 << 63) <= value < 1 << 64:
+        return ("int64", "an LINT (4 words)") if value < 0 else ("uint64", "a ULINT (4 words)")
+    return None
 
 
 def _call_options(timeout: float | None, retries: int | None) -> tuple[float | None, int | None]:

@@ -199,7 +199,7 @@ def test_values_that_do_not_parse_are_errors_not_tracebacks(
 ) -> None:
     for argv, said in (
         (("D30", "12a", "--type", "bcd16"), "value '12a' is not an integer"),
-        (("D30", "abc"), "value 'abc' is not an integer"),
+        (("D30", "abc"), "value 'abc' is no word (a whole number 0..65535"),
         (("D30", "1,5", "--type", "float32"), "value '1,5' is not a number"),
     ):
         code, out, err = run(capsys, "write", sim_url, *argv)

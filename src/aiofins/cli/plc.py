@@ -23,7 +23,7 @@ from typing import Any
 
 import anyio
 
-from ..client import Client
+from ..client import Client, type_for_value
 from ..connection import connect
 from ..protocol.commands.mode import RunMode
 from ..protocol.endcodes import EndCode
@@ -224,6 +224,26 @@ def _parse_value(text: str, kind: str) -> Value:
         raise CommandError(f"value {text!r} is not an integer (0x.. hex accepted)") from None
 
 
+def _word(text: str) -> int:
+    """A value of ``write`` without ``--type``: a word, 0..65535 (a bit, 0 or 1); a value of
+    another type names the ``--type`` that writes it."""
+    try:
+        value: Value = _parse_value(text, "int")
+    except CommandError:
+        try:
+            value = float_value("value", text)
+        except CommandError:
+            value = text
+    fix = type_for_value(value)
+    if fix is None and isinstance(value, int):
+        return value
+    kind, what = fix or ("string:N", "text")
+    raise CommandError(
+        f"value {text!r} is no word (a whole number 0..65535, 0x.. hex accepted); to write "
+        f"it as {what}, add --type {kind}"
+    )
+
+
 def _ask_write(args: argparse.Namespace) -> str:
     return f"write {len(args.values)} value(s) to {args.address} of {args.url}?"
 
@@ -253,7 +273,7 @@ async def _write(plc: Client, args: argparse.Namespace) -> dict[str, Any]:
             args.address, values, args.type, allow_split=args.allow_split, timeout=args.timeout
         )
     else:
-        words = [int(_parse_value(v, "int")) for v in args.values]
+        words = [_word(v) for v in args.values]
         await plc.write(args.address, words, allow_split=args.allow_split, timeout=args.timeout)
     return {"address": args.address, "written": len(args.values)}
 

@@ -11,6 +11,7 @@ the word digits then two bit digits) is accepted too. ``#82:0064:00`` is a raw d
 
 from __future__ import annotations
 
+import difflib
 import re
 from functools import lru_cache
 
@@ -26,7 +27,7 @@ from .areas import (
 )
 from .errors import AddressError
 
-__all__ = ["format_address", "parse_address", "parse_span"]
+__all__ = ["format_address", "parse_address", "parse_span", "suggest_address"]
 
 # Accepted prefixes -> the table's area mnemonic. "" (a bare number) is CIO.
 _PREFIXES: dict[str, str] = {
@@ -109,7 +110,56 @@ def _parse_text(text: str, series: Series) -> MemoryAddress:
     except AddressError as exc:
         shown = text.strip()
         shown = shown if len(shown) <= 40 else shown[:37] + "..."
-        raise AddressError(f"{shown!r}: {exc}") from None
+        meant = suggest_address(norm, series)
+        hint = f"; did you mean {meant}?" if meant else ""
+        raise AddressError(f"{shown!r}: {exc}{hint}", end_code=exc.end_code) from None
+
+
+#: Characters typed for one another: the letter O and the digit 0, I or l and 1.
+_LOOKALIKES = {"O": "0", "0": "O", "I": "1", "L": "1", "1": "I"}
+#: The most look-alike characters tried together (2**6 candidates at most).
+_MAX_LOOKALIKES = 6
+
+
+def suggest_address(text: str, series: Series = Series.CS_CJ) -> str | None:
+    """The address text most like ``text`` that parses (``D1OO``: ``D100``; ``CI0 10``:
+    ``CIO 10``; ``DN100``: ``DM100``), or ``None``: for a "did you mean" in errors."""
+    norm = "".join(text.split()).upper()
+    places = [i for i, ch in enumerate(norm) if ch in _LOOKALIKES][:_MAX_LOOKALIKES]
+    found: list[tuple[int, str]] = []
+    for mask in range(1, 1 << len(places)):
+        chars = list(norm)
+        for n, i in enumerate(places):
+            if mask >> n & 1:
+                chars[i] = _LOOKALIKES[chars[i]]
+        found += [(bin(mask).count("1"), "".join(chars))]
+    generic = re.fullmatch(r"([A-Z]+)(\d.*)", norm)
+    if generic and generic.group(1) not in _PREFIXES:
+        for prefix in difflib.get_close_matches(generic.group(1), _PREFIXES, n=3, cutoff=0.5):
+            found.append((2, prefix + generic.group(2)))
+    # Fewest changes first; of those, the one keeping the longest area name (CI0 10 is
+    # CIO 10, not C1010).
+    for _, _, candidate in sorted((n, -len(_letters(c)), c) for n, c in found):
+        try:
+            _parse(candidate, series)
+        except AddressError:
+            continue
+        return _readable(candidate, series)
+    return None
+
+
+def _letters(norm: str) -> str:
+    """The letters an address text starts with (its area)."""
+    return norm[: len(norm) - len(norm.lstrip("ABCDEFGHIJKLMNOPQRSTUVWXYZ_"))]
+
+
+def _readable(norm: str, series: Series) -> str:
+    """``CIO10.01`` as ``CIO 10.01``, the way the manual and the docs write CIO; a flag by
+    its name (``P_On``)."""
+    named = _NAMED.get((series, norm))
+    if named is not None:
+        return named.area
+    return f"CIO {norm[3:]}" if norm.startswith("CIO") and norm[3:4].isdigit() else norm
 
 
 def parse_span(text: str, count: int, series: Series = Series.CS_CJ) -> MemoryAddress:
