@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from typing import TextIO
 
 import anyio
@@ -95,14 +94,14 @@ async def demo(duration: float = 10.0, interval: float = 0.5, out: TextIO | None
         stop = anyio.Event()
         async with anyio.create_task_group() as tg:
             tg.start_soon(_process, url, stop)
-            deadline = time.monotonic() + duration
+            deadline = anyio.current_time() + duration
             async with Pool() as pool, Poller(pool) as poller:
                 poller.add_group("demo", url, DEMO_TAGS, interval=interval)
                 with anyio.move_on_after(duration):
                     async for snap in poller:
                         _render(snap, url, stream, live)
                         shown += 1
-                        if time.monotonic() >= deadline:
+                        if anyio.current_time() >= deadline:
                             break
             stop.set()
     stream.write(f"done: {shown} scans of {len(DEMO_TAGS)} tags.\n")

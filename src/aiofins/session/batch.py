@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
-from time import monotonic
 from typing import TYPE_CHECKING, NoReturn
 
 import anyio
@@ -220,7 +219,7 @@ class Batch:
         session.log_frames_now()
         start, state, commands, retries = session.start, self.state, self.commands, self.retries
         sid_waits = self.sid_waits
-        now = monotonic()
+        now = session.clock()
         end = now + self.timeout
         frames = []
         for index in due:

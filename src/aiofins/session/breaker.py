@@ -14,7 +14,6 @@ import enum
 import logging
 import math
 import random
-from time import monotonic
 from typing import TYPE_CHECKING
 
 from ..protocol.errors import CircuitOpen, ConnectionLost, FinsTimeout
@@ -106,11 +105,12 @@ class CircuitBreaker:
 
 
 async def admit_call(
-    breaker: CircuitBreaker, stats: SessionStats, dest: FinsAddress, where: str
+    breaker: CircuitBreaker, stats: SessionStats, dest: FinsAddress, where: str, now: float
 ) -> None:
-    """Let a call to ``dest`` (via ``where``) through an open breaker as the probe, or fail
-    it at once with :class:`CircuitOpen` (counted in ``stats.breaker_rejects``)."""
-    wait = breaker.admit(monotonic())
+    """Let a call to ``dest`` (via ``where``) through an open breaker as the probe at ``now``
+    (the session's clock), or fail it at once with :class:`CircuitOpen` (counted in
+    ``stats.breaker_rejects``)."""
+    wait = breaker.admit(now)
     if wait:
         stats.breaker_rejects += 1
         if wait == math.inf:
@@ -133,15 +133,18 @@ def call_answered(breaker: CircuitBreaker, where: str) -> None:
         logger.info("%s answers again: circuit breaker closed", where, extra={"endpoint": where})
 
 
-def call_ended(breaker: CircuitBreaker, exc: BaseException, timeout: float, where: str) -> None:
-    """A call raised ``exc`` (its ``timeout`` was that): a failure of the link (no answer,
+def call_ended(
+    breaker: CircuitBreaker, exc: BaseException, timeout: float, where: str, now: float
+) -> None:
+    """A call raised ``exc`` at ``now`` (the session's clock; its ``timeout`` was that): a
+    failure of the link (no answer,
     link lost) counts towards opening the breaker (logged when it opens); a call failed
     before it was sent (slot or SID wait, open breaker, reconnect backoff) or cancelled
     only gives back the probe's turn."""
     if isinstance(exc, (FinsTimeout, ConnectionLost)) and not isinstance(
         exc, (SlotTimeout, CircuitOpen, InBackoff)
     ):
-        if breaker.failed(monotonic(), timeout):
+        if breaker.failed(now, timeout):
             logger.warning(
                 "%s: %d calls in a row got no answer: circuit breaker open, failing fast "
                 "while a probe tests the link",

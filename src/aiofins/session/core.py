@@ -54,6 +54,7 @@ from ..transport.base import Transport, is_asyncio
 from .background import Background
 from .batch import raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, call_ended
+from .clock import Clock, Clocks, backend_clocks
 from .link import Link
 from .log import cpu_flags_seen, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
@@ -121,6 +122,10 @@ class Session:
     After ``breaker_threshold`` calls in a row that got no answer (0: never) calls fail at
     once with :class:`CircuitOpen` while one probe at a time tests the link (see
     :mod:`aiofins.session.breaker`). ``hooks`` receive the request and link events.
+
+    Every time the session reads comes from ``clock`` (default: the running event loop's,
+    chosen on entry; see :mod:`aiofins.session.clock`), so it runs on virtual time under a
+    virtual clock; a driver without an event loop passes its own.
     """
 
     def __init__(
@@ -145,6 +150,7 @@ class Session:
         breaker_threshold: int = 5,
         breaker_cooldown: tuple[float, float] = (0.05, 2.0),
         hooks: EventHooks | None = None,
+        clock: Clock | None = None,
     ) -> None:
         max_sid_spaces = check_options(
             gct=gct,
@@ -180,6 +186,11 @@ class Session:
         self.reconnect_backoff = reconnect_backoff
         self.hooks = hooks
         self._hooks = None if hooks is None else hooks.or_none()
+        #: The clock the caller passed (``None``: the event loop's, chosen on entry).
+        self._clock_given = clock
+        #: The one clock every part of the session reads (see :mod:`.clock`): set on entry
+        #: by :meth:`_use_clock`; until then the monotonic clock.
+        self.clock: Clock = monotonic if clock is None else clock
         #: Whether retransmissions follow the measured RTO: not over a reliable stream
         #: (FINS/TCP), which loses nothing; there the call's own schedule alone.
         self._adaptive = not transport.reliable
@@ -188,7 +199,7 @@ class Session:
         #: One request on the line at a time across all destinations (serial links).
         self._shared_slots = limit == 1
         #: The SIDs and the requests in flight of the transport (see :mod:`.sids`).
-        self.sids = SidSpace(min_linger)
+        self.sids = SidSpace(min_linger, self.clock)
         # The space's tables under the names the receive path and tests use.
         self._pending = self.sids.pending
         self._quarantine = self.sids.quarantine
@@ -244,6 +255,7 @@ class Session:
             self._adopt_local_node,
             self.sids.forget,
             self.fail_all,
+            self.clock,
         )
 
     # ----------------------------------------------------------------- link state
@@ -282,10 +294,8 @@ class Session:
             if type(loop).create_future is asyncio.BaseEventLoop.create_future:
                 # asyncio's own: the same future, made without that method's Python call.
                 self._new_future = partial(asyncio.Future, loop=loop)
-            self._watcher.clock = self._loop.time
             self._watcher.loop = self._loop
-        else:
-            self._watcher.clock = anyio.current_time
+        self._use_clock(backend_clocks(self._clock_given))
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
@@ -328,6 +338,17 @@ class Session:
         with anyio.CancelScope(shield=True):
             await self.transport.aclose()
             await self._spaces.aclose()
+
+    def _use_clock(self, clocks: Clocks) -> None:
+        """The one place the session's clock is set: every part reads ``clocks.session``,
+        the deadline watcher sets its timer in ``clocks.timer`` (see :mod:`.clock`)."""
+        clock = self.clock = clocks.session
+        self.sids.clock = clock
+        self._link.clock = clock
+        self._spaces.clock = clock
+        self._watcher.clock = clock
+        self._watcher.timer_clock = clocks.timer
+        self._watcher.direct = clocks.direct
 
     def _adopt_local_node(self) -> None:
         """The transport is open: take the node the peer assigned us (FINS/TCP), if any, as
@@ -383,7 +404,7 @@ class Session:
             return
         p.done = True
         p.end_code = raw
-        now = monotonic()
+        now = self.clock()
         sids.recent[key] = now
         latency = now - p.sent_at
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
@@ -615,7 +636,7 @@ class Session:
         if p.done:
             return
         (self.sids if p.space is None else p.space.sids).abandon(
-            p, self.quarantine_until(monotonic(), timeout)
+            p, self.quarantine_until(self.clock(), timeout)
         )
         if timed_out:
             self.stats.timeouts += 1
@@ -708,26 +729,27 @@ class Session:
             raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
         if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_command(mrc, src, params)  # raises the error that says which
-        end = (now := monotonic()) + timeout  # (now: read again after any wait below)
+        clock = self.clock
+        end = (now := clock()) + timeout  # (now: read again after any wait below)
         self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
         if self._breaker.failures:  # (none: the breaker is closed)
-            await admit_call(self._breaker, self.stats, dest, self.transport.description)
-            now = monotonic()
+            await admit_call(self._breaker, self.stats, dest, self.transport.description, now)
+            now = clock()
         p: Pending | None = None
         busy = 0
         try:
             while True:
                 transport = self.transport
                 if transport.fast_send is None and not transport.is_open:
-                    await self._link.ensure_open(end - monotonic(), call_timeout=timeout)
-                    now = monotonic()
+                    await self._link.ensure_open(end - clock(), call_timeout=timeout)
+                    now = clock()
                 state = self._last_state if dest is self._last_dest else self.dest_state(dest)
                 slots = state.slots
                 if slots.in_flight < slots.limit and not slots.waiters:
                     slots.in_flight += 1
                 else:
-                    await slots.acquire(max(end - monotonic(), 0.0), f"{dest}")
-                    now = monotonic()
+                    await slots.acquire(max(end - clock(), 0.0), f"{dest}")
+                    now = clock()
                 fut: asyncio.Future[bytes] | None
                 if self._asyncio:
                     p = AsyncioPending()  # start() sets every field
@@ -771,7 +793,7 @@ class Session:
                     return response
                 await self._busy_pause_or_raise(frame, busy, end, mrc, src)
                 busy += 1
-                now = monotonic()
+                now = clock()
         except BaseException as exc:
             await self._call_failed(exc, p, dest, timeout)
 
@@ -786,9 +808,9 @@ class Session:
         if isinstance(exc, Expired):
             assert p is not None
             error = no_response(self, dest, p.mrc, p.src, timeout, p.attempts)
-            call_ended(self._breaker, error, timeout, where)
+            call_ended(self._breaker, error, timeout, where, self.clock())
             raise error from None
-        call_ended(self._breaker, exc, timeout, where)
+        call_ended(self._breaker, exc, timeout, where, self.clock())
         if isinstance(exc, ConnectionLost):
             await raise_after_a_turn(exc)
         raise exc
@@ -800,7 +822,7 @@ class Session:
         PLC was too busy (see :meth:`busy_pause`) and the call's deadline ``end`` leaves
         time, else raise the end code's error (the PLC answered: the breaker closes)."""
         pause = self.busy_pause(frame, busy)
-        if pause is not None and pause < end - monotonic():
+        if pause is not None and pause < end - self.clock():
             self.stats.busy_retries += 1
             await anyio.sleep(pause)
             return
@@ -882,7 +904,9 @@ class Session:
         """
         breaker = self._breaker
         if breaker.state is not _CLOSED_BREAKER:
-            await admit_call(breaker, self.stats, dest or self.dest, self.transport.description)
+            await admit_call(
+                breaker, self.stats, dest or self.dest, self.transport.description, self.clock()
+            )
         try:
             responses = await request_many(
                 self,
@@ -912,7 +936,7 @@ class Session:
         elif isinstance(error, EndCodeError):
             call_answered(breaker, self.transport.description)
         else:
-            call_ended(breaker, error, timeout, self.transport.description)
+            call_ended(breaker, error, timeout, self.transport.description, self.clock())
 
     def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None:
         """For a batch that found no free SID of the transport's own: one of an open extra

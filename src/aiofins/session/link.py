@@ -22,6 +22,7 @@ from ..hooks import ConnectionStateChanged, EventHooks
 from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout
 from ..transport.base import FrameSink, Transport
 from .background import Background
+from .clock import Clock
 from .response import SessionStats
 from .states import LINK_TRANSITIONS, LinkState
 
@@ -75,7 +76,10 @@ class Link:
         on_open: Callable[[], None],
         on_fresh: Callable[[], None],
         fail: Callable[[BaseException], None],
+        clock: Clock = monotonic,
     ) -> None:
+        #: The session's clock (see :mod:`.clock`).
+        self.clock = clock
         self.transport = transport
         self.sink = sink
         self.stats = stats
@@ -86,12 +90,12 @@ class Link:
         self.fail = fail
         self.background: Background | None = None
         self.state = LinkState.CLOSED
-        self.since = monotonic()
+        self.since = clock()
         self.lost_at: float | None = None  # when an open link was lost (for "reconnected")
         #: The connection attempt in progress, if any (one at a time, shared by callers).
         self.connecting: _Attempt | None = None
         self.backoff = 0.0
-        self.retry_at = 0.0  # no connection attempt before this (monotonic) time
+        self.retry_at = 0.0  # no connection attempt before this time (the clock's)
 
     def set_state(self, new: LinkState) -> None:
         """The one place the link state changes: checked, logged, emitted as a hook."""
@@ -100,7 +104,7 @@ class Link:
             return
         assert new in LINK_TRANSITIONS[old], f"link state {old.name} -> {new.name}"
         self.state = new
-        now = monotonic()
+        now = self.clock()
         self.since = now
         where = self.transport.description
         if new is LinkState.OPEN:
@@ -206,7 +210,7 @@ class Link:
         if state is LinkState.OPEN:  # the transport ended without telling us
             self.set_state(LinkState.CLOSED)
         elif state is LinkState.BACKOFF:
-            wait = self.retry_at - monotonic()
+            wait = self.retry_at - self.clock()
             if wait > 0:  # fail fast: no call waits out the backoff beyond its own deadline
                 raise InBackoff(
                     f"cannot connect to {self.transport.description}: the last attempt failed; "
@@ -260,7 +264,7 @@ class Link:
                 low, high = self.reconnect_backoff
                 self.backoff = min(high, max(low, self.backoff * 2))
                 wait = self.backoff * random.uniform(0.5, 1.0)  # no lockstep after an outage
-                self.retry_at = monotonic() + wait
+                self.retry_at = self.clock() + wait
                 self.set_state(LinkState.BACKOFF)
                 logger.warning(
                     "%s; next attempt in %.2f s",

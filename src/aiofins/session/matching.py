@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from time import monotonic
-
 from .response import SessionStats
 from .slots import Pending
 
@@ -40,10 +38,12 @@ def count_unmatched(
     quarantine: dict[int, float],
     recent: dict[int, float],
     key: int,
+    now: float,
 ) -> str:
     """Count a reply no request waits for: late (timed out), duplicate, or unsolicited.
 
-    A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE`): the reply
+    A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE` from
+    ``now``, the session's time): the reply
     the quarantine waited for has come. Returns which: ``"late"``, ``"duplicate"`` or
     ``"unsolicited"``.
     """
@@ -52,7 +52,7 @@ def count_unmatched(
         until = quarantine.get(k)
         if until is not None:
             stats.late_replies += 1
-            quarantine[k] = min(until, monotonic() + LATE_REPLY_GRACE)
+            quarantine[k] = min(until, now + LATE_REPLY_GRACE)
             return "late"
     for k in keys:
         if k in recent:

@@ -29,8 +29,9 @@ class SourceNodes:
 
     def __init__(self, clock: Callable[[], float] = monotonic) -> None:
         self._held: dict[str, Counter[int]] = {}
-        #: peer -> node -> until when a node given back stays out of use.
-        self._cooling: dict[str, dict[int, float]] = {}
+        #: peer -> node -> until when a node given back stays out of use, on which clock
+        #: (the releasing session's: sessions of one process may run on different clocks).
+        self._cooling: dict[str, dict[int, tuple[float, Callable[[], float]]]] = {}
         self._clock = clock
         self._lock = threading.Lock()
 
@@ -43,8 +44,7 @@ class SourceNodes:
         held = self._held.get(peer)
         cooling = self._cooling.get(peer)
         if cooling:
-            now = self._clock()
-            for node in [n for n, until in cooling.items() if until <= now]:
+            for node in [n for n, (until, clock) in cooling.items() if _over(until, clock)]:
                 del cooling[node]
         return frozenset(held or ()) | frozenset(cooling or ())
 
@@ -104,13 +104,20 @@ class SourceNodes:
             self._hold(peer, node)
             return FinsAddress(source.network, node, source.unit)
 
-    def release(self, peer: str, node: int, cool_until: float = 0.0) -> None:
+    def release(
+        self,
+        peer: str,
+        node: int,
+        cool_until: float = 0.0,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
         """Give ``node`` back; it is free again once every holder gave it back and
-        ``cool_until`` (:func:`time.monotonic`) has passed."""
+        ``clock`` (the releasing session's; default: this table's own, monotonic) has
+        passed ``cool_until``."""
         with self._lock:
-            self._release(peer, node, cool_until)
+            self._release(peer, node, cool_until, clock or self._clock)
 
-    def _release(self, peer: str, node: int, cool_until: float) -> None:
+    def _release(self, peer: str, node: int, cool_until: float, clock: Callable[[], float]) -> None:
         held = self._held.get(peer)
         if held is None or not held[node]:
             return
@@ -120,8 +127,17 @@ class SourceNodes:
         del held[node]
         if not held:
             del self._held[peer]
-        if cool_until > self._clock():
-            self._cooling.setdefault(peer, {})[node] = cool_until
+        if cool_until > clock():
+            self._cooling.setdefault(peer, {})[node] = (cool_until, clock)
+
+
+def _over(until: float, clock: Callable[[], float]) -> bool:
+    """Whether ``clock`` has passed ``until``; a clock that cannot be read any more (trio's
+    outside its run: the session that released the node is long gone) has."""
+    try:
+        return until <= clock()
+    except RuntimeError:
+        return True
 
 
 def _free(taken: frozenset[int]) -> int | None:

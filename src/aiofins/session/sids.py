@@ -23,6 +23,7 @@ from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from time import monotonic
 
+from .clock import Clock
 from .matching import count_unmatched
 from .response import SessionStats
 from .slots import DestState, Pending
@@ -44,6 +45,7 @@ class SidSpace:
     """
 
     __slots__ = (
+        "clock",
         "linger",
         "linger_resent",
         "lingering",
@@ -54,7 +56,9 @@ class SidSpace:
         "short",
     )
 
-    def __init__(self, min_linger: float = 0.0) -> None:
+    def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
+        #: The session's clock (see :mod:`.clock`).
+        self.clock = clock
         #: SID key -> the request in flight under it.
         self.pending: dict[int, Pending] = {}
         #: SID key -> when it may be used again (requests given up on).
@@ -116,7 +120,7 @@ class SidSpace:
         """The next free SID of ``state`` in round-robin order (``None``: all 256 taken);
         a scan of up to 256 keys."""
         base, sid = state.base, state.cursor
-        now = monotonic()
+        now = self.clock()
         taken: AbstractSet[int] = {k & 0xFF for k in self.pending} if self.routed else _NONE
         for _ in range(256):
             key = base | sid
@@ -158,7 +162,7 @@ class SidSpace:
         the table and its SID quarantined until ``until(now, time since it was sent)``
         (should the link come back under the same space, a late reply must not reach a
         newer request)."""
-        now = monotonic()
+        now = self.clock()
         for p in self.drain():
             self.abandon(p, until(now, now - p.sent_at))
             p.fail(exc)
@@ -181,15 +185,16 @@ class SidSpace:
         twice its lateness after a reply). Returns which (``"late"``, ``"duplicate"`` or
         ``"unsolicited"``), and for a duplicate of a reply
         the network repeated that made :attr:`linger` grow, how late it came (else 0.0)."""
-        kind = count_unmatched(stats, self.quarantine, self.recent, key)
+        now = self.clock()
+        kind = count_unmatched(stats, self.quarantine, self.recent, key, now)
         if kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
-                linger = min(MAX_LINGER, LINGER_FACTOR * (monotonic() + done_at))
+                linger = min(MAX_LINGER, LINGER_FACTOR * (now + done_at))
                 if linger > self.linger_resent:
                     self.linger_resent = linger
             elif done_at is not None:  # the network duplicated a reply
-                lateness = monotonic() - done_at
+                lateness = now - done_at
                 linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
                 if linger > self.linger:
                     self.linger = linger

@@ -34,6 +34,7 @@ from ..protocol.errors import ConnectionLost
 from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .background import Background
+from .clock import Clock
 from .messages import no_free_sid
 from .nodes import SOURCE_NODES
 from .sids import SID_WAIT, SidSpace
@@ -86,7 +87,7 @@ class ExtraSpace:
         #: 1 for the first extra space (0 is the session's own).
         self.number = number
         self.transport = transport
-        self.sids = SidSpace(min_linger)
+        self.sids = SidSpace(min_linger, owner.clock)
         #: What a datagram transport reads to stop draining early (see FrameSink).
         self.replies_awaited = self.sids.pending
         self.state = SpaceState.OPENING
@@ -95,7 +96,7 @@ class ExtraSpace:
         #: The source node held in :data:`SOURCE_NODES` for it (UDP), and towards which peer.
         self.claimed: tuple[str, int] | None = None
         self.dests: dict[FinsAddress, DestState] = {}
-        self.last_used = monotonic()
+        self.last_used = owner.clock()
         self.opened = anyio.Event()
         self.background: Background | None = None
 
@@ -162,6 +163,8 @@ class SidSpaces:
         prefix: Callable[[FinsAddress, FinsAddress], bytes],
     ) -> None:
         self.transport = transport
+        #: The session's clock (see :mod:`.clock`; the session sets it on entry).
+        self.clock: Clock = monotonic
         #: Spaces in all at most, the session's own included.
         self.limit = limit if transport.another() is not None else 1
         self.min_linger = min_linger
@@ -229,7 +232,7 @@ class SidSpaces:
                 space.sids.routed = routed
                 key = space.sids.allocate(space.dest_state(state))
                 if key is not None:
-                    space.last_used = monotonic()
+                    space.last_used = self.clock()
                     return key, space
         return None
 
@@ -330,7 +333,7 @@ class SidSpaces:
         space.opened.set()
         while space.is_open:
             idle_at = space.last_used + self.idle_after
-            now = monotonic()
+            now = self.clock()
             if now < idle_at or space.sids.pending or self._capped:  # (capped: needed)
                 await anyio.sleep(max(idle_at - now, self.idle_after / 4))
                 continue
@@ -347,7 +350,7 @@ class SidSpaces:
 
     def _failed(self, space: ExtraSpace, exc: BaseException) -> None:
         self.stats.sid_space_failures += 1
-        self.retry_at = monotonic() + RETRY_AFTER
+        self.retry_at = self.clock() + RETRY_AFTER
         where = self.transport.description
         logger.warning(
             "%s: cannot open another SID space (%s); requests wait for a free SID",
@@ -390,7 +393,7 @@ class SidSpaces:
             if space.background is not None:
                 space.background.cancel_all()
             if space.claimed is not None:
-                SOURCE_NODES.release(*space.claimed, cool_until=until)
+                SOURCE_NODES.release(*space.claimed, cool_until=until, clock=self.clock)
                 space.claimed = None
             if space in self.extra:
                 self.extra.remove(space)
@@ -471,7 +474,7 @@ async def sid_anywhere(
     wait for the first to come free in any space, up to the call's deadline ``end``
     (then :class:`SlotTimeout`). Running out is counted and logged (once until SIDs
     are free again)."""
-    sids, spaces = session.sids, session._spaces
+    sids, spaces, clock = session.sids, session._spaces, session.clock
     key = sids.allocate(state)
     if key is not None:
         if sids.short:
@@ -479,8 +482,8 @@ async def sid_anywhere(
             spaces.enough()
         return key, None
     got = spaces.allocate(state)
-    while got is None and spaces.may_open(monotonic()):
-        if not await spaces.open(session.source, session._nodes_in_use(), end - monotonic()):
+    while got is None and spaces.may_open(clock()):
+        if not await spaces.open(session.source, session._nodes_in_use(), end - clock()):
             break
         got = spaces.allocate(state)
     if got is not None:
@@ -509,7 +512,7 @@ async def sid_anywhere(
     lock = state.sid_lock
     if lock is None:
         lock = state.sid_lock = anyio.Lock()
-    with anyio.move_on_after(max(end - monotonic(), 0.0)):
+    with anyio.move_on_after(max(end - clock(), 0.0)):
         async with lock:
             while True:
                 key = sids.allocate(state)
@@ -518,7 +521,7 @@ async def sid_anywhere(
                 got = spaces.allocate(state)
                 if got is not None:
                     return got
-                now = monotonic()
+                now = clock()
                 if spaces.may_open(now):
                     await spaces.open(session.source, session._nodes_in_use(), end - now)
                     continue
@@ -550,7 +553,7 @@ async def start_when_free(
     else:  # on another socket or connection
         space.dest_state(state).cursor = key & 0xFF
         transport = space.transport
-    now = monotonic()
+    now = session.clock()
     frame = session.start(p, state, mrc, src, params, retries, now, end, cap, space)
     assert frame is not None
     return frame, transport, now

@@ -50,7 +50,8 @@ class DeadlineWatcher:
         self.deadlines = Deadlines()
         #: The in-order part of the deadlines, appended to inline by the session.
         self.fifo = self.deadlines.fifo
-        #: When the watcher wakes next (monotonic; ``inf``: not before a request is added).
+        #: When the watcher wakes next (the session's clock; ``inf``: not before a request
+        #: is added).
         self.at = math.inf
         #: The watcher's sleep under anyio's other backends (trio): a cancel scope's deadline.
         self.scope: anyio.CancelScope | None = None
@@ -60,8 +61,11 @@ class DeadlineWatcher:
         self.loop: Any = None
         self.waiter: asyncio.Future[None] | None = None
         self.timer: asyncio.TimerHandle | None = None
-        #: The backend's clock (set by the session on entry).
+        #: The session's clock, the backend timer's, and whether a time of the first may be
+        #: given to the timer as it is (all set by the session on entry; see ``.clock``).
         self.clock: Callable[[], float] = monotonic
+        self.timer_clock: Callable[[], float] = monotonic
+        self.direct = True
         self.background: Background | None = None
         self._fire = self.fire  # (bound once: arm() passes it to every timer)
 
@@ -76,13 +80,15 @@ class DeadlineWatcher:
         if waiter is None or waiter.done():
             return
         at = self.deadlines.live_earliest()
-        now = monotonic()
+        now = self.clock()
         if at <= now:
             waiter.set_result(None)
             return
         self.at = at
         if at != math.inf:
-            self.timer = self.loop.call_at(self.clock() + (at - now), self._fire)
+            self.timer = self.loop.call_at(
+                at if self.direct else self.timer_clock() + (at - now), self._fire
+            )
 
     async def run(self) -> None:
         """The only timer: sleeps until the earliest deadline, retransmits or expires what is
@@ -90,7 +96,7 @@ class DeadlineWatcher:
         loop = self.loop
         while True:
             try:
-                self.expire(monotonic())
+                self.expire(self.clock())
             except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
                 where = self.session.transport.description
                 logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
@@ -100,7 +106,9 @@ class DeadlineWatcher:
             if loop is not None:
                 waiter = self.waiter = loop.create_future()
                 if at != math.inf:
-                    self.timer = loop.call_at(loop.time() + (at - monotonic()), self._fire)
+                    if not self.direct:
+                        at = loop.time() + (at - self.clock())
+                    self.timer = loop.call_at(at, self._fire)
                 try:
                     await waiter
                 finally:
@@ -112,14 +120,15 @@ class DeadlineWatcher:
             with anyio.CancelScope() as scope:
                 self.scope = scope
                 if at != math.inf:
-                    scope.deadline = anyio.current_time() + (at - monotonic())
+                    scope.deadline = at if self.direct else self.timer_clock() + (at - self.clock())
                 await anyio.sleep_forever()
             self.scope = None
 
     def arm(self, deadline: float) -> None:
-        """Wake the watcher at ``deadline`` (monotonic) if that is earlier than planned. Runs
-        in receive callbacks too (a batch sends from there), so the backend's clock is read
-        directly rather than through ``anyio.current_time()``, which needs a task."""
+        """Wake the watcher at ``deadline`` (the session's clock) if that is earlier than
+        planned. Runs in receive callbacks too (a batch sends from there), so the backend's
+        clock is read directly rather than through ``anyio.current_time()``, which needs a
+        task."""
         if deadline >= self.at:
             return
         waiter = self.waiter
@@ -128,12 +137,17 @@ class DeadlineWatcher:
             timer = self.timer
             if timer is not None:
                 timer.cancel()
-            self.timer = self.loop.call_at(self.clock() + (deadline - monotonic()), self._fire)
+            self.timer = self.loop.call_at(
+                deadline if self.direct else self.timer_clock() + (deadline - self.clock()),
+                self._fire,
+            )
             return
         scope = self.scope
         if scope is not None:
             self.at = deadline
-            scope.deadline = self.clock() + (deadline - monotonic())
+            scope.deadline = (
+                deadline if self.direct else self.timer_clock() + (deadline - self.clock())
+            )
 
     def expire(self, now: float) -> None:
         """Send again or give up every request due at ``now``."""
@@ -256,7 +270,7 @@ class DeadlineWatcher:
         """A retransmission through an awaited send (trio, FINS/TCP under anyio)."""
         transport = self.session.transport if p.space is None else p.space.transport
         try:
-            await transport.send(resend.frame, max(resend.end - monotonic(), 0.001))
+            await transport.send(resend.frame, max(resend.end - self.clock(), 0.001))
         except Exception as exc:  # a boundary: the request fails, nothing else
             self.give_up(p, exc)
 
@@ -266,7 +280,7 @@ class DeadlineWatcher:
         if p.done:
             return
         session = self.session
-        now = monotonic()
+        now = self.clock()
         (session.sids if p.space is None else p.space.sids).abandon(
             p, session.quarantine_until(now, now - p.sent_at)
         )
