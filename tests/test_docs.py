@@ -128,6 +128,6 @@ def test_an_async_context_manager_is_shown_as_one() -> None:
         search_paths=[str(ROOT / "src")],
         extensions=griffe.load_extensions(hook.ApiReference),
     )
-    connect = package["connect"]
-    assert "async" not in connect.labels
-    assert str(connect.returns) == "AbstractAsyncContextManager[Client]"
+    run_simulator = package["simulator.run_simulator"]
+    assert "async" not in run_simulator.labels
+    assert str(run_simulator.returns) == "AbstractAsyncContextManager[Simulator]"

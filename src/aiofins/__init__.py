@@ -3,7 +3,7 @@
 import logging
 from importlib.metadata import PackageNotFoundError, version
 
-from .client import Client
+from .client import Client, ClientState
 from .connection import connect
 from .hooks import (
     ConnectionStateChanged,
@@ -50,6 +50,7 @@ __all__ = [
     "AddressError",
     "CircuitOpen",
     "Client",
+    "ClientState",
     "CommandError",
     "ConnectionLost",
     "ConnectionStateChanged",

@@ -9,8 +9,14 @@ route's limits and send the chunks pipelined.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any, TypeVar, overload
+import asyncio
+import enum
+from collections.abc import Callable, Coroutine, Mapping, Sequence
+from contextlib import AbstractAsyncContextManager, AsyncExitStack
+from types import TracebackType
+from typing import Any, NoReturn, TypeVar, cast, overload
+
+import anyio
 
 from ._callplan import (
     cacheable,
@@ -26,7 +32,7 @@ from .protocol.areas import MemoryAddress
 from .protocol.commands import Request, operation_for
 from .protocol.commands.memory import MemoryAreaWrite
 from .protocol.endcodes import EndCode
-from .protocol.errors import CommandError, DecodeError, EndCodeError
+from .protocol.errors import CommandError, ConnectionLost, DecodeError, EndCodeError
 from .protocol.guard import changes, check_read_only
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
@@ -44,6 +50,7 @@ from .protocol.values import (
 )
 from .session import Response, Session
 from .tags import ReadPlan, compile_tags
+from .transport.base import is_asyncio
 
 R = TypeVar("R")
 
@@ -74,6 +81,69 @@ AddressLike = str | MemoryAddress
 Progress = Callable[[int, int], object]
 
 
+class ClientState(enum.Enum):
+    """The life of a :class:`Client` made by :func:`aiofins.connect`; :meth:`Client._move`
+    makes every change. A client made on a session that is open already
+    (``Client(session)``, a :class:`~aiofins.Pool`'s lease) is ``OPEN`` from the start: its
+    session is opened and closed by its owner."""
+
+    #: Made by ``connect()``, nothing opened yet: calls raise :class:`~aiofins.ConnectionLost`
+    #: saying to ``await plc.open()`` (or to use ``async with``).
+    NEW = "new"
+    #: :meth:`Client.open` or ``async with`` is making the connection.
+    OPENING = "opening"
+    #: Connected: calls go to the PLC.
+    OPEN = "open"
+    #: :meth:`Client.aclose` (or leaving ``async with``) is under way: new calls raise
+    #: ``ConnectionLost``, calls still waiting end with it.
+    CLOSING = "closing"
+    #: Closed, or the connection could not be made: calls raise ``ConnectionLost``. A client
+    #: is opened once; ``aiofins.connect(url)`` makes a new one.
+    CLOSED = "closed"
+
+
+#: The changes :meth:`Client._move` allows.
+_TRANSITIONS: dict[ClientState, frozenset[ClientState]] = {
+    ClientState.NEW: frozenset({ClientState.OPENING, ClientState.CLOSED}),
+    ClientState.OPENING: frozenset({ClientState.OPEN, ClientState.CLOSING, ClientState.CLOSED}),
+    ClientState.OPEN: frozenset({ClientState.CLOSING}),
+    ClientState.CLOSING: frozenset({ClientState.CLOSED}),
+    ClientState.CLOSED: frozenset(),
+}
+
+#: What makes a client's connection: :func:`aiofins.connect`'s context manager, which yields
+#: a client on the open session.
+Opener = Callable[[], AbstractAsyncContextManager["Client"]]
+
+
+class _NoSession:
+    """Stands for the session of a client that is not open: any use of it says why."""
+
+    def __init__(self, client: Client) -> None:
+        self._client = client
+
+    def __getattr__(self, name: str) -> NoReturn:
+        raise ConnectionLost(self._client._not_open())
+
+
+#: The tasks hosting the sessions of clients opened with :meth:`Client.open` under asyncio
+#: (the event loop keeps only weak references to tasks).
+_HOSTS: set[asyncio.Task[None]] = set()
+
+
+def _spawn_host(run: Callable[[], Coroutine[Any, Any, None]]) -> None:
+    """Start ``run`` in a task of its own, outside the caller's task group and cancel scopes:
+    a client opened with :meth:`Client.open` may be closed from any task, in any order."""
+    if is_asyncio():
+        task = asyncio.get_running_loop().create_task(run())
+        _HOSTS.add(task)
+        task.add_done_callback(_HOSTS.discard)
+    else:  # trio: the run's system nursery, as a task group outlives no caller
+        import trio
+
+        trio.lowlevel.spawn_system_task(run)
+
+
 class Client(CommandMethods):
     """A FINS client for one PLC (``dest``), over one session.
 
@@ -81,6 +151,17 @@ class Client(CommandMethods):
     :class:`RouteLimits`, Ethernet by default), ``word_order`` for typed values (Omron's CDAB
     by default). CPU error flags of the last response (end code bits 6/7) are in
     :attr:`last_end_code`; they are not raised.
+
+    A client made by :func:`aiofins.connect` is opened and closed either with ``async with``
+    or explicitly, for a client kept in an object of its own (a service class)::
+
+        plc = aiofins.connect(url)
+        await plc.open()
+        ...
+        await plc.aclose()
+
+    Used before :meth:`open` or after :meth:`aclose`, a call raises
+    :class:`~aiofins.ConnectionLost` saying so; :attr:`state` tells where it stands.
     """
 
     def __init__(
@@ -101,6 +182,184 @@ class Client(CommandMethods):
         #: End code of the latest normal response (look here for the 0040/0080 flags).
         self.last_end_code: EndCode | None = None
         self._twin: Client | None = None
+        self._state = ClientState.OPEN
+        self._opener: Opener | None = None
+        self._where = ""
+        self._stack: AsyncExitStack | None = None
+        self._host_scope: anyio.CancelScope | None = None
+        self._opened: anyio.Event | None = None
+        self._close_asked: anyio.Event | None = None
+        self._closed: anyio.Event | None = None
+        self._failure: Exception | None = None
+
+    @classmethod
+    def unopened(cls, opener: Opener, where: str) -> Client:
+        """A client in state ``NEW`` whose connection ``opener`` makes when it is opened
+        (what :func:`aiofins.connect` returns; ``where`` names the PLC in errors). Its
+        ``dest``, ``limits``, ``word_order`` and ``read_only`` are those of the connection
+        once open."""
+        client = cls.__new__(cls)
+        Client.__init__(client, cast(Session, _NoSession(client)), dest=FinsAddress(0, 0, 0))
+        client._state = ClientState.NEW
+        client._opener = opener
+        client._where = where
+        return client
+
+    # -- lifecycle ----------------------------------------------------------------------
+
+    @property
+    def state(self) -> ClientState:
+        """Where the client stands in its life (see :class:`ClientState`)."""
+        return self._state
+
+    def _move(self, to: ClientState) -> None:
+        """The one place the state changes; a change :data:`_TRANSITIONS` does not allow is a
+        :class:`CommandError` naming both states."""
+        if to not in _TRANSITIONS[self._state]:
+            raise CommandError(self._refusal(to))
+        self._state = to
+        if to is ClientState.CLOSED:
+            self.session = cast(Session, _NoSession(self))
+
+    def _refusal(self, to: ClientState) -> str:
+        where = f"the client of {self._where}"
+        if to is ClientState.OPENING and self._state is ClientState.OPEN:
+            return f"{where} is open already"
+        if to is ClientState.OPENING and self._state is ClientState.OPENING:
+            return f"{where} is being opened already"
+        if to is ClientState.OPENING:
+            return f"{where} is {self._state.value}: aiofins.connect(url) makes a new client"
+        return f"{where} cannot go from {self._state.value} to {to.value}"
+
+    def _not_open(self) -> str:
+        """What a call on a client that is not open says."""
+        where = f"the client of {self._where}"
+        state = self._state
+        if state is ClientState.NEW:
+            return (
+                f"{where} is not open: await plc.open() first (and await plc.aclose() when "
+                "done), or use async with aiofins.connect(url) as plc"
+            )
+        if state is ClientState.OPENING:
+            return f"{where} is still opening: await plc.open() returns once it is open"
+        if state is ClientState.CLOSING:
+            return f"{where} is closing"
+        return f"{where} is closed: aiofins.connect(url) makes a new client"
+
+    def _owned(self) -> Opener:
+        """The opener of a client made by ``connect()``; a client on someone else's session
+        is refused (a Pool's lease is given back by leaving ``async with pool.client()``)."""
+        if self._opener is None:
+            raise CommandError(
+                "this client runs on a session opened elsewhere (Client(session), a Pool's "
+                "lease): its owner opens and closes it; a lease is given back by leaving "
+                "async with pool.client(url)"
+            )
+        return self._opener
+
+    def _adopt(self, inner: Client) -> None:
+        """Take the session and settings of the client ``opener`` made."""
+        self.session = inner.session
+        self.dest = inner.dest
+        self.limits = inner.limits
+        self.word_order = inner.word_order
+        self.read_only = inner.read_only
+
+    async def open(self) -> Client:
+        """Open the connection (the transport and its session); returns this client.
+
+        The session runs in a task of its own, so :meth:`aclose` may be called from any
+        task and clients closed in any order. An error opening (a bad URL or option, a
+        FINS/TCP connection refused) is raised here and leaves the client ``CLOSED``.
+        """
+        opener = self._owned()
+        self._move(ClientState.OPENING)
+        self._opened, self._close_asked, self._closed = anyio.Event(), anyio.Event(), anyio.Event()
+        self._host_scope = anyio.CancelScope()
+        _spawn_host(lambda: self._host(opener))
+        try:
+            await self._opened.wait()
+        except BaseException:  # the caller gave up: the connection is not wanted
+            self._host_scope.cancel()
+            raise
+        if self._failure is not None:
+            failure, self._failure = self._failure, None
+            raise failure
+        return self
+
+    async def _host(self, opener: Opener) -> None:
+        """The task of an :meth:`open`-ed client: holds its connection open until
+        :meth:`aclose` asks; no error leaves it (:meth:`open` raises one met opening)."""
+        assert self._opened is not None and self._close_asked is not None
+        assert self._closed is not None and self._host_scope is not None
+        try:
+            with self._host_scope:
+                async with opener() as inner:
+                    self._adopt(inner)
+                    self._move(ClientState.OPEN)
+                    self._opened.set()
+                    await self._close_asked.wait()
+        except Exception as exc:
+            if not self._opened.is_set():
+                self._failure = exc
+        finally:
+            if self._state is ClientState.OPEN:  # cancelled from outside: the loop ends
+                self._move(ClientState.CLOSING)
+            if self._state is not ClientState.CLOSED:
+                self._move(ClientState.CLOSED)
+            self._opened.set()
+            self._closed.set()
+
+    async def aclose(self) -> None:
+        """Close the connection: calls still waiting end with
+        :class:`~aiofins.ConnectionLost`, later ones raise it. Closing a closed client (or
+        one never opened) does nothing."""
+        self._owned()
+        state = self._state
+        if state is ClientState.NEW:
+            self._move(ClientState.CLOSED)
+            return
+        if self._stack is not None:  # opened by async with: left here, in its task
+            await self.__aexit__(None, None, None)
+            return
+        if state in (ClientState.OPENING, ClientState.OPEN):
+            self._move(ClientState.CLOSING)
+            if self._host_scope is not None and state is ClientState.OPENING:
+                self._host_scope.cancel()
+            if self._close_asked is not None:
+                self._close_asked.set()
+        if self._closed is not None:
+            with anyio.CancelScope(shield=True):
+                await self._closed.wait()
+
+    async def __aenter__(self) -> Client:
+        opener = self._owned()
+        self._move(ClientState.OPENING)
+        stack = AsyncExitStack()
+        try:
+            inner = await stack.enter_async_context(opener())
+        except BaseException:
+            self._move(ClientState.CLOSED)
+            raise
+        self._stack = stack
+        self._adopt(inner)
+        self._move(ClientState.OPEN)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        stack, self._stack = self._stack, None
+        if stack is None:  # closed already (aclose() in the block)
+            return None
+        self._move(ClientState.CLOSING)
+        try:
+            return await stack.__aexit__(exc_type, exc, tb)
+        finally:
+            self._move(ClientState.CLOSED)
 
     def with_read_only(self, read_only: bool = True) -> Client:
         """This client, or a twin on the same session whose only difference is

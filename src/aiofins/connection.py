@@ -297,8 +297,11 @@ def connect(
     breaker_cooldown: tuple[float, float] | None = None,
     reconnect_backoff: tuple[float, float] | None = None,
     **transport_options: Any,
-) -> AbstractAsyncContextManager[Client]:
-    """Connect to a PLC: ``async with aiofins.connect("udp://10.0.0.5") as plc: ...``.
+) -> Client:
+    """A client of a PLC, opened by ``async with aiofins.connect("udp://10.0.0.5") as plc:``
+    or by ``plc = aiofins.connect(url)``, ``await plc.open()`` (and closed by
+    ``await plc.aclose()``): see :class:`~aiofins.Client`. Nothing is opened or checked
+    before then; a bad URL or option is raised on opening.
 
     ``networks`` names the networks a routed request crosses (their smallest limits apply);
     ``limits`` overrides them altogether. ``max_in_flight`` caps concurrent requests to the
@@ -346,27 +349,32 @@ def connect(
     then the session gets a free node, 254 down. A ``src`` named here or in the URL whose
     node another session to that host:port uses is refused with :class:`CommandError`.
     """
-    return _connect(
-        url,
-        transport=transport,
-        dest=dest,
-        src=src,
-        timeout=timeout,
-        retries=retries,
-        max_in_flight=max_in_flight,
-        max_sid_spaces=max_sid_spaces,
-        gct=gct,
-        networks=networks,
-        limits=limits,
-        word_order=word_order,
-        read_only=read_only,
-        hooks=hooks,
-        breaker_threshold=breaker_threshold,
-        breaker_cooldown=breaker_cooldown,
-        reconnect_backoff=reconnect_backoff,
-        source_held=False,
-        **transport_options,
-    )
+
+    def opener() -> AbstractAsyncContextManager[Client]:
+        return _connect(
+            url,
+            transport=transport,
+            dest=dest,
+            src=src,
+            timeout=timeout,
+            retries=retries,
+            max_in_flight=max_in_flight,
+            max_sid_spaces=max_sid_spaces,
+            gct=gct,
+            networks=networks,
+            limits=limits,
+            word_order=word_order,
+            read_only=read_only,
+            hooks=hooks,
+            breaker_threshold=breaker_threshold,
+            breaker_cooldown=breaker_cooldown,
+            reconnect_backoff=reconnect_backoff,
+            source_held=False,
+            **transport_options,
+        )
+
+    where = url if isinstance(url, str) else str(getattr(transport, "description", transport))
+    return Client.unopened(opener, where)
 
 
 def pooled_connect(url: str, **options: Any) -> AbstractAsyncContextManager[Client]:
