@@ -163,6 +163,8 @@ class ScanGroup:
     #: Missed scans not yet warned about, and when the last warning was logged.
     _missed_unlogged: int = 0
     _missed_logged_at: float = -math.inf
+    #: Whether the scan in flight said (INFO) that it waits for the PLC while scan times pass.
+    _waiting_said: bool = False
     #: ``missed`` when the last ScanDone was emitted (the next one says how many since).
     _missed_reported: int = 0
     #: The pool lease the group's scans borrow the endpoint's client with (kept between scans).
@@ -401,8 +403,41 @@ class Poller:
             push(schedule, (when + interval, order, group))
 
     def _missed(self, group: ScanGroup, skipped: int, now: float) -> None:
-        """Count missed scans; warn at the first and then at most once a minute per group."""
+        """Count missed scans; warn at the first and then at most once a minute per group.
+
+        Not while the scan in flight waits for the PLC: a dead PLC's first line would be
+        "cannot keep up" before the timeout that is the cause. Said once per scan what it
+        waits for instead; the scan's outcome decides (:meth:`_waited`)."""
         group._missed_unlogged += skipped
+        if group.state is ScanState.SCANNING:
+            if not group._waiting_said:
+                group._waiting_said = True
+                logger.info(
+                    "scan group %s: its scan waits for %s to answer (timeout %s); scan times "
+                    "pass meanwhile (interval %.3g s)",
+                    group.name,
+                    group.url,
+                    "the endpoint's" if group.timeout is None else f"{group.timeout:g} s",
+                    group.interval,
+                    extra={"group": group.name, "endpoint": group.url},
+                )
+            return
+        self._warn_missed(group, now)
+
+    def _waited(self, group: ScanGroup, failed: bool) -> str:
+        """A scan that let scan times pass ended: a failure is their cause (its warning says
+        how many, returned here); a scan that succeeded too slowly warns "cannot keep up"."""
+        group._waiting_said = False
+        skipped = group._missed_unlogged
+        if not skipped:
+            return ""
+        if failed:
+            group._missed_unlogged = 0
+            return f" ({skipped} scan time{'s' if skipped > 1 else ''} passed while it waited)"
+        self._warn_missed(group, self._now())
+        return ""
+
+    def _warn_missed(self, group: ScanGroup, now: float) -> None:
         if now - group._missed_logged_at < MISSED_WARNING_INTERVAL:
             return
         logger.warning(
@@ -601,15 +636,17 @@ class Poller:
         (by name; ``bad``: the tags that are no value of their type) or failed with
         ``exc``, counted and logged; ``None`` if nothing to deliver."""
         error: str | None = None
+        waited = self._waited(group, exc is not None) if group._missed_unlogged else ""
         if exc is not None:
             group.errors += 1
             error = f"{type(exc).__name__}: {exc}"
             if group._failing is None:
                 logger.warning(
-                    "scan group %s: scans of %s fail: %s",
+                    "scan group %s: scans of %s fail: %s%s",
                     group.name,
                     group.url,
                     error,
+                    waited,
                     extra={"group": group.name, "endpoint": group.url},
                 )
             group._failing = error
