@@ -230,6 +230,8 @@ def _word(text: str) -> int:
     try:
         value: Value = _parse_value(text, "int")
     except CommandError:
+        if len(text) > _MAX_INTEGER_TEXT:
+            raise
         try:
             value = float_value("value", text)
         except CommandError:
