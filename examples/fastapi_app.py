@@ -1,14 +1,16 @@
-"""A FastAPI backend sharing one aiofins.Pool across requests.
+"""A FastAPI service: read and write PLC memory over HTTP, one aiofins.Pool for all requests.
 
-    pip install fastapi uvicorn 'aiofins[prometheus]'
-    AIOFINS_PLC=udp://192.168.250.1 uvicorn examples.fastapi_app:app
+    pip install fastapi uvicorn prometheus_client
+    uvicorn examples.fastapi_app:app                          # the PLC at udp://127.0.0.1
+    PLC_URL=udp://192.168.250.1 uvicorn examples.fastapi_app:app --host 0.0.0.0
 
-Without ``AIOFINS_PLC`` the app starts an embedded virtual PLC in its lifespan. The PLCs a
-request may name (``?plc=HOST``) are configured, never taken from the request:
-``AIOFINS_PLCS=udp://192.168.250.2,udp://192.168.250.3`` adds them to ``AIOFINS_PLC``, the
-default. Any other host is refused (404) before the pool opens anything: a route that built
-URLs from request input would let any caller make the server open sockets to hosts of their
-choosing.
+``PLC_URL`` is the PLC the routes talk to (default ``udp://127.0.0.1``, where
+``aiofins simulate`` answers). The PLCs a request may name (``?plc=HOST``) are configured,
+never taken from the request: ``PLC_URLS=udp://192.168.250.2,udp://192.168.250.3`` adds them
+to ``PLC_URL``, the default. Any other host is refused (404) before the pool opens anything:
+a route that built URLs from request input would let any caller make the server open sockets
+to hosts of their choosing. FINS errors become HTTP errors: bad input 400, the PLC refusing
+(an end code) 409, no answer 504.
 
     GET  /plc/D100?count=10            -> {"address": "D100", "values": [...]}
     GET  /plc/D100?plc=192.168.250.2   -> the same, from another configured PLC
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import AsyncIterator
-from contextlib import AsyncExitStack, asynccontextmanager
+from contextlib import asynccontextmanager
 from dataclasses import asdict
 from typing import Any
 
@@ -33,30 +35,25 @@ from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_l
 import aiofins
 from aiofins.endpoint import parse_endpoint
 from aiofins.metrics import FinsMetrics
-from aiofins.simulator import VirtualPLC, run_simulator
 
 STATE: dict[str, Any] = {}
 
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-    async with AsyncExitStack() as stack:
-        url = os.environ.get("AIOFINS_PLC")
-        if not url:
-            sim = await stack.enter_async_context(run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)))
-            url = f"udp://127.0.0.1:{sim.udp_port}"
-        STATE["url"] = url
-        extra = [u.strip() for u in os.environ.get("AIOFINS_PLCS", "").split(",") if u.strip()]
-        # The allowlist: host (or serial device) -> URL, from the configuration only.
-        endpoints = {u: parse_endpoint(u) for u in [url, *extra]}
-        STATE["plcs"] = {e.host or e.device: u for u, e in endpoints.items()}
-        # Metrics: the pool's counters at each scrape, latencies from its hooks. A registry
-        # of the app's own (prometheus_client.REGISTRY also works, once per process).
-        metrics = FinsMetrics(registry=None)
-        STATE["registry"] = CollectorRegistry()
-        STATE["registry"].register(metrics)
-        pool = aiofins.Pool(timeout=1.0, hooks=metrics.hooks)
-        STATE["pool"] = await stack.enter_async_context(pool)
+    url = os.environ.get("PLC_URL", "udp://127.0.0.1")
+    STATE["url"] = url
+    extra = [u.strip() for u in os.environ.get("PLC_URLS", "").split(",") if u.strip()]
+    # The allowlist: host (or serial device) -> URL, from the configuration only.
+    endpoints = {u: parse_endpoint(u) for u in [url, *extra]}
+    STATE["plcs"] = {e.host or e.device: u for u, e in endpoints.items()}
+    # Metrics: the pool's counters at each scrape, latencies from its hooks. A registry
+    # of the app's own (prometheus_client.REGISTRY also works, once per process).
+    metrics = FinsMetrics(registry=None)
+    STATE["registry"] = CollectorRegistry()
+    STATE["registry"].register(metrics)
+    async with aiofins.Pool(timeout=1.0, hooks=metrics.hooks) as pool:
+        STATE["pool"] = pool
         metrics.watch_pool(pool)
         yield
 

@@ -1,7 +1,7 @@
-"""A polling daemon: scan tag lists on several PLCs and print changes as JSON lines.
+"""A polling daemon: scan a tag list on several PLCs and print changes as JSON lines.
 
-    python examples/polling_daemon.py                      # against two embedded virtual PLCs
-    python examples/polling_daemon.py udp://10.0.0.5 udp://10.0.0.6
+    python examples/polling_daemon.py                      # the PLC at $PLC_URL
+    python examples/polling_daemon.py udp://10.0.0.5 udp://10.0.0.6 --interval 0.5
 
 Each PLC is one scan group with its own interval; a slow or dead PLC does not delay the others
 and its tags turn STALE (the last good value kept, with its timestamp; tags never read are
@@ -11,15 +11,17 @@ sessions closed, exit code 0.
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
 import signal
 import sys
-from contextlib import AsyncExitStack
 
 import anyio
 
 import aiofins
-from aiofins.simulator import VirtualPLC, run_simulator
+
+PLC_URL = os.environ.get("PLC_URL", "udp://127.0.0.1")
 
 TAGS = {
     "temperature": "D100:float32",
@@ -30,10 +32,10 @@ TAGS = {
 }
 
 
-async def main(urls: list[str], duration: float | None) -> None:
+async def main(urls: list[str], interval: float, duration: float | None) -> None:
     async with anyio.create_task_group() as tg:
         tg.start_soon(stop_on_signals, tg.cancel_scope)
-        await poll(urls, duration)
+        await poll(urls, interval, duration)
         tg.cancel_scope.cancel()
 
 
@@ -46,18 +48,13 @@ async def stop_on_signals(scope: anyio.CancelScope) -> None:
             return
 
 
-async def poll(urls: list[str], duration: float | None) -> None:
-    async with AsyncExitStack() as stack:
-        if not urls:  # no PLC given: run two virtual ones
-            for _ in range(2):
-                sim = await stack.enter_async_context(
-                    run_simulator(VirtualPLC(), udp=("127.0.0.1", 0))
-                )
-                urls.append(f"udp://127.0.0.1:{sim.udp_port}")
-        pool = await stack.enter_async_context(aiofins.Pool(timeout=0.5, retries=1))
-        poller = await stack.enter_async_context(aiofins.Poller(pool, changes_only=True))
+async def poll(urls: list[str], interval: float, duration: float | None) -> None:
+    async with (
+        aiofins.Pool(timeout=0.5, retries=1, read_only=True) as pool,
+        aiofins.Poller(pool, changes_only=True) as poller,
+    ):
         for i, url in enumerate(urls):
-            poller.add_group(f"plc{i}", url, TAGS, interval=0.2)
+            poller.add_group(f"plc{i}", url, TAGS, interval=interval)
         with anyio.move_on_after(duration if duration else float("inf")):
             async for snap in poller:
                 print(
@@ -76,8 +73,9 @@ async def poll(urls: list[str], duration: float | None) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    seconds = None
-    if args and args[0].startswith("--duration="):
-        seconds = float(args.pop(0).split("=", 1)[1])
-    anyio.run(main, args, seconds)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("urls", nargs="*", default=[PLC_URL], help="PLCs (default: $PLC_URL)")
+    parser.add_argument("--interval", type=float, default=0.2, help="seconds between scans")
+    parser.add_argument("--duration", type=float, help="seconds to run (default: until stopped)")
+    args = parser.parse_args()
+    anyio.run(main, args.urls, args.interval, args.duration)

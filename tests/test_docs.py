@@ -1,24 +1,38 @@
-"""Every ```python example in docs/ runs (against the embedded simulator).
+"""Every ```python example in docs/ and README.md runs as a user would run it: in a
+subprocess, with ``PLC_URL`` pointing at a virtual PLC of its own (an example reads where its
+PLC is from ``PLC_URL``, so a user runs it against a real PLC without editing it).
 
 A block whose first line is ``# top-level await`` is notebook code (Jupyter, IPython,
 ``python -m asyncio``): it is compiled with top-level ``await`` allowed and run on an asyncio
-loop, as a notebook would run it.
+loop, as a notebook would run it. A block whose first line is ``# runs until stopped`` is a
+service: it must print a first line, then stop cleanly (exit 0) on SIGTERM, as systemd and
+Docker stop it. A block whose first line is ``# app.py`` is an ASGI app: uvicorn serves it.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
+import signal
 import subprocess
 import sys
+import urllib.error
+import urllib.request
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
+
+from aiofins.simulator import Mode, VirtualPLC
+from tests.simulated import simulated_plc
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCK = re.compile(r"```python\n(.*?)```", re.DOTALL)
 TOP_LEVEL_AWAIT = "# top-level await"
+SERVICE = "# runs until stopped"
+ASGI_APP = "# app.py"
 
 #: Runs a notebook cell's code (stdin) the way IPython's autoawait does.
 NOTEBOOK_RUNNER = """
@@ -32,12 +46,13 @@ if asyncio.iscoroutine(result):
 
 def _examples() -> list[tuple[str, str]]:
     out: list[tuple[str, str]] = []
-    for path in sorted(ROOT.glob("docs/**/*.md")):
+    for path in [ROOT / "README.md", *sorted(ROOT.glob("docs/**/*.md"))]:
         for i, match in enumerate(BLOCK.finditer(path.read_text())):
             code = match.group(1)
             if "# not runnable" in code:
                 continue
-            out.append((f"{path.relative_to(ROOT / 'docs')}#{i + 1}", code))
+            name = path.name if path.parent == ROOT else path.relative_to(ROOT / "docs")
+            out.append((f"{name}#{i + 1}", code))
     return out
 
 
@@ -45,20 +60,103 @@ EXAMPLES = _examples()
 
 
 @pytest.mark.parametrize("code", [c for _, c in EXAMPLES], ids=[n for n, _ in EXAMPLES])
-def test_doc_example_runs(code: str) -> None:
+def test_doc_example_runs(code: str, tmp_path: Path) -> None:
+    if code.startswith(ASGI_APP):
+        pytest.importorskip("uvicorn", reason="the recipe is served by uvicorn")
+        _serve(code, tmp_path)
+        return
     if code.startswith(TOP_LEVEL_AWAIT):
         command, stdin = [sys.executable, "-c", NOTEBOOK_RUNNER], code
     else:
         command, stdin = [sys.executable, "-c", code], None
-    result = subprocess.run(
-        command, input=stdin, capture_output=True, text=True, timeout=60, cwd=ROOT
-    )
+    with simulated_plc(VirtualPLC(mode=Mode.RUN)) as sim:  # as `aiofins simulate` serves it
+        if code.startswith(SERVICE):
+            _run_service(command, sim.env())
+            return
+        result = subprocess.run(
+            command, input=stdin, capture_output=True, text=True, cwd=ROOT, env=sim.env()
+        )
     assert result.returncode == 0, result.stderr[-2000:]
+
+
+def _run_service(command: list[str], env: dict[str, str]) -> None:
+    """Start it, read its first line of output, stop it as systemd would: exit code 0."""
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=ROOT)  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate()
+    finally:
+        proc.kill()
+        proc.wait()
+    assert first, err
+    assert proc.returncode == 0 and "Traceback" not in err, err
+
+
+def _http(method: str, url: str, body: object = None) -> tuple[int, Any]:
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(url, data, method=method)
+    request.add_header("Content-Type", "application/json")
+    try:
+        with urllib.request.urlopen(request) as reply:
+            return reply.status, json.loads(reply.read())
+    except urllib.error.HTTPError as error:
+        return error.code, json.loads(error.read())
+
+
+def _serve(code: str, folder: Path) -> None:
+    """The recipe saved as app.py, served by ``uvicorn app:app`` as the recipe says, with
+    ``PLC_URL`` at a virtual PLC: reads, writes and the error mapping over real HTTP."""
+    (folder / "app.py").write_text(code)
+    with simulated_plc(VirtualPLC(mode=Mode.RUN)) as sim:
+        server = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "app:app", "--port", "0"],
+            stderr=subprocess.PIPE,
+            text=True,
+            env=sim.env(),
+            cwd=folder,
+        )
+        try:
+            assert server.stderr is not None
+            seen = []
+            for line in server.stderr:  # uvicorn says where it listens once it does
+                seen.append(line)
+                match = re.search(r"Uvicorn running on (http://\S+)", line)
+                if match:
+                    base = match.group(1)
+                    break
+            else:
+                raise AssertionError("".join(seen))
+            assert _http("PUT", f"{base}/plc/D100", [1, 2, 3]) == (200, {"written": 3})
+            assert sim.call(sim.plc.read, "D100", 3) == [1, 2, 3]
+            reply = _http("GET", f"{base}/plc/D100?count=3")
+            assert reply == (200, {"address": "D100", "values": [1, 2, 3]})
+            assert _http("GET", f"{base}/plc/Q100")[0] == 400  # no such area
+            assert _http("PUT", f"{base}/plc/A0", [1])[0] == 409  # A0 is read-only
+        finally:
+            server.terminate()
+            server.wait()
 
 
 def test_the_new_pages_have_examples() -> None:
     pages = {name.split("#")[0] for name, _ in EXAMPLES}
     assert {"getting-started.md", "recipes.md", "troubleshooting.md", "sync.md"} <= pages
+    assert "README.md" in pages
+
+
+@pytest.mark.parametrize(
+    "page", ["README.md", "docs/index.md", "docs/getting-started.md", "docs/recipes.md"]
+)
+def test_the_first_pages_point_their_examples_at_plc_url(page: str) -> None:
+    """What a newcomer copies first reads PLC_URL (udp://127.0.0.1, where `aiofins simulate`
+    answers, without it) and starts no simulator of its own."""
+    blocks = BLOCK.findall((ROOT / page).read_text())
+    assert blocks
+    for code in blocks:
+        assert "run_simulator" not in code and "TestClient" not in code, code
+        assert 'os.environ.get("PLC_URL", "udp://127.0.0.1")' in code, code
 
 
 def test_a_notebook_block_runs_its_awaits() -> None:

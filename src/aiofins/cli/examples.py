@@ -74,6 +74,12 @@ EXAMPLES: dict[str, str] = {
   # the tags of a CX-Programmer symbol table (or a name,address,type CSV)
   aiofins poll udp://192.168.250.1 --tags symbols.csv
 """,
+    "watch": """
+  # values and a trend per tag, redrawn every 0.5 s, until Ctrl-C
+  aiofins watch udp://127.0.0.1 temp=D100:float32 pressure=D102:int32 run="CIO 0.00"
+  # a longer trend, one scan a second, the tags of a symbol table
+  aiofins watch udp://192.168.250.1 --tags symbols.csv --interval 1 --history 60
+""",
     "backup": """
   # the program area (raw bytes), the parameter areas (JSON)
   aiofins backup udp://192.168.250.1 program.bin

@@ -86,7 +86,8 @@ def to_json(snap: Snapshot) -> str:
     )
 
 
-async def poll(args: argparse.Namespace) -> None:
+def collect_tags(args: argparse.Namespace) -> dict[str, str]:
+    """The tags of the TAG arguments and the ``--tags`` files (``poll`` and ``watch``)."""
     tags = parse_tags(args.tags)
     for path in args.tag_files:
         for name, spec in load_tags(path).items():
@@ -97,6 +98,11 @@ async def poll(args: argparse.Namespace) -> None:
         raise CommandError("no tags: give ADDRESS[:TYPE] arguments or --tags FILE")
     if args.count < 0:
         raise CommandError(f"--count {args.count}: give a number of scans, or 0 to run until ^C")
+    return tags
+
+
+async def poll(args: argparse.Namespace) -> None:
+    tags = collect_tags(args)
     options = {
         "timeout": args.timeout,
         "dest": args.dest,
