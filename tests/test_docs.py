@@ -19,6 +19,7 @@ import subprocess
 import sys
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -26,7 +27,7 @@ from typing import Any
 import pytest
 
 from aiofins.simulator import Mode, VirtualPLC
-from tests.simulated import simulated_plc
+from tests.simulated import RunningPLC, simulated_plc
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCK = re.compile(r"```python\n(.*?)```", re.DOTALL)
@@ -59,11 +60,11 @@ def _examples() -> list[tuple[str, str]]:
 EXAMPLES = _examples()
 
 
-@pytest.mark.parametrize("code", [c for _, c in EXAMPLES], ids=[n for n, _ in EXAMPLES])
-def test_doc_example_runs(code: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("name", "code"), EXAMPLES, ids=[n for n, _ in EXAMPLES])
+def test_doc_example_runs(name: str, code: str, tmp_path: Path) -> None:
     if code.startswith(ASGI_APP):
-        pytest.importorskip("uvicorn", reason="the recipe is served by uvicorn")
-        _serve(code, tmp_path)
+        pytest.importorskip("uvicorn", reason="the app is served by uvicorn")
+        _serve(code, tmp_path, APP_CHECKS[name.split("#")[0]])
         return
     if code.startswith(TOP_LEVEL_AWAIT):
         command, stdin = [sys.executable, "-c", NOTEBOOK_RUNNER], code
@@ -71,18 +72,18 @@ def test_doc_example_runs(code: str, tmp_path: Path) -> None:
         command, stdin = [sys.executable, "-c", code], None
     with simulated_plc(VirtualPLC(mode=Mode.RUN)) as sim:  # as `aiofins simulate` serves it
         if code.startswith(SERVICE):
-            _run_service(command, sim.env())
+            _run_service(command, sim.env(), tmp_path)
             return
-        result = subprocess.run(
-            command, input=stdin, capture_output=True, text=True, cwd=ROOT, env=sim.env()
+        result = subprocess.run(  # in a folder of its own: a block may write files
+            command, input=stdin, capture_output=True, text=True, cwd=tmp_path, env=sim.env()
         )
     assert result.returncode == 0, result.stderr[-2000:]
 
 
-def _run_service(command: list[str], env: dict[str, str]) -> None:
+def _run_service(command: list[str], env: dict[str, str], cwd: Path) -> None:
     """Start it, read its first line of output, stop it as systemd would: exit code 0."""
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, cwd=ROOT)  # fmt: skip
+                            env=env, cwd=cwd)  # fmt: skip
     try:
         assert proc.stdout is not None
         first = proc.stdout.readline()
@@ -106,9 +107,36 @@ def _http(method: str, url: str, body: object = None) -> tuple[int, Any]:
         return error.code, json.loads(error.read())
 
 
-def _serve(code: str, folder: Path) -> None:
-    """The recipe saved as app.py, served by ``uvicorn app:app`` as the recipe says, with
-    ``PLC_URL`` at a virtual PLC: reads, writes and the error mapping over real HTTP."""
+def _check_recipe_app(base: str, sim: RunningPLC) -> None:
+    """recipes.md's FastAPI app: reads, writes and the error mapping."""
+    assert _http("PUT", f"{base}/plc/D100", [1, 2, 3]) == (200, {"written": 3})
+    assert sim.call(sim.plc.read, "D100", 3) == [1, 2, 3]
+    reply = _http("GET", f"{base}/plc/D100?count=3")
+    assert reply == (200, {"address": "D100", "values": [1, 2, 3]})
+    assert _http("GET", f"{base}/plc/Q100")[0] == 400  # no such area
+    assert _http("PUT", f"{base}/plc/A0", [1])[0] == 409  # A0 is read-only
+
+
+def _check_metrics_app(base: str, sim: RunningPLC) -> None:
+    """observability.md's app: a read, then its latency among the metrics."""
+    sim.call(sim.plc.write, "D100", [42])
+    assert _http("GET", f"{base}/plc/D100") == (200, [42])
+    with urllib.request.urlopen(f"{base}/metrics") as reply:
+        text = reply.read().decode()
+    assert 'aiofins_request_duration_seconds_count{endpoint="udp://127.0.0.1:' in text
+    assert 'family="memory"} 1.0' in text
+
+
+#: What each page's ``# app.py`` block is asked over HTTP.
+APP_CHECKS: dict[str, Callable[[str, RunningPLC], None]] = {
+    "recipes.md": _check_recipe_app,
+    "observability.md": _check_metrics_app,
+}
+
+
+def _serve(code: str, folder: Path, check: Callable[[str, RunningPLC], None]) -> None:
+    """The block saved as app.py, served by ``uvicorn app:app`` as the page says, with
+    ``PLC_URL`` at a virtual PLC, asked over real HTTP by ``check``."""
     (folder / "app.py").write_text(code)
     with simulated_plc(VirtualPLC(mode=Mode.RUN)) as sim:
         server = subprocess.Popen(
@@ -129,12 +157,7 @@ def _serve(code: str, folder: Path) -> None:
                     break
             else:
                 raise AssertionError("".join(seen))
-            assert _http("PUT", f"{base}/plc/D100", [1, 2, 3]) == (200, {"written": 3})
-            assert sim.call(sim.plc.read, "D100", 3) == [1, 2, 3]
-            reply = _http("GET", f"{base}/plc/D100?count=3")
-            assert reply == (200, {"address": "D100", "values": [1, 2, 3]})
-            assert _http("GET", f"{base}/plc/Q100")[0] == 400  # no such area
-            assert _http("PUT", f"{base}/plc/A0", [1])[0] == 409  # A0 is read-only
+            check(base, sim)
         finally:
             server.terminate()
             server.wait()
