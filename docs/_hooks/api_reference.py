@@ -21,8 +21,14 @@ import griffe
 ROLE = re.compile(r":(?:py:)?(?:class|meth|func|attr|data|mod|exc|obj|const):`(~?)([^`]+)`")
 
 
+TITLED = re.compile(r"(.+?)\s*<([^>]+)>")
+
+
 def _code(match: re.Match[str]) -> str:
     short, target = match.group(1), match.group(2)
+    titled = TITLED.fullmatch(target)  # :attr:`Endpoint.key <aiofins.endpoint.Endpoint.key>`
+    if titled:
+        return f"`{titled.group(1)}`"
     return f"`{target.rsplit('.', 1)[-1] if short else target}`"
 
 

@@ -35,7 +35,24 @@ from .protocol.commands.status import CpuMode
 from .protocol.errors import CommandError, DecodeError, EndCodeError
 from .protocol.files import Disk, FileEntry, FileWriteMode
 
+#: ``progress(done, total)``: bytes (or words) transferred so far, of ``total`` (``None``
+#: when the size is not known in advance).
 Progress = Callable[[int, "int | None"], None]
+
+__all__ = [
+    "MAX_FILE_BYTES",
+    "MAX_PROGRAM_BYTES",
+    "Progress",
+    "backup_parameters",
+    "backup_program",
+    "check_parameter_backup",
+    "check_program_image",
+    "download_file",
+    "list_files",
+    "restore_parameters",
+    "restore_program",
+    "upload_file",
+]
 
 #: Largest program image :func:`backup_program` reads by default (4 MiB: several times the
 #: UM of the largest CS/CJ CPU Units).

@@ -66,8 +66,14 @@ MISSED_WARNING_INTERVAL = 60.0
 
 
 class Quality(Enum):
+    """How far a :class:`TagReading`'s value can be trusted."""
+
+    #: Read in this scan.
     GOOD = "good"
+    #: This scan failed (or the tag's words were no value of its type): the value is the
+    #: last good one, kept; ``error`` says why.
     STALE = "stale"
+    #: No good value yet: every scan of the tag so far failed; ``value`` is ``None``.
     ERROR = "error"
 
 

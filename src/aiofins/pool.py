@@ -317,7 +317,8 @@ class _Lease:
 
 
 class Pool:
-    """Clients keyed by endpoint URL; see the module docstring.
+    """Clients keyed by endpoint URL: sessions shared among tasks, bounded, health-checked
+    and backed off as :mod:`aiofins.pool` describes (on this page, above).
 
     Every argument is checked when the pool is made (:class:`CommandError`): counts are
     whole numbers from 1, times finite seconds above 0 (``backoff_min`` may be 0: no

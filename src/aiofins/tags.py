@@ -30,6 +30,8 @@ from .protocol.errors import AddressError, CommandError, DecodeError
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
 from .protocol.wordcodec import NUMBER_CODES
 
+__all__ = ["ReadPlan", "Tag", "TagNames", "WordRun", "compile_tags", "parse_tag"]
+
 #: Bit area code → the word area code holding the same bits (CS/CJ codes).
 BIT_TO_WORD_AREA: dict[int, int] = {
     0x30: 0xB0,  # CIO

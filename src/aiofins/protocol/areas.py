@@ -16,7 +16,9 @@ from .errors import AddressError, DecodeError
 class Series(enum.Enum):
     """Which column of manual 5-2-2 applies: CS/CJ/CP/NSJ codes or CVM1/CV-series codes."""
 
+    #: CS, CJ, CP and NSJ CPU Units (the default).
     CS_CJ = "CS/CJ/CP/NSJ"
+    #: CVM1 and CV-series CPU Units.
     CV = "CVM1/CV"
 
 

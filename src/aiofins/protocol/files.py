@@ -35,7 +35,9 @@ MAX_DIRECTORY_LENGTH = 65
 class Disk(IntEnum):
     """Disk number: the file memory a command works on."""
 
+    #: The Memory Card in the CPU Unit.
     MEMORY_CARD = 0x8000
+    #: EM banks formatted as file memory.
     EM_FILE_MEMORY = 0x8001
     #: CP-series Memory Cassette (2220 MEMORY CASSETTE TRANSFER only).
     MEMORY_CASSETTE = 0x8003

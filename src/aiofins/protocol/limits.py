@@ -36,11 +36,17 @@ HOST_LINK_MAX_RESPONSE_DATA_BYTES = hostlink.MAX_RESPONSE_DATA_BYTES
 class NetworkType(Enum):
     """A network a FINS command can travel over (manual 5-2-2 and 5-3-5 name these)."""
 
+    #: FINS/UDP or FINS/TCP over Ethernet (the default: up to 990 words a frame).
     ETHERNET = "ethernet"
+    #: Controller Link.
     CONTROLLER_LINK = "controller_link"
+    #: SYSMAC LINK.
     SYSMAC_LINK = "sysmac_link"
+    #: DeviceNet.
     DEVICENET = "devicenet"
+    #: SYSMAC WAY (Host Link through a serial communications unit).
     SYSWAY = "sysway"
+    #: Host Link on the CPU Unit's own serial port (``serial://`` URLs).
     HOST_LINK = "host_link"
 
 

@@ -11,8 +11,11 @@ from ..protocol.commands.status import CpuMode
 class Mode(IntEnum):
     """CPU Unit operating mode, with the values 0601 and 0401 use on the wire (no CV DEBUG)."""
 
+    #: Stopped: every write is accepted, the program does not run.
     PROGRAM = CpuMode.PROGRAM.value
+    #: Running, online changes accepted.
     MONITOR = CpuMode.MONITOR.value
+    #: Running, online changes refused as a real CPU refuses them.
     RUN = CpuMode.RUN.value
 
 

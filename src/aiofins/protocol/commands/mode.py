@@ -19,7 +19,9 @@ from .program import PROGRAM_NUMBER, _read_program_number
 class RunMode(IntEnum):
     """The mode byte of 04 01 RUN."""
 
+    #: Run the program; online changes allowed.
     MONITOR = 0x02
+    #: Run the program; online changes refused.
     RUN = 0x04
 
 

@@ -15,9 +15,13 @@ from ._base import NoParameters, Request, expect_no_data
 class CpuMode(enum.IntEnum):
     """Operating mode byte of 06 01 (``DEBUG`` exists on CV-series CPUs only)."""
 
+    #: The program does not run; the whole PLC may be written (programs, parameters).
     PROGRAM = 0x00
+    #: CV-series only: the program runs for debugging.
     DEBUG = 0x01
+    #: The program runs; memory, forced bits and present values may be changed online.
     MONITOR = 0x02
+    #: The program runs; online changes are refused.
     RUN = 0x04
 
 
