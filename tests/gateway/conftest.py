@@ -205,5 +205,6 @@ async def simulators(count: int) -> AsyncIterator[list[Simulator]]:
 
 @asynccontextmanager
 async def publisher(port: int) -> AsyncIterator[aiomqtt.Client]:
-    async with aiomqtt.Client("127.0.0.1", port) as client:
+    """An MQTT 5 client (message expiry) to publish set requests with."""
+    async with aiomqtt.Client("127.0.0.1", port, protocol=aiomqtt.ProtocolVersion.V5) as client:
         yield client

@@ -384,6 +384,8 @@ url = "udp://127.0.0.1:{sim.udp_port}"
                 await pub.publish(f"{topic}/{tag}", payload, qos=1)
                 await sub.wait_for(lambda: len(sub.on(f"{base}/{tag}/reply")) > before)
                 reply: dict[str, object] = sub.on(f"{base}/{tag}/reply")[-1]
+                waited = reply.pop("waited")
+                assert (waited is None) is (reply["end_code"] is None), reply
                 return reply
 
             await pub.publish("fins/p1/r/set/sp2", "7", qos=1)  # no writable tag: nobody listens
@@ -414,7 +416,7 @@ url = "udp://127.0.0.1:{sim.udp_port}"
             for bad, why in [
                 ("abc", "not JSON"),
                 ("1.5", "whole number"),
-                ("70000", "does not fit"),
+                ("70000", "out of range -32768..32767"),
                 ("true", "whole number"),
                 ('{"value": 1, "bogus": 2}', "unknown key"),
                 ('{"id": 3}', 'needs "value"'),

@@ -116,7 +116,10 @@ async def mqtt_peer() -> AsyncIterator[Peer]:
 
 
 def link_to(port: int) -> MqttLink:
-    config = MqttConfig(port=port, timeout=2.0, backoff_min=0.05, backoff_max=0.05)
+    # The hand-built peer speaks MQTT 3.1.1 (the QoS 0 path is the same in 5).
+    config = MqttConfig(
+        port=port, timeout=2.0, backoff_min=0.05, backoff_max=0.05, protocol="3.1.1"
+    )
     return MqttLink(config, client_id="t", status_topic="s")
 
 

@@ -149,14 +149,29 @@ def test_set_payloads_of_each_type(spec: str, payload: bytes, value: object) -> 
     [
         ("D0:int16", b"", "not JSON"),
         ("D0:int16", b"\xff\xfe", "not JSON"),
-        ("D0:int16", b"40000", "does not fit"),
+        ("D0:int16", b"40000", "t is an int16: 40000 is out of range -32768..32767"),
         ("D0:int16", b"1.0", "whole number"),
         ("D0:int16", b"null", "whole number"),
-        ("D0:uint16", b"-1", "does not fit"),
+        ("D0:uint16", b"-1", "out of range 0..65535"),
         ("D0:float32", b"true", "send a number"),
         ("D0:float32", b'"1"', "send a number"),
         ("CIO 0.01", b"2", "bit"),
-        ("D0:bcd16", b"10000", "BCD"),
+        ("D0:bcd16", b"10000", "t is a bcd16: 10000 is out of range 0..9999"),
+        ("D0:int16", b"1e9", "t is an int16: 1000000000.0 is out of range -32768..32767"),
+        ("D0:int16", b"1.5", "send a whole number in -32768..32767, got 1.5"),
+        ("D0:float32", b"NaN", "t: NaN is not a finite number"),
+        ("D0:float32", b"-Infinity", "t: -Infinity is not a finite number"),
+        ("D0:float64", b"1e400", "t is a float64: inf is out of range"),
+        (
+            "D0:float32",
+            b"3.5e38",
+            "out of range (a finite number in -3.4028235e+38..3.4028235e+38)",
+        ),
+        ("D0:float32", b"1" + b"0" * 400, "out of range"),
+        ("D0:int16", b"[" * 100_000 + b"]" * 100_000, "at most 65536 (not read)"),
+        ("D0:int16", b"[" * 30_000 + b"]" * 30_000, "nests deeper than 2 levels"),
+        ("D0:int16", b'{"value": [[1]], "id": "x"}', "nests deeper"),
+        ("D0:string:4", b'"' + b"x" * 60_000 + b'"', "is 60000 bytes, longer than 4"),
         ("D0:string:2", b'"ABC"', "t:"),
         ("D0:string:2", b"5", "JSON string"),
         ("D0:int16", b'{"id": 1}', '"value"'),
@@ -189,3 +204,18 @@ async def test_a_full_outbox_drops_its_oldest_but_not_the_one_being_sent(
     link.put(one, b"c", 0.0)
     assert [p for p, _ in one.messages] == [b"a", b"c"] and one.dropped == 1
     assert link.queued_messages == 5 and link.dropped == 4
+
+
+def test_a_refusal_echoes_the_id_and_not_the_payload() -> None:
+    """``{"value": "abc", "id": "B"}`` was answered with ``"id": null``; a 60 kB string
+    value was echoed whole into the refusal."""
+    sp = parse_tag("sp", "D0:int16")
+    with pytest.raises(SetPayloadError) as info:
+        parse_set(b'{"value": "abc", "id": "B"}', sp)
+    assert info.value.request_id == "B"
+    with pytest.raises(SetPayloadError) as info:
+        parse_set(b'{"value": "' + b"x" * 60_000 + b'", "id": 7}', sp)
+    assert info.value.request_id == "7" and len(str(info.value)) < 200
+    with pytest.raises(SetPayloadError) as info:
+        parse_set(b'{"value": 1, "id": 2, "' + b"k" * 50_000 + b'": 0}', sp)
+    assert info.value.request_id == "2" and len(str(info.value)) < 200

@@ -64,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"aiofins gateway needs: pip install 'aiofins[gateway]' ({exc})", file=sys.stderr)
         return 2
 
+    fatal: list[BaseException] = []
+
     async def main() -> None:
         gateway = Gateway(config, shard=shard)
         async with gateway:
@@ -84,6 +86,11 @@ def run(args: argparse.Namespace) -> int:
                     )
                     await gateway.wait_closed()
                     tg.cancel_scope.cancel()
+        if gateway.fatal is not None:
+            fatal.append(gateway.fatal)
 
     anyio.run(main, backend="asyncio")
+    if fatal:  # a duplicate shard: exit non-zero so the orchestrator shows why
+        print(f"aiofins gateway: {fatal[0]}", file=sys.stderr)
+        return 3
     return 0

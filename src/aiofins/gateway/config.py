@@ -69,6 +69,9 @@ class MqttConfig:
     #: Tasks publishing QoS 1/2 messages at once, each awaiting an acknowledgement (each
     #: keeps its topic's messages in order; QoS 0 messages need none).
     publishers: int = 8
+    #: MQTT protocol version: "5" (message expiry, the broker's reason for a disconnect, a
+    #: maximum packet size) or "3.1.1" for a broker without MQTT 5.
+    protocol: str = "5"
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,9 @@ class GroupConfig:
     writable: frozenset[str] = frozenset()
     #: Times a failed write is tried again (0: never).
     write_retries: int = 0
+    #: Seconds from the gateway's receipt of a set request until it is too old to write
+    #: (refused "expired"); an MQTT 5 message expiry shortens it.
+    write_max_age: float = 5.0
     parsed: Mapping[str, Tag] = field(default_factory=dict, compare=False, repr=False)
 
 
@@ -121,6 +127,10 @@ class GatewayConfig:
     #: Options for every connection (:func:`aiofins.connect` keywords: timeout, retries, ...).
     connect: Mapping[str, Any] = field(default_factory=dict)
     source: str = "<config>"
+    #: Set requests waiting per PLC, at most (a full queue refuses, it does not delay).
+    write_queue: int = 100
+    #: Bytes a set payload may have (a larger one is refused unread).
+    max_payload: int = 65536
 
 
 def load_config(path: str | Path) -> GatewayConfig:
@@ -210,7 +220,9 @@ class _Reader:
             self.problem(
                 self.lines.at("gateway", -1, "name"), f"gateway name {name!r}: {_NAME_RULE}"
             )
-        self.unknown(gateway, "gateway", {"name"})
+        write_queue = self.take(gateway, "gateway", "write_queue", int, 100, check=_positive)
+        max_payload = self.take(gateway, "gateway", "max_payload", int, 65536, check=_payload_size)
+        self.unknown(gateway, "gateway", {"name", "write_queue", "max_payload"})
         mqtt = self.mqtt()
         http = self.http()
         connect = self.table("connect")
@@ -223,7 +235,17 @@ class _Reader:
         self.topics(name, mqtt, plcs, groups)
         if self.problems:
             raise ConfigError(self.problems)
-        return GatewayConfig(name, mqtt, http, plcs, groups, connect, self.lines.source)
+        return GatewayConfig(
+            name,
+            mqtt,
+            http,
+            plcs,
+            groups,
+            connect,
+            self.lines.source,
+            write_queue=write_queue,
+            max_payload=max_payload,
+        )
 
     # -- helpers ------------------------------------------------------------------------
 
@@ -302,6 +324,9 @@ class _Reader:
             gateway_topic=get("gateway_topic", str, _topic({"gateway"})),
             plc_status_topic=get("plc_status_topic", str, _topic({"plc", "gateway"})),
             publishers=get("publishers", int, _positive),
+            protocol=get(
+                "protocol", str, lambda v: None if v in ("5", "3.1.1") else 'must be "5" or "3.1.1"'
+            ),
         )
         if config.backoff_max < config.backoff_min:
             self.problem(
@@ -372,6 +397,7 @@ class _Reader:
             i,
             lambda n: None if n >= 0 else "must not be negative",
         )
+        write_max_age = self.take(t, "groups", "write_max_age", (int, float), 5.0, i, _positive)
         writable_list = self.take(t, "groups", "writable", list, [], i)
         writable: set[str] = set()
         for tag in writable_list:
@@ -403,6 +429,7 @@ class _Reader:
                 "timeout",
                 "writable",
                 "write_retries",
+                "write_max_age",
             },
             i,
         )
@@ -427,6 +454,7 @@ class _Reader:
             timeout=None if timeout is None else float(timeout),
             writable=frozenset(writable),
             write_retries=write_retries,
+            write_max_age=float(write_max_age),
             parsed=parsed,
         )
 
@@ -651,6 +679,10 @@ def _topic_problem(topic: str) -> str | None:
     if "+" in topic or "#" in topic:
         return f"{topic[:40]!r} contains an MQTT wildcard"
     return None
+
+
+def _payload_size(value: int) -> str | None:
+    return None if 16 <= value <= 16 * 1024 * 1024 else "must be 16..16777216 bytes"
 
 
 def _port(value: int) -> str | None:

@@ -18,6 +18,7 @@ import json
 import logging
 import os
 import time
+from collections.abc import Callable, Coroutine
 from contextlib import AsyncExitStack
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -32,16 +33,28 @@ from ..pool import Pool
 from .config import GatewayConfig, GroupConfig, PlcConfig, render
 from .http import HttpServer
 from .metrics import CONTENT_TYPE, GatewayMetrics
-from .mqtt import LinkState, MqttLink, Outbox
-from .payload import ScanEncoder, status_message
+from .mqtt import DuplicateClient, LinkState, MqttLink, Outbox
+from .payload import ScanEncoder, SetPayloadError, parse_set, request_id_of, status_message
 from .plcs import PlcState, PlcStatus
 from .sharding import Shard
-from .writes import encode_reply, handle_set, reply_topic
+from .writes import (
+    REPLY_BUFFER,
+    RETAINED_MEMORY,
+    ReplyPool,
+    SetRequest,
+    Writer,
+    encode_reply,
+    new_reply,
+    reply_topic,
+    write_value,
+)
 
 log = logging.getLogger("aiofins.gateway")
 
 #: Set requests carried out at once (the rest wait their turn).
 MAX_CONCURRENT_WRITES = 16
+#: Refused set requests logged one by one per second, at most (the rest are summed up).
+REFUSALS_LOGGED = 20
 
 
 @dataclass(eq=False)
@@ -101,8 +114,21 @@ class Gateway:
         self.poller = Poller(self.pool, buffer=max(64, sum(len(p.groups) for p in self.plcs)))
         self.plc_status: dict[str, PlcStatus] = {p.name: PlcStatus(p.name) for p in self.plcs}
         self.routes: dict[str, Route] = {}
+        #: Set requests by outcome (see :data:`~aiofins.gateway.writes.OUTCOMES`).
         self.write_counts: dict[str, int] = {}
         self._set_routes: dict[str, Route] = {}  # "{topic}/set/" -> route
+        #: The reply outbox of each writable tag's set topic ("{topic}/set/{tag}").
+        self._reply_boxes: dict[str, Outbox] = {}
+        #: Reply outboxes for set topics of no writable tag (bounded, reused).
+        self.reply_pool = ReplyPool()
+        #: Each PLC's write queue.
+        self.writers: dict[str, Writer] = {}
+        #: Retained set messages already answered: (topic, payload) -> None, oldest first.
+        self._retained_seen: dict[tuple[str, bytes], None] = {}
+        self._refusal_window = -1e9
+        self._refusals_logged = self._refusals_unlogged = 0
+        #: Why the gateway stopped on its own (a duplicate shard), or None.
+        self.fatal: DuplicateClient | None = None
         self.library_metrics.watch_pool(self.pool)
         self.library_metrics.watch_poller(self.poller)
         self.metrics = GatewayMetrics(self)
@@ -113,6 +139,8 @@ class Gateway:
             on_message=self._on_message,
             on_connected=self._on_connected,
             on_published=self._on_published,
+            max_packet=max(4 * config.max_payload, 256 * 1024),
+            owner=f"gateway {self.name} (shard {self.shard})",
         )
         for plc in self.plcs:
             for group_name in plc.groups:
@@ -131,6 +159,14 @@ class Gateway:
                 if group.writable:
                     self._set_routes[f"{topic}/set/"] = route
                     self.link.subscriptions.append(f"{topic}/set/+")
+                    for tag in sorted(group.writable):
+                        set_topic = f"{topic}/set/{tag}"
+                        self._reply_boxes[set_topic] = self.link.outbox(
+                            reply_topic(set_topic), qos=1, retain=False, limit=REPLY_BUFFER
+                        )
+            self.writers[plc.name] = Writer(
+                plc.name, config.write_queue, self._start_writer, self._write
+            )
         self.http: HttpServer | None = None
         if config.http.enabled:
             self.http = HttpServer(
@@ -161,7 +197,7 @@ class Gateway:
             tg = self._tg = await stack.enter_async_context(anyio.create_task_group())
             if self.http is not None:
                 await tg.start(self.http.serve)
-            tg.start_soon(self.link.run)
+            tg.start_soon(self._run_link)
             tg.start_soon(self._consume)
             tg.start_soon(self._start_groups)
             self._stack = stack.pop_all()
@@ -193,6 +229,12 @@ class Gateway:
     @property
     def http_port(self) -> int | None:
         return None if self.http is None else self.http.port
+
+    async def _run_link(self) -> None:
+        await self.link.run()
+        if self.link.fatal is not None:  # a duplicate shard: stop, the CLI exits non-zero
+            self.fatal = self.link.fatal
+            self._closed.set()
 
     # -- scans --------------------------------------------------------------------------
 
@@ -270,21 +312,115 @@ class Gateway:
 
     # -- writes -------------------------------------------------------------------------
 
-    def _on_message(self, topic: str, payload: bytes) -> None:
-        prefix, _, tag = topic.rpartition("/")
+    def _on_message(self, topic: str, payload: bytes, retain: bool, expiry: float | None) -> None:
+        """A set request: refused at once (answered), or queued for its PLC's writer."""
+        prefix, _, tag_name = topic.rpartition("/")
         route = self._set_routes.get(prefix + "/")
         if route is None or self._tg is None:
             return
-        self._tg.start_soon(self._write, route, topic, tag, payload)
-
-    async def _write(self, route: Route, topic: str, tag: str, payload: bytes) -> None:
-        async with self._writes:
-            outcome, reply = await handle_set(
-                self.pool, route.plc, route.url, route.group, tag, payload
+        now = anyio.current_time()
+        group = route.group
+        what = f"{route.plc}/{group.name}/{tag_name}"
+        box = self._reply_boxes.get(topic)
+        if box is None:
+            box = self.reply_pool.outbox(reply_topic(topic))
+        max_payload = self.config.max_payload
+        if retain:
+            key = (topic, payload)
+            if key in self._retained_seen:  # answered when first seen: not again
+                log.debug("retained set %s seen again: not written, not answered", what)
+                self._count("retained")
+                return
+            self._retained_seen[key] = None
+            if len(self._retained_seen) > RETAINED_MEMORY:
+                del self._retained_seen[next(iter(self._retained_seen))]
+            error = (
+                f"{what}: a retained set message is not written (it would be written again on "
+                "every start and reconnect); publish set requests without retain"
             )
+            self._refuse("retained", box, tag_name, request_id_of(payload, max_payload), error)
+            return
+        tag = group.parsed.get(tag_name)
+        if tag is None or tag_name not in group.writable:
+            why = "no such tag" if tag is None else "not writable (not in the writable list)"
+            self._refuse(
+                "refused", box, tag_name, request_id_of(payload, max_payload), f"{what}: {why}"
+            )
+            return
+        try:
+            value, request_id = parse_set(payload, tag, max_size=max_payload)
+        except SetPayloadError as exc:
+            self._refuse("invalid", box, tag_name, exc.request_id, str(exc))
+            return
+        assert box is not None  # a writable tag has its own outbox
+        age = group.write_max_age if expiry is None else min(group.write_max_age, expiry)
+        request = SetRequest(
+            route.plc, route.url, group, tag, value, request_id, now, now + age, box
+        )
+        writer = self.writers[route.plc]
+        if not writer.offer(request):
+            self._refuse(
+                "busy",
+                box,
+                tag_name,
+                request_id,
+                f"{what}: PLC {route.plc} has {writer.limit} set requests waiting "
+                "(write_queue): refused, not queued",
+            )
+
+    def _count(self, outcome: str) -> None:
         self.write_counts[outcome] = self.write_counts.get(outcome, 0) + 1
-        box = self.link.outbox(reply_topic(topic), qos=1, retain=False, limit=100)
-        self.link.put(box, encode_reply(reply))
+
+    def _refuse(
+        self, outcome: str, box: Outbox | None, tag: str, request_id: str | None, error: str
+    ) -> None:
+        self._count(outcome)
+        self._log_refusal(outcome, error)
+        if box is not None:
+            self.link.put(box, encode_reply(new_reply(tag, request_id, error)))
+        else:
+            log.warning("reply to %s dropped: every pooled reply outbox is busy", tag)
+
+    def _log_refusal(self, outcome: str, error: str) -> None:
+        """A WARNING per refusal, at most :data:`REFUSALS_LOGGED` a second: a flood of bad
+        requests is summed up in one line a second instead of flooding the log."""
+        now = anyio.current_time()
+        if now - self._refusal_window >= 1.0:
+            if self._refusals_unlogged:
+                log.warning(
+                    "%d more set requests refused and not logged one by one (a flood?)",
+                    self._refusals_unlogged,
+                )
+            self._refusal_window = now
+            self._refusals_logged = self._refusals_unlogged = 0
+        if self._refusals_logged < REFUSALS_LOGGED:
+            self._refusals_logged += 1
+            log.warning("set refused (%s): %s", outcome, error)
+        else:
+            self._refusals_unlogged += 1
+
+    def _start_writer(self, run: Callable[[], Coroutine[Any, Any, None]]) -> None:
+        assert self._tg is not None
+        self._tg.start_soon(run)
+
+    async def _write(self, request: SetRequest) -> None:
+        """Write one queued request unless it is past its deadline; answer it either way."""
+        what = f"{request.plc}/{request.group.name}/{request.tag.name}"
+        async with self._writes:
+            now = anyio.current_time()
+            if now > request.deadline:
+                self._refuse(
+                    "expired",
+                    request.reply_box,
+                    request.tag.name,
+                    request.request_id,
+                    f"{what}: expired: {now - request.received:.3f} s after it was received "
+                    f"(at most {request.deadline - request.received:.3f} s), not written",
+                )
+                return
+            outcome, reply = await write_value(self.pool, request, now - request.received)
+        self._count(outcome)
+        self.link.put(request.reply_box, encode_reply(reply))
 
     # -- HTTP ---------------------------------------------------------------------------
 
@@ -307,5 +443,6 @@ class Gateway:
             "mqtt": self.link.state.value,
             "plcs": {state.value: states.count(state) for state in PlcState},
             "queued_messages": self.link.queued_messages,
+            "queued_writes": sum(len(w.queue) for w in self.writers.values()),
             "dropped_messages": self.link.dropped,
         }

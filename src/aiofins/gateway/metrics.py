@@ -150,6 +150,21 @@ class _Collector(Collector):
             "Broker connections lost or closed",
             value=link.disconnects,
         )
+        yield CounterMetricFamily(
+            "aiofins_gateway_mqtt_takeovers",
+            "Times another client took the gateway's MQTT client id (a duplicate shard)",
+            value=link.takeovers,
+        )
+        yield GaugeMetricFamily(
+            "aiofins_gateway_queued_writes",
+            "Set requests waiting in the PLCs' write queues",
+            value=sum(len(w.queue) for w in gw.writers.values()),
+        )
+        yield CounterMetricFamily(
+            "aiofins_gateway_dropped_replies",
+            "Replies to set requests on no writable tag dropped (every pooled outbox busy)",
+            value=gw.reply_pool.dropped,
+        )
         writes = CounterMetricFamily(
             "aiofins_gateway_writes", "Set requests by outcome", labels=["outcome"]
         )

@@ -51,6 +51,24 @@ log = logging.getLogger("aiofins.gateway")
 MAX_HANDED = 1024
 #: QoS 0 messages the pump hands over before it lets the event loop write them.
 PUMP_BATCH = 256
+#: Received messages waiting for the gateway, at most (more are discarded by aiomqtt,
+#: with a warning): a flood of set requests cannot grow memory.
+MAX_INCOMING = 10_000
+#: MQTT 5 reason code of a DISCONNECT that says another client took our client id.
+SESSION_TAKEN_OVER = 0x8E
+#: Takeovers of the client id within :data:`TAKEOVER_WINDOW` seconds that stop the gateway
+#: (another gateway runs with the same shard: flapping helps no one).
+TAKEOVER_LIMIT = 3
+TAKEOVER_WINDOW = 60.0
+
+#: ``on_message(topic, payload, retain, expiry)``: ``expiry`` is the MQTT 5 message expiry
+#: interval left (seconds), or None.
+OnMessage = Callable[[str, bytes, bool, "float | None"], None]
+
+
+class DuplicateClient(Exception):
+    """Another client keeps taking this gateway's MQTT client id (a second gateway running
+    as the same shard); the message names the id and the shard."""
 
 
 class LinkState(Enum):
@@ -105,11 +123,17 @@ class MqttLink:
         client_id: str,
         status_topic: str,
         subscriptions: Sequence[str] = (),
-        on_message: Callable[[str, bytes], None] | None = None,
+        on_message: OnMessage | None = None,
         on_connected: Callable[[], None] | None = None,
         on_published: Callable[[float], None] | None = None,
+        max_packet: int | None = None,
+        owner: str = "",
     ) -> None:
         self.config = config
+        #: The largest MQTT packet the broker may send us (MQTT 5; None: no limit).
+        self.max_packet = max_packet
+        #: Who runs this link, for messages ("gateway plant-1 (shard 1/3)").
+        self.owner = owner or f"client {client_id}"
         self.client_id = client_id
         self.status_topic = status_topic
         self.subscriptions = list(subscriptions)
@@ -121,6 +145,11 @@ class MqttLink:
         self.connects = 0
         self.connect_failures = 0
         self.disconnects = 0
+        #: Times the broker said another client took our client id (MQTT 5).
+        self.takeovers = 0
+        self._takeover_times: deque[float] = deque(maxlen=TAKEOVER_LIMIT)
+        #: Why the link gave up for good (a duplicate client id), or None.
+        self.fatal: DuplicateClient | None = None
         #: Set when the link is :attr:`LinkState.CONNECTED` (cleared when it is not).
         self.connected = anyio.Event()
         self._closing = anyio.Event()
@@ -259,6 +288,8 @@ class MqttLink:
                     backoff = self.config.backoff_min
                     why = await self._serve(client)
                 self.disconnects += 1
+                if why.startswith(_TAKEN_OVER):
+                    self._taken_over()
             except aiomqtt.MqttError as exc:
                 self.connect_failures += 1
                 why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
@@ -274,10 +305,42 @@ class MqttLink:
                 await self._closing.wait()
         self._enter(LinkState.CLOSED)
 
+    def _taken_over(self) -> None:
+        """The broker dropped us for another client with our id: an error each time, and
+        after :data:`TAKEOVER_LIMIT` within :data:`TAKEOVER_WINDOW` the link stops for good
+        (:attr:`fatal`)."""
+        self.takeovers += 1
+        now = anyio.current_time()
+        self._takeover_times.append(now)
+        log.error(
+            "MQTT client id %r was taken over by another client (%d times so far): is another "
+            "%s running?",
+            self.client_id,
+            self.takeovers,
+            self.owner,
+        )
+        times = self._takeover_times
+        if len(times) == TAKEOVER_LIMIT and now - times[0] <= TAKEOVER_WINDOW:
+            self.fatal = DuplicateClient(
+                f"another client took MQTT client id {self.client_id!r} {TAKEOVER_LIMIT} times "
+                f"within {TAKEOVER_WINDOW:.0f} s: a second {self.owner} is running; stop one "
+                "of them (each shard runs once)"
+            )
+            log.error("%s", self.fatal)
+            self._closing.set()
+
     def _new_client(self, aiomqtt_module: object) -> aiomqtt.Client:
         import aiomqtt
 
         c = self.config
+        v5 = c.protocol == "5"
+        properties = None
+        if v5 and self.max_packet is not None:
+            from paho.mqtt.packettypes import PacketTypes
+            from paho.mqtt.properties import Properties
+
+            properties = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+            properties.MaximumPacketSize = self.max_packet
         tls = None
         if c.tls:
             tls = aiomqtt.TLSParameters(
@@ -294,6 +357,9 @@ class MqttLink:
             timeout=c.timeout,
             tls_params=tls,
             logger=logging.getLogger("aiofins.gateway.mqtt"),
+            protocol=aiomqtt.ProtocolVersion.V5 if v5 else aiomqtt.ProtocolVersion.V311,
+            properties=properties,
+            max_queued_incoming_messages=MAX_INCOMING,
         )
 
     async def _serve(self, client: aiomqtt.Client) -> str:
@@ -306,7 +372,7 @@ class MqttLink:
 
             def lost(why: str) -> None:
                 self._paho = self._lost = None  # nothing more is handed to this connection
-                if ended == ["closed"]:
+                if ended == ["closed"] or why.startswith(_TAKEN_OVER):
                     ended[0] = why
                 tg.cancel_scope.cancel()
 
@@ -341,13 +407,29 @@ class MqttLink:
     async def _receive(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
         import aiomqtt
 
+        on_message = self.on_message
         try:
             async for message in client.messages:
                 payload = message.payload
-                if self.on_message is not None and isinstance(payload, (bytes, bytearray)):
-                    self.on_message(str(message.topic), bytes(payload))
+                if on_message is None or not isinstance(payload, (bytes, bytearray)):
+                    continue
+                expiry = getattr(message.properties, "MessageExpiryInterval", None)
+                try:
+                    on_message(
+                        str(message.topic),
+                        bytes(payload),
+                        bool(message.retain),
+                        None if expiry is None else float(expiry),
+                    )
+                except Exception:  # nothing a peer sends raises out of the receiver
+                    log.exception("a message on %s could not be handled", message.topic)
         except aiomqtt.MqttError as exc:
-            lost(f"connection lost: {exc}")
+            cause = exc.__cause__
+            code = getattr(cause, "rc", None)
+            if getattr(code, "value", code) == SESSION_TAKEN_OVER:
+                lost(f"{_TAKEN_OVER}: {cause}")
+            else:
+                lost(f"connection lost: {exc}")
 
     async def _pump(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
         """Send the QoS 0 outboxes' backlogs, one message per outbox in turn."""
@@ -402,6 +484,8 @@ class MqttLink:
         async with ready:
             async for box in ready:
                 box.queued = False
+                if box.sending is not None:  # another publisher sends its head: that one
+                    continue  # queues the outbox again when done (sending it twice did not)
                 try:
                     if not box.messages:
                         continue
@@ -425,6 +509,9 @@ class MqttLink:
     def close(self) -> None:
         """Stop: publish ``offline`` if connected, disconnect, make no more attempts."""
         self._closing.set()
+
+
+_TAKEN_OVER = "session taken over by another client"
 
 
 def _paho_client(client: aiomqtt.Client) -> paho_mqtt.Client | None:

@@ -16,6 +16,9 @@ Timestamps are Unix seconds (float). Floats that JSON cannot carry are sent as t
 from __future__ import annotations
 
 import json
+import math
+import re
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -139,29 +142,131 @@ def status_message(state: str, **extra: Any) -> bytes:
     return json.dumps({"state": state, **extra}, separators=(",", ":")).encode()
 
 
+#: Bytes a set payload may have (``max_payload``), by default; a larger one is refused
+#: unread.
+MAX_PAYLOAD = 65536
+#: How deeply a set payload may nest: ``{"value": ...}`` around a scalar is depth 1.
+MAX_DEPTH = 2
+_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
+_BRACKET = re.compile(rb"[\[\]{}]")
+#: Integer kinds' ranges (BCD: the digits the words hold).
+INT_RANGES: dict[str, tuple[int, int]] = {
+    "int16": (-(2**15), 2**15 - 1),
+    "uint16": (0, 2**16 - 1),
+    "int32": (-(2**31), 2**31 - 1),
+    "uint32": (0, 2**32 - 1),
+    "int64": (-(2**63), 2**63 - 1),
+    "uint64": (0, 2**64 - 1),
+    "bcd16": (0, 9999),
+    "bcd32": (0, 99_999_999),
+}
+#: The largest magnitude of each float kind.
+FLOAT_MAX = {"float32": 3.4028234663852886e38, "float64": sys.float_info.max}
+
+
 class SetPayloadError(CommandError):
-    """A set payload that is not a value for its tag (nothing is written)."""
+    """A set payload that is not a value for its tag (nothing is written); ``request_id``
+    is the payload's ``id`` where it could be read."""
+
+    def __init__(self, message: str, request_id: str | None = None) -> None:
+        super().__init__(message)
+        self.request_id = request_id
 
 
-def parse_set(payload: bytes, tag: Tag) -> tuple[Value, str | None]:
-    """(value, request id) of a set payload, checked against the tag's type."""
+def _depth_over(payload: bytes, limit: int) -> bool:
+    """Whether ``payload`` nests arrays or objects deeper than ``limit`` (strings, which may
+    hold brackets, are left out first): checked before ``json.loads``, which recurses."""
+    depth = 0
+    for m in _BRACKET.finditer(_STRING.sub(b"", payload)):
+        if m.group() in b"[{":
+            depth += 1
+            if depth > limit:
+                return True
+        else:
+            depth -= 1
+    return False
+
+
+class _NonFinite(ValueError):
+    pass
+
+
+def _constant(name: str) -> object:
+    raise _NonFinite(f"{name} is not a finite number: refused")
+
+
+def parse_set(payload: bytes, tag: Tag, *, max_size: int = MAX_PAYLOAD) -> tuple[Value, str | None]:
+    """(value, request id) of a set payload, checked against the tag's type.
+
+    The size is checked before anything is parsed, the nesting before ``json.loads``;
+    ``NaN``, ``Infinity`` and numbers a float cannot hold are refused, and so is any number
+    outside the tag type's range (the message gives the range). The error carries the
+    payload's ``id`` whenever the payload is an object with a usable one.
+    """
+    if len(payload) > max_size:
+        raise SetPayloadError(f"payload of {len(payload)} bytes: at most {max_size} (not read)")
+    if _depth_over(payload, MAX_DEPTH):
+        raise SetPayloadError(
+            f'payload nests deeper than {MAX_DEPTH} levels: send a value or {{"value": ..., '
+            '"id": ...}'
+        )
     try:
-        data = json.loads(payload.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise SetPayloadError(f"payload is not JSON: {exc}") from None
+        data = json.loads(payload.decode("utf-8"), parse_constant=_constant)
+    except _NonFinite as exc:
+        raise SetPayloadError(f"{tag.name}: {exc}") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise SetPayloadError(f"payload is not JSON: {_cut(str(exc))}") from None
     request_id: str | None = None
     if isinstance(data, dict):
-        if "value" not in data:
-            raise SetPayloadError('an object payload needs "value" (and may carry "id")')
-        unknown = set(data) - {"value", "id"}
-        if unknown:
-            raise SetPayloadError(f"unknown key(s) {', '.join(sorted(unknown))}; use value and id")
         raw_id = data.get("id")
-        if raw_id is not None and not isinstance(raw_id, (str, int)):
-            raise SetPayloadError("id must be a string or a number")
-        request_id = None if raw_id is None else str(raw_id)
-        data = data["value"]
+        id_ok = raw_id is None or (isinstance(raw_id, (str, int)) and not isinstance(raw_id, bool))
+        if id_ok and raw_id is not None:
+            request_id = _cut(str(raw_id), 200)
+        try:
+            if not id_ok:
+                raise SetPayloadError("id must be a string or a number")
+            if "value" not in data:
+                raise SetPayloadError('an object payload needs "value" (and may carry "id")')
+            unknown = set(data) - {"value", "id"}
+            if unknown:
+                names = ", ".join(_cut(k, 40) for k in sorted(unknown)[:5])
+                raise SetPayloadError(f"unknown key(s) {names}; use value and id")
+            value = check_value(data["value"], tag)
+        except SetPayloadError as exc:
+            exc.request_id = request_id
+            raise
+        return value, request_id
     return check_value(data, tag), request_id
+
+
+def _a(kind: str) -> str:
+    return f"an {kind}" if kind.startswith("int") else f"a {kind}"
+
+
+def request_id_of(payload: bytes, max_size: int = MAX_PAYLOAD) -> str | None:
+    """The ``id`` of a set payload that is refused before its value is looked at (a tag
+    that is not writable, a retained message), where it can be read safely; else None."""
+    if len(payload) > max_size or _depth_over(payload, MAX_DEPTH):
+        return None
+    try:
+        data = json.loads(payload.decode("utf-8"), parse_constant=_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        return None
+    if not isinstance(data, dict):
+        return None
+    raw_id = data.get("id")
+    if isinstance(raw_id, (str, int)) and not isinstance(raw_id, bool):
+        return _cut(str(raw_id), 200)
+    return None
+
+
+def _cut(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def _shown(data: object) -> str:
+    """``repr(data)`` cut short: a refusal does not echo a large payload back."""
+    return _cut(repr(data), 60)
 
 
 def check_value(data: object, tag: Tag) -> Value:
@@ -169,24 +274,57 @@ def check_value(data: object, tag: Tag) -> Value:
     vtype = tag.vtype
     kind = vtype.kind
     value: Value
+    number = isinstance(data, (int, float)) and not isinstance(data, bool)
     if kind == "bit":
         if not isinstance(data, bool) and data not in (0, 1):
-            raise SetPayloadError(f"{tag.name} is a bit: send true/false or 0/1, got {data!r}")
+            raise SetPayloadError(
+                f"{tag.name} is a bit: send true/false or 0/1, got {_shown(data)}"
+            )
         value = bool(data)
     elif kind == "string":
         if not isinstance(data, str):
-            raise SetPayloadError(f"{tag.name} is a {vtype}: send a JSON string, got {data!r}")
+            raise SetPayloadError(
+                f"{tag.name} is a {vtype}: send a JSON string, got {_shown(data)}"
+            )
         value = data
     elif kind.startswith("float"):
-        if isinstance(data, bool) or not isinstance(data, (int, float)):
-            raise SetPayloadError(f"{tag.name} is a {kind}: send a number, got {data!r}")
-        value = float(data)
+        if not number:
+            raise SetPayloadError(f"{tag.name} is {_a(kind)}: send a number, got {_shown(data)}")
+        top = FLOAT_MAX.get(kind, sys.float_info.max)
+        assert isinstance(data, (int, float))
+        try:
+            value = float(data)
+        except OverflowError:  # an integer past 1.8e308
+            value = math.inf
+        if not math.isfinite(value) or abs(value) > top:
+            raise SetPayloadError(
+                f"{tag.name} is {_a(kind)}: {_shown(data)} is out of range "
+                f"(a finite number in -{top:.8g}..{top:.8g})"
+            )
     else:  # integers and BCD
-        if isinstance(data, bool) or not isinstance(data, int):
-            raise SetPayloadError(f"{tag.name} is a {kind}: send a whole number, got {data!r}")
+        low, high = INT_RANGES.get(kind, (-(2**63), 2**64 - 1))
+        if not number:
+            raise SetPayloadError(
+                f"{tag.name} is {_a(kind)}: send a whole number in {low}..{high}, "
+                f"got {_shown(data)}"
+            )
+        assert isinstance(data, (int, float))
+        if isinstance(data, float) and not math.isfinite(data):
+            raise SetPayloadError(
+                f"{tag.name} is {_a(kind)}: {_shown(data)} is out of range {low}..{high}"
+            )
+        if not low <= data <= high:
+            raise SetPayloadError(
+                f"{tag.name} is {_a(kind)}: {_shown(data)} is out of range {low}..{high}"
+            )
+        if not isinstance(data, int):
+            raise SetPayloadError(
+                f"{tag.name} is {_a(kind)}: send a whole number in {low}..{high}, "
+                f"got {_shown(data)}"
+            )
         value = data
     try:
         vtype.encode(value)  # range, length and encoding
     except CommandError as exc:
-        raise SetPayloadError(f"{tag.name}: {exc}") from None
+        raise SetPayloadError(f"{tag.name}: {_cut(str(exc))}") from None
     return value
