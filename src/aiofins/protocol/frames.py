@@ -18,7 +18,9 @@ from .header import MAX_PARAMETER_SIZE
 #: code (MRC SRC), then in a reply the end code (MRES SRES) and a relay error's trailer.
 ICF = 0
 DNA = 3
+DA1 = 4
 SNA = 6
+SA1 = 7
 SID = 9
 MRC = 10
 SRC = 11

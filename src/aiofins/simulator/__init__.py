@@ -11,6 +11,7 @@ in the other. Quick start::
 
 from __future__ import annotations
 
+from .ethernet import AddressConversion, EthernetUnit
 from .faults import (
     BUSY_END_CODE,
     Delay,
@@ -31,8 +32,10 @@ from .udp import UdpServer
 
 __all__ = [
     "BUSY_END_CODE",
+    "AddressConversion",
     "Delay",
     "Dispatcher",
+    "EthernetUnit",
     "FaultCounters",
     "FaultDecision",
     "FaultPlan",

@@ -6,15 +6,20 @@ import logging
 from collections.abc import AsyncIterator, Iterator, Sequence
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import anyio
 
 from ..protocol.errors import leaf_errors
 from ..protocol.header import FinsAddress
+from .ethernet import EthernetUnit
 from .faults import Dispatcher, FaultCounters, FaultPlan, FrameHandler
 from .serial import SerialServer, SerialSettings
 from .tcp import DEFAULT_MAX_CONNECTIONS, DEFAULT_NODE_POOL, MAX_PENDING_HANDSHAKES, TcpServer
 from .udp import UdpServer
+
+if TYPE_CHECKING:
+    from ..memnet import MemoryNetwork
 
 _logger = logging.getLogger(__name__)
 
@@ -108,19 +113,25 @@ async def run_simulator(
     handshake_timeout: float | None = None,
     serial_unit: int = 0,
     serial_settings: SerialSettings | None = None,
+    network: MemoryNetwork | None = None,
+    ethernet: EthernetUnit | None = None,
 ) -> AsyncIterator[Simulator]:
     """Serve ``plc`` on the given endpoints while the ``async with`` block runs.
 
     Port 0 binds an ephemeral port (read it from ``sim.udp_port`` / ``sim.tcp_port``). The
     FINS/TCP server node defaults to the PLC's node (``plc.address.node``) or 1;
     ``max_connections``, ``max_pending`` and ``handshake_timeout`` are :class:`TcpServer`'s.
+    ``network``: serve UDP and TCP on an in-memory network (:mod:`aiofins.memnet`) instead of
+    the operating system's sockets; ``ethernet``: the address conversion of the Ethernet
+    Unit the UDP server plays (:class:`~aiofins.simulator.ethernet.EthernetUnit`: where
+    replies go; by default to the sender).
     """
     dispatcher = Dispatcher(plc, faults)
     sim = Simulator(plc, dispatcher)
     # The servers are made (their arguments checked) before any task: a bad argument is a
     # ValueError of its own, not one wrapped in an exception group.
     if udp is not None:
-        sim.udp = UdpServer(dispatcher, udp[0], udp[1])
+        sim.udp = UdpServer(dispatcher, udp[0], udp[1], network=network, ethernet=ethernet)
     if tcp is not None:
         sim.tcp = TcpServer(
             dispatcher,
@@ -131,6 +142,7 @@ async def run_simulator(
             max_connections=max_connections,
             max_pending=max_pending,
             handshake_timeout=handshake_timeout,
+            network=network,
         )
     if serial is not None:
         sim.serial = SerialServer(dispatcher, serial, unit=serial_unit, settings=serial_settings)

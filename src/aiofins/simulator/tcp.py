@@ -28,9 +28,10 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import anyio
-from anyio.abc import SocketAttribute, SocketListener, SocketStream, TaskGroup, TaskStatus
+from anyio.abc import ByteStream, SocketAttribute, SocketListener, TaskGroup, TaskStatus
 
 from ..protocol.errors import FinsTcpError
 from ..protocol.tcp import (
@@ -46,6 +47,9 @@ from ..protocol.tcp import (
     parse_node_request,
 )
 from .faults import Dispatcher
+
+if TYPE_CHECKING:
+    from ..memnet import MemoryNetwork, StreamListener
 
 #: Client nodes a CS1W-ETN21 allocates automatically (W421: 239-254).
 DEFAULT_NODE_POOL = tuple(range(239, 255))
@@ -78,7 +82,7 @@ class ConnectionState(Enum):
 
 @dataclass(eq=False, slots=True)
 class _Connection:
-    stream: SocketStream
+    stream: ByteStream
     host: str
     port: int
     lock: anyio.Lock = field(default_factory=anyio.Lock)
@@ -106,6 +110,7 @@ class TcpServer:
         max_connections: int = DEFAULT_MAX_CONNECTIONS,
         max_pending: int = MAX_PENDING_HANDSHAKES,
         handshake_timeout: float | None = None,
+        network: MemoryNetwork | None = None,
     ) -> None:
         if not _whole(server_node) or not 1 <= server_node <= 254:
             raise ValueError(
@@ -122,6 +127,8 @@ class TcpServer:
         if not 0 < handshake_timeout < float("inf"):
             raise ValueError(f"handshake_timeout {handshake_timeout} must be a positive number")
         self.dispatcher = dispatcher
+        #: Serve on this in-memory network instead of the operating system's sockets.
+        self.network = network
         self.host = host
         self.requested_port = port
         self.port: int | None = None
@@ -153,6 +160,16 @@ class TcpServer:
 
     async def serve(self, *, task_status: TaskStatus[int] = anyio.TASK_STATUS_IGNORED) -> None:
         """Accept connections until cancelled."""
+        if self.network is not None:
+            mem = self.network.listen(self.host, self.requested_port)
+            try:
+                async with anyio.create_task_group() as tg:
+                    self.port = mem.port
+                    task_status.started(self.port)
+                    await self._accept(mem, tg)
+            finally:
+                mem.close()
+            return
         listener = await anyio.create_tcp_listener(
             local_host=self.host, local_port=self.requested_port
         )
@@ -163,7 +180,7 @@ class TcpServer:
                 assert isinstance(one, SocketListener)
                 tg.start_soon(self._accept, one, tg)
 
-    async def _accept(self, listener: SocketListener, tg: TaskGroup) -> None:
+    async def _accept(self, listener: SocketListener | StreamListener, tg: TaskGroup) -> None:
         while True:
             try:
                 stream = await listener.accept()
@@ -177,7 +194,7 @@ class TcpServer:
                 continue
             tg.start_soon(self._connection, self._admit(stream))
 
-    def _admit(self, stream: SocketStream) -> _Connection:
+    def _admit(self, stream: ByteStream) -> _Connection:
         """A new connection, pending its handshake; the oldest pending one is closed if
         there are already ``max_pending``."""
         address = stream.extra(SocketAttribute.remote_address)

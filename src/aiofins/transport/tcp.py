@@ -25,10 +25,10 @@ import asyncio
 import contextlib
 import socket
 from collections.abc import Sequence
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import anyio
-from anyio.abc import SocketAttribute, SocketStream
+from anyio.abc import ByteStream, SocketAttribute, SocketStream
 
 from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout, FrameError
 from ..protocol.tcp import (
@@ -54,6 +54,9 @@ from .base import (
     url_host,
     wrap_os_error,
 )
+
+if TYPE_CHECKING:
+    from ..memnet import MemoryNetwork
 
 #: Seconds a connection attempt (TCP connect and node-address handshake) may take.
 DEFAULT_CONNECT_TIMEOUT = 5.0
@@ -248,7 +251,13 @@ async def _connect(loop: asyncio.AbstractEventLoop, host: str, port: int) -> soc
 
 
 class TcpTransport(Transport):
-    """FINS/TCP to ``host:port``; ``node`` 0 lets the PLC allocate our node."""
+    """FINS/TCP to ``host:port``; ``node`` 0 lets the PLC allocate our node.
+
+    ``network``: an in-memory network (:class:`aiofins.memnet.MemoryNetwork`) instead of the
+    operating system's sockets, for tests and simulations: the same handshake and framing
+    over its byte stream, read by a reader task and written frame by frame under every
+    backend (``local_host``: our address on it; default: the network's ``default_host``).
+    """
 
     reconnectable = True
     fresh_sid_space = True
@@ -263,6 +272,8 @@ class TcpTransport(Transport):
         node: int = 0,
         connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
         gather_writes: bool = True,
+        network: MemoryNetwork | None = None,
+        local_host: str | None = None,
     ) -> None:
         if not 0 <= node <= MAX_NODE:
             raise FrameError(f"FINS/TCP client node {node} out of range 0..{MAX_NODE}")
@@ -275,6 +286,10 @@ class TcpTransport(Transport):
         #: call). ``False`` writes each frame on its own, for a peer whose TCP stack mishandles
         #: several FINS/TCP messages in one segment (TCP itself may still join them).
         self.gather_writes = gather_writes
+        self.network = network
+        self.local_host = local_host
+        #: The connection over an in-memory network, while open.
+        self._mem: ByteStream | None = None
         self._stream: SocketStream | None = None
         self._raw: socket.socket | None = None  # the stream's socket (trio path)
         self._sink: FrameSink | None = None  # whom the trio path reports to
@@ -285,7 +300,7 @@ class TcpTransport(Transport):
 
     @property
     def is_open(self) -> bool:
-        return self._stream is not None or self._aio is not None
+        return self._stream is not None or self._aio is not None or self._mem is not None
 
     @property
     def description(self) -> str:
@@ -299,10 +314,15 @@ class TcpTransport(Transport):
             self.port,
             connect_timeout=self.connect_timeout,
             gather_writes=self.gather_writes,
+            network=self.network,
+            local_host=self.local_host,
         )
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:
+            return
+        if self.network is not None:
+            await self._open_on_network(self.network, sink, task_group)
             return
         if is_asyncio():
             await self._open_asyncio(sink)
@@ -347,6 +367,77 @@ class TcpTransport(Transport):
 
         received = sink.frame_received
         self.poll_now = poll
+
+    async def _open_on_network(
+        self, network: MemoryNetwork, sink: FrameSink, task_group: TaskSpawner
+    ) -> None:
+        """Connect and shake hands over an in-memory network's byte stream; a reader task
+        pumps it (:meth:`_read_stream`), :meth:`send` writes each frame."""
+        conn = TcpClientConnection(self.node)
+        stream: ByteStream | None = None
+        try:
+            with anyio.fail_after(self.connect_timeout):  # connect and handshake
+                stream = await network.connect(self.host, self.port, local_host=self.local_host)
+                early = await self._handshake(stream, conn)
+        except BaseException as exc:
+            if stream is not None:
+                with anyio.CancelScope(shield=True):
+                    await stream.aclose()
+            raise self._open_failed(exc) from exc
+        self._mem = stream
+        self._send_lock = anyio.Lock()
+        task_group.start_soon(self._read_stream, stream, conn, early, sink)
+
+    async def _read_stream(
+        self, stream: ByteStream, conn: TcpClientConnection, early: list[TcpEvent], sink: FrameSink
+    ) -> None:
+        """The pump of a connection over an in-memory network: what the stream gives, into
+        the connection, frames out to the sink; a background task ending at a boundary (the
+        end of the stream, a broken one, a framing error: the link is lost, reported)."""
+        exc: BaseException | None = None
+        received = sink.frame_received
+        try:
+            error = _deliver(self, early, sink)
+            if error is not None:
+                raise error
+            while True:
+                events = conn.receive_data(await stream.receive(), received)
+                if events:
+                    error = _deliver(self, events, sink)
+                    if error is not None:
+                        raise error
+        except FrameError as err:
+            exc = err
+        except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError) as err:
+            exc = ConnectionLost(f"{self.description} closed the connection")
+            exc.__cause__ = err
+        except OSError as err:
+            exc = wrap_os_error(err, f"connection to {self.description} failed")
+        finally:
+            conn.close()
+            if self._mem is stream:
+                self._mem = None
+                if exc is not None:
+                    sink.connection_lost(exc)
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+
+    async def _send_on_network(
+        self, stream: ByteStream, frame: bytes, timeout: float | None
+    ) -> None:
+        """Write one frame on an in-memory network's stream (its window may make us wait,
+        at most ``timeout``)."""
+        try:
+            with anyio.fail_after(timeout):
+                async with self._send_lock:
+                    await stream.send(encode_frame(frame))
+        except TimeoutError:
+            raise FinsTimeout(
+                f"cannot send to {self.description} within {timeout} s: the PLC does not "
+                "read what was sent"
+            ) from None
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError) as exc:
+            raise ConnectionLost(f"cannot send to {self.description}: {exc!r}") from exc
 
     def _open_failed(self, exc: BaseException) -> BaseException:
         """What a failed connection attempt raises: a :class:`FinsError` as it is (a refused
@@ -418,7 +509,7 @@ class TcpTransport(Transport):
         self.fast_send_many = None
         self.poll_now = None
 
-    async def _handshake(self, stream: SocketStream, conn: TcpClientConnection) -> list[TcpEvent]:
+    async def _handshake(self, stream: ByteStream, conn: TcpClientConnection) -> list[TcpEvent]:
         """Send our node, read until the server assigned both; returns the events that
         followed the assignment in the same read (the anyio pump of the handshake)."""
         await stream.send(conn.start())
@@ -483,6 +574,9 @@ class TcpTransport(Transport):
         if self._aio is not None:
             self._aio.send(frame)  # buffered by the event loop: never waits
             return
+        if self._mem is not None:
+            await self._send_on_network(self._mem, frame, timeout)
+            return
         stream, raw = self._stream, self._raw
         if stream is None or raw is None:
             raise ConnectionLost(f"{self.description} is not connected")
@@ -535,6 +629,10 @@ class TcpTransport(Transport):
         self._detach()
         if proto is not None and proto.transport is not None:
             proto.transport.close()
+        mem, self._mem = self._mem, None
+        if mem is not None:
+            with anyio.CancelScope(shield=True):
+                await mem.aclose()
         stream, self._stream, self._raw = self._stream, None, None
         if stream is not None:
             self.poll_now = None

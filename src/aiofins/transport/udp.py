@@ -21,7 +21,7 @@ import contextlib
 import socket
 from collections import deque
 from collections.abc import Sized
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import anyio
 
@@ -36,6 +36,9 @@ from .base import (
     url_host,
     wrap_os_error,
 )
+
+if TYPE_CHECKING:
+    from ..memnet import DatagramSocket, MemoryNetwork
 
 DEFAULT_PORT = 9600
 #: Receive buffer asked for: room for 50 in-flight 999-word replies many times over.
@@ -207,8 +210,46 @@ class _EndpointProtocol(asyncio.DatagramProtocol):
             self.transport.close()
 
 
+class _NetworkSocket:
+    """The path over an in-memory network (:mod:`aiofins.memnet`): the network calls us when
+    a datagram is queued on the socket, and we drain it into the sink as the asyncio path
+    drains a real socket (the same :func:`_drain`, ICMP errors included)."""
+
+    def __init__(self, sock: DatagramSocket, owner: UdpTransport, sink: FrameSink) -> None:
+        self.sock = sock
+        self.owner = owner
+        self.sink = sink
+        self.awaited = replies_awaited(sink)
+        sock.on_readable = self._readable
+
+    def _readable(self) -> None:
+        exc = _drain(self.sock.recv, self.sink, self.awaited)
+        if exc is not None:
+            self.owner._lost(self, exc)
+
+    poll = _readable
+
+    def send(self, frame: bytes) -> None:
+        try:
+            self.sock.send(frame)
+        except ConnectionRefusedError as exc:  # an earlier ICMP error surfacing here
+            self.sink.frame_dropped(f"socket error: {exc}")
+        except OSError as exc:
+            self.owner._lost(self, exc)
+            raise ConnectionLost(f"cannot send to {self.owner.description}: {exc}") from exc
+
+    def close(self) -> None:
+        self.sock.on_readable = None
+        self.sock.close()
+
+
 class UdpTransport(Transport):
-    """FINS/UDP to ``host:port`` from an ephemeral local port."""
+    """FINS/UDP to ``host:port`` from an ephemeral local port.
+
+    ``network``: an in-memory network (:class:`aiofins.memnet.MemoryNetwork`) instead of the
+    operating system's sockets, for tests and simulations (``local_host`` is then our
+    address on it; default: the network's ``default_host``).
+    """
 
     reconnectable = True
     own_source_node = True
@@ -222,13 +263,15 @@ class UdpTransport(Transport):
         local_host: str | None = None,
         local_port: int = 0,
         rcvbuf: int = DEFAULT_RCVBUF,
+        network: MemoryNetwork | None = None,
     ) -> None:
+        self.network = network
         self.host = host
         self.port = port
         self.local_host = local_host
         self.local_port = local_port
         self.rcvbuf = rcvbuf
-        self._aio: _AsyncioSocket | _EndpointProtocol | None = None
+        self._aio: _AsyncioSocket | _EndpointProtocol | _NetworkSocket | None = None
         self._sock: socket.socket | None = None  # the socket of the anyio (trio) driver
 
     @property
@@ -264,7 +307,13 @@ class UdpTransport(Transport):
     def another(self) -> UdpTransport:
         """A UDP transport to the same peer from a socket of its own (another local port):
         its replies come to it alone, once it sends with a source node of its own."""
-        return UdpTransport(self.host, self.port, local_host=self.local_host, rcvbuf=self.rcvbuf)
+        return UdpTransport(
+            self.host,
+            self.port,
+            local_host=self.local_host,
+            rcvbuf=self.rcvbuf,
+            network=self.network,
+        )
 
     async def _socket(self) -> socket.socket:
         """A non-blocking UDP socket, bound to an ephemeral port and connected to the PLC."""
@@ -286,6 +335,9 @@ class UdpTransport(Transport):
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:
+            return
+        if self.network is not None:
+            self._open_on_network(self.network, sink)
             return
         try:
             sock = await self._socket()
@@ -329,6 +381,20 @@ class UdpTransport(Transport):
                     _drain(sock.recv, sink, awaited)
 
             self.poll_now = poll
+
+    def _open_on_network(self, network: MemoryNetwork, sink: FrameSink) -> None:
+        """Open a socket of the in-memory network, connected to the PLC."""
+        try:
+            sock = network.datagram_socket(
+                self.local_host or network.default_host,
+                self.local_port,
+                remote=(self.host, self.port),
+            )
+        except OSError as exc:
+            raise wrap_os_error(exc, f"cannot open {self.description}") from exc
+        aio = self._aio = _NetworkSocket(sock, self, sink)
+        self.fast_send = aio.send
+        self.poll_now = aio.poll
 
     async def _reader(self, sock: socket.socket, sink: FrameSink) -> None:
         """The anyio driver: wait until readable, then drain every queued datagram."""
@@ -376,7 +442,9 @@ class UdpTransport(Transport):
         self.fast_send = None
         self.poll_now = None
 
-    def _lost(self, aio: _AsyncioSocket | _EndpointProtocol, exc: BaseException) -> None:
+    def _lost(
+        self, aio: _AsyncioSocket | _EndpointProtocol | _NetworkSocket, exc: BaseException
+    ) -> None:
         if self._aio is aio:
             self._detach()
             aio.close()
