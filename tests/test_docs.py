@@ -127,10 +127,18 @@ def _check_metrics_app(base: str, sim: RunningPLC) -> None:
     assert 'family="memory"} 1.0' in text
 
 
+def _check_pool_app(base: str, sim: RunningPLC) -> None:
+    """pool.md's app: a configured PLC by name; any other name is refused."""
+    sim.call(sim.plc.write, "D10", [5, 6])
+    assert _http("GET", f"{base}/plc/press-1/D10?count=2") == (200, {"values": [5, 6]})
+    assert _http("GET", f"{base}/plc/10.0.0.1/D10") == (404, {"detail": "no PLC named '10.0.0.1'"})
+
+
 #: What each page's ``# app.py`` block is asked over HTTP.
 APP_CHECKS: dict[str, Callable[[str, RunningPLC], None]] = {
     "recipes.md": _check_recipe_app,
     "observability.md": _check_metrics_app,
+    "pool.md": _check_pool_app,
 }
 
 
@@ -178,8 +186,22 @@ def test_the_first_pages_point_their_examples_at_plc_url(page: str) -> None:
     blocks = BLOCK.findall((ROOT / page).read_text())
     assert blocks
     for code in blocks:
-        assert "run_simulator" not in code and "TestClient" not in code, code
         assert 'os.environ.get("PLC_URL", "udp://127.0.0.1")' in code, code
+
+
+#: A connection to a PLC named in the code (a user would have to edit it).
+LITERAL_URL = re.compile(r"""(connect|client|Pool|add_group)\([^)]*["'](udp|tcp|serial)://""")
+
+
+@pytest.mark.parametrize("name", [n for n, _ in EXAMPLES])
+def test_examples_are_starting_points_not_self_tests(name: str) -> None:
+    """Outside the simulator's own page an example talks to the PLC at PLC_URL: it does not
+    start a virtual PLC around itself, drive a test client, or hard-code an address."""
+    code = dict(EXAMPLES)[name]
+    if name.startswith("simulator.md"):
+        return
+    assert "run_simulator" not in code and "TestClient" not in code, code
+    assert not LITERAL_URL.search(code), code
 
 
 def test_a_notebook_block_runs_its_awaits() -> None:

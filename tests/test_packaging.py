@@ -45,6 +45,18 @@ def test_serial_packages_are_an_extra() -> None:
     assert any(r.startswith("pyserial-asyncio-fast") and 'extra == "serial"' in r for r in requires)
 
 
+def test_the_core_depends_on_anyio_only() -> None:
+    """The live view's terminal library and the notebook's pandas are extras."""
+    requires = importlib.metadata.requires("aiofins") or []
+    assert [r for r in requires if "extra ==" not in r] == ["anyio>=4.4"]
+    extras = {
+        (r.split(";")[0].split(">")[0], r.split('extra == "')[1].split('"')[0])
+        for r in requires
+        if 'extra == "' in r
+    }
+    assert {("rich", "watch"), ("pandas", "notebook"), ("matplotlib", "notebook")} <= extras
+
+
 def test_the_quick_start_works_without_the_serial_packages() -> None:
     """``pip install -e .`` then ``aiofins demo``: the library, the simulator and the CLI."""
     result = _run(
