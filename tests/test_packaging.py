@@ -85,7 +85,7 @@ def test_a_serial_url_without_the_extra_says_what_to_install(backend: str) -> No
     assert result.returncode == 0, result.stderr
     package = "pyserial-asyncio-fast" if backend == "asyncio" else "pyserial"
     assert f"needs {package}" in result.stdout
-    assert "pip install 'aiofins[serial]'" in result.stdout
+    assert "pip install -e '.[serial]' in a clone of aiofins" in result.stdout
 
 
 def test_the_simulator_cannot_serve_a_serial_device_without_the_extra() -> None:
@@ -94,4 +94,4 @@ def test_the_simulator_cannot_serve_a_serial_device_without_the_extra() -> None:
         "sys.exit(main(['simulate', '--udp', '127.0.0.1:0', '--serial', '/dev/null']))\n"
     )
     assert result.returncode != 0
-    assert "pip install 'aiofins[serial]'" in result.stderr
+    assert "pip install -e '.[serial]' in a clone of aiofins" in result.stderr

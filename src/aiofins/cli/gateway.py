@@ -61,7 +61,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         from ..gateway.daemon import Gateway
     except ImportError as exc:
-        print(f"aiofins gateway needs: pip install 'aiofins[gateway]' ({exc})", file=sys.stderr)
+        print(
+            f"aiofins gateway needs: pip install -e '.[gateway]' in a clone of aiofins ({exc})",
+            file=sys.stderr,
+        )
         return 2
 
     fatal: list[BaseException] = []

@@ -82,7 +82,7 @@ class SerialServer:
         except ImportError as exc:  # the optional ``serial`` extra
             raise CommandError(
                 "serving a serial device needs pyserial, which is not installed: "
-                "pip install 'aiofins[serial]'"
+                "pip install -e '.[serial]' in a clone of aiofins (or pip install pyserial)"
             ) from exc
         port = serial.Serial(
             self.device,

@@ -34,7 +34,8 @@ def _import_serial(name: str) -> Any:
     except ImportError as exc:
         package = {"serial": "pyserial", "serial_asyncio_fast": "pyserial-asyncio-fast"}[name]
         raise CommandError(
-            f"serial:// needs {package}, which is not installed: pip install 'aiofins[serial]'"
+            f"serial:// needs {package}, which is not installed: pip install -e '.[serial]' "
+            f"in a clone of aiofins (or pip install {package})"
         ) from exc
 
 
