@@ -5,7 +5,9 @@ and each of those modules has its own description rendered there."""
 from __future__ import annotations
 
 import importlib
+import inspect
 import re
+import typing
 from pathlib import Path
 
 import pytest
@@ -96,3 +98,32 @@ def test_the_check_sees_a_missing_entry() -> None:
     without_pool = [path for path in _directives() if path != "aiofins.Pool"]
     assert _missing("aiofins", without_pool) == ["Pool"]
     assert _missing("aiofins", [*without_pool, "aiofins.pool.Pool"]) == []
+
+
+def _classes(hint: object) -> list[type]:
+    """The aiofins classes a type hint names (``list[FileEntry] | None``: FileEntry)."""
+    args = typing.get_args(hint)
+    if args:
+        return [cls for arg in args for cls in _classes(arg)]
+    if inspect.isclass(hint) and hint.__module__.startswith("aiofins"):
+        return [hint]
+    return []
+
+
+def test_every_type_a_client_call_returns_has_an_entry() -> None:
+    """What ``await plc.cpu_unit_status_read()`` returns is a type users read attributes of:
+    it has a page entry (CpuUnitStatus, ClockData, ... each result of the manual's commands)."""
+    import aiofins
+
+    documented = {id(_resolve(path)) for path in _directives()}
+    missing = set()
+    for name, method in inspect.getmembers(aiofins.Client, callable):
+        if name.startswith("_"):
+            continue
+        returned = typing.get_type_hints(method).get("return")
+        missing |= {
+            f"{cls.__module__}.{cls.__qualname__} ({name})"
+            for cls in _classes(returned)
+            if id(cls) not in documented
+        }
+    assert not missing, sorted(missing)

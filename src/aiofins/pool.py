@@ -323,7 +323,14 @@ class Pool:
     Every argument is checked when the pool is made (:class:`CommandError`): counts are
     whole numbers from 1, times finite seconds above 0 (``backoff_min`` may be 0: no
     backoff), ``backoff_min <= backoff_max``; other keywords are options of
-    :func:`aiofins.connect` for every endpoint.
+    :func:`aiofins.connect` for every endpoint, defaults that an endpoint's URL overrides
+    (``timeout``, ``retries``, ``read_only``, ...). Among them the resilience of each session:
+    ``breaker_threshold`` (calls in a row without an answer that open its circuit breaker,
+    default 5, 0: never), ``breaker_cooldown=(min, max)`` (seconds between the open
+    breaker's probes, default ``(0.05, 2.0)``) and ``reconnect_backoff=(min, max)``
+    (seconds between reconnection attempts, default ``(0.05, 5.0)``); a URL says
+    ``?breaker_threshold=0`` for one endpoint. (``backoff_min``/``backoff_max`` are the
+    pool's own: how long an endpoint whose connection failed is left alone.)
     """
 
     def __init__(
