@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-import errno
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -14,7 +16,6 @@ from aiofins.protocol.errors import ConnectionLost, EndCodeError, FinsTimeout
 from aiofins.simulator.faults import FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import run_simulator
-from aiofins.transport.serial import SerialTransport
 from tests.client.test_all_operations import EXPECTED_END_CODES, run_script
 from tests.conftest import PTY_8N1, PTY_LINE
 
@@ -138,9 +139,43 @@ async def test_a_missing_device_asks_whether_the_adapter_is_plugged_in(tmp_path:
     assert f"there is no {device}: is the adapter plugged in?" in str(info.value)
 
 
-async def test_permission_denied_names_the_dialout_group() -> None:
-    """(Root opens any device, so the error is made here, as the OS raises it.)"""
-    transport = SerialTransport("/dev/ttyUSB0")
-    denied = OSError(errno.EACCES, "Permission denied", "/dev/ttyUSB0")
-    advice = transport._open_advice(denied)
-    assert "add it to the 'dialout' group (sudo usermod -aG dialout $USER" in advice
+PERMISSION_SCRIPT = """
+import anyio, aiofins
+async def main():
+    async with aiofins.connect("serial://{device}", timeout=0.5) as plc:
+        await plc.read("D0")
+try:
+    anyio.run(main, backend={backend!r})
+except aiofins.ConnectionLost as exc:
+    print(exc)
+"""
+
+
+@pytest.mark.skipif(
+    shutil.which("setpriv") is None or os.geteuid() != 0,
+    reason="needs root and setpriv to open a device without the right to",
+)
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_permission_denied_names_the_dialout_group(tmp_path: Path, backend: str) -> None:
+    """A device this process may not open, as a user outside 'dialout' meets /dev/ttyUSB0:
+    owned by another user, mode 600, opened without the capability to override that."""
+    device = tmp_path / "ttyUSB0"
+    device.touch(mode=0o600)
+    os.chown(device, 65534, 65534)
+    no_override = "-dac_override,-dac_read_search"
+    result = subprocess.run(
+        [
+            "setpriv",
+            f"--inh-caps={no_override}",
+            f"--bounding-set={no_override}",
+            sys.executable,
+            "-c",
+            PERMISSION_SCRIPT.format(device=device, backend=backend),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Permission denied" in result.stdout
+    assert "add it to the 'dialout' group (sudo usermod -aG dialout $USER" in result.stdout
