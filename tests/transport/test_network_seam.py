@@ -6,9 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import anyio
 import pytest
-import trio
-import trio.testing
 
 from aiofins.memnet import MemoryNetwork, Packet
 from aiofins.protocol.errors import ConnectionLost, FinsTimeout
@@ -16,6 +15,8 @@ from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.transport import TcpTransport, UdpTransport
+
+from ..virtual_time import VIRTUAL_BACKENDS, run_on_virtual_time
 
 PLC_IP, OUR_IP = "192.168.250.10", "192.168.250.2"
 READ_D0_2 = bytes.fromhex("820000000002")  # DM 0, two words
@@ -56,20 +57,26 @@ async def test_udp_and_fins_tcp_read_from_the_simulator_over_the_network(
         assert net.stats.dropped == net.stats.overflows == 0
 
 
-@pytest.mark.anyio
-async def test_a_lost_datagram_costs_a_retransmission(anyio_backend: object) -> None:
-    def fate(packet: Packet) -> Sequence[float]:
-        return [] if packet.number == 1 else [0.0]  # the first command is lost
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_a_lost_datagram_costs_a_retransmission(backend: str) -> None:
+    """The first command is lost: sent again after the first retransmission timeout (1/7
+    of the call's 1 s: 2 retries, each wait doubling), answered at once then."""
+    out: list[object] = []
 
-    async with (
-        MemoryNetwork(fate=fate) as net,
-        run_simulator(make_plc(), udp=(PLC_IP, 9600), network=net),
-        session(UdpTransport(PLC_IP, network=net), timeout=1.0, retries=2) as s,
-    ):
-        r = await s.request(0x01, 0x01, READ_D0_2, idempotent=True)
-        assert r.data == bytes.fromhex("BEEF0102")
-        assert (s.stats.retries, s.stats.completed) == (1, 1)
-        assert net.stats.dropped == 1
+    def fate(packet: Packet) -> Sequence[float]:
+        return [] if packet.number == 1 else [0.0]
+
+    async def main() -> None:
+        async with (
+            MemoryNetwork(fate=fate) as net,
+            run_simulator(make_plc(), udp=(PLC_IP, 9600), network=net),
+            session(UdpTransport(PLC_IP, network=net), timeout=1.0, retries=2) as s,
+        ):
+            r = await s.request(0x01, 0x01, READ_D0_2, idempotent=True)
+            out.extend([r.data, anyio.current_time(), s.stats.retries, net.stats.dropped])
+
+    run_on_virtual_time(main, backend)
+    assert out == [bytes.fromhex("BEEF0102"), pytest.approx(1 / 7, abs=1e-6), 1, 1]
 
 
 @pytest.mark.anyio
@@ -94,7 +101,8 @@ async def test_a_reset_fins_tcp_connection_is_a_lost_link_then_a_new_one(
         assert s.stats.connects == 2
 
 
-def test_udp_over_the_network_runs_on_virtual_time() -> None:
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_udp_over_the_network_runs_on_virtual_time(backend: str) -> None:
     """Replies 0.25 s late, timeout 1 s: each read completes at exactly +0.25 s; a silent
     PLC (every reply lost) fails a read at exactly +1 s."""
     times: list[float] = []
@@ -107,11 +115,11 @@ def test_udp_over_the_network_runs_on_virtual_time() -> None:
         ):
             for _ in range(3):
                 await s.request(0x01, 0x01, READ_D0_2)
-                times.append(trio.current_time())
+                times.append(anyio.current_time())
             net.fate = lambda p: [] if p.source[1] == 9600 else [0.125]
             with pytest.raises(FinsTimeout):
                 await s.request(0x01, 0x01, READ_D0_2)
-            times.append(trio.current_time())
+            times.append(anyio.current_time())
 
-    trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+    run_on_virtual_time(main, backend)
     assert times == [0.25, 0.5, 0.75, 1.75]

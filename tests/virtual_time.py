@@ -1,0 +1,28 @@
+"""Running a test on virtual time: trio's ``MockClock(autojump_threshold=0)`` or asyncio on
+looptime's loop, both of which jump the clock whenever every task waits. The session reads
+the loop's clock (aiofins/session/clock.py), so timeouts, retransmissions and delays take no
+wall time and their times are exact (looptime's to its resolution, 1 us). uvloop's clock
+cannot be made virtual: tests of time run under these two instead."""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+
+import looptime
+import trio
+import trio.testing
+
+#: The backends with a virtual clock, for ``pytest.mark.parametrize("backend", ...)``.
+VIRTUAL_BACKENDS = ("trio", "asyncio")
+
+
+def run_on_virtual_time(main: Callable[[], Awaitable[None]], backend: str = "trio") -> None:
+    """Run ``main`` from virtual time 0 under ``backend`` (see :data:`VIRTUAL_BACKENDS`)."""
+    if backend == "trio":
+        trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+        return
+    loop = looptime.new_event_loop(start=0.0)
+    try:
+        loop.run_until_complete(main())
+    finally:
+        loop.close()
