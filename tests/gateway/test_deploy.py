@@ -78,18 +78,24 @@ def base_image() -> str:
         unavailable("docker-compose is not installed (apt-get install docker-compose)")
     image = os.environ.get("AIOFINS_BASE_IMAGE", "aiofins-debian:bookworm")
     exists = subprocess.run(["docker", "image", "inspect", image], capture_output=True)
-    if exists.returncode != 0 and shutil.which("debootstrap") is None:
-        unavailable(f"no base image {image} and no debootstrap to make it (apt-get install it)")
+    if exists.returncode != 0:
+        if shutil.which("debootstrap") is None:
+            unavailable(f"no base image {image} and no debootstrap to make it (apt-get install it)")
+        if os.geteuid() != 0:
+            unavailable(f"no base image {image}; as root, deploy/debian-base.sh makes it")
     return run("bash", str(DEPLOY / "debian-base.sh")).strip()
 
 
-class Stack:
-    """deploy/docker-compose.yml as a compose project of its own, on host ports Docker picks."""
+PROJECT = "aiofinsdeploytest"
 
-    def __init__(self, base: str) -> None:
-        suffix = f"{os.getpid()}"
-        self.project = f"aiofinsdeploytest{suffix}"
-        self.image = f"aiofins-gateway:test-{suffix}"
+
+class Stack:
+    """deploy/docker-compose.yml as a compose project of its own (named after the test's
+    process), on host ports Docker picks."""
+
+    def __init__(self, base: str, pid: int) -> None:
+        self.project = f"{PROJECT}{pid}"
+        self.image = f"aiofins-gateway:test-{pid}"
         self.env = {
             **os.environ,
             "AIOFINS_PYTHON_IMAGE": base,
@@ -123,9 +129,32 @@ class Stack:
         subprocess.run(["docker", "rmi", self.image], capture_output=True)
 
 
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
+
+
+def sweep(base: str) -> None:
+    """Takes down the stacks of earlier runs killed before their clean-up: their containers
+    would start again with every start of the daemon (``restart: unless-stopped``)."""
+    projects = run(
+        "docker", "ps", "--all", "--format", '{{.Label "com.docker.compose.project"}}'
+    )  # fmt: skip
+    for project in set(projects.split()):
+        pid = project.removeprefix(PROJECT)
+        if project.startswith(PROJECT) and pid.isdigit() and not alive(int(pid)):
+            Stack(base, int(pid)).down()
+
+
 @pytest.fixture
 def stack(base_image: str) -> Iterator[Stack]:
-    s = Stack(base_image)
+    sweep(base_image)
+    s = Stack(base_image, os.getpid())
     try:
         yield s
     finally:
