@@ -4,6 +4,7 @@ output fed to a terminal emulator), and the sparkline and trend behind the trend
 from __future__ import annotations
 
 import fcntl
+import io
 import os
 import signal
 import struct
@@ -15,7 +16,7 @@ from collections.abc import Callable
 import pyte
 import pytest
 
-from aiofins.cli.watch import BARS, GAP, Trend, sparkline
+from aiofins.cli.watch import BARS, GAP, Trend, render, sparkline, trend_width
 from aiofins.poller import Quality, Snapshot, TagReading
 from aiofins.protocol.errors import CommandError
 from aiofins.simulator import Mode, VirtualPLC
@@ -45,6 +46,28 @@ def test_a_trend_keeps_its_length_and_a_gap_where_a_scan_did_not_read_the_tag() 
     assert trend.line("s") == GAP * 3 and trend.range("s") is None  # a string has no trend
     with pytest.raises(CommandError, match="--history 0"):
         Trend(["t"], 0)
+
+
+def test_a_narrow_terminal_shortens_the_trend_not_the_names_and_values() -> None:
+    from rich.console import Console
+
+    tags = {"temperature_oven_1": "D100:float32", "run": "CIO 0.00"}
+    trend = Trend(list(tags), 40)
+    for scan in range(1, 41):  # a ramp: the latest scans are the highest
+        readings = {
+            "temperature_oven_1": TagReading(float(scan), Quality.GOOD, 1.0),
+            "run": TagReading(scan % 2 == 0, Quality.GOOD, 1.0),
+        }
+        trend.add(_snap(scan, **readings))
+    screen = io.StringIO()
+    console = Console(file=screen, width=72, color_system=None)
+    console.print(render("udp://plc", tags, _snap(40, **readings), trend, 72))
+    (row,) = [line for line in screen.getvalue().splitlines() if line.startswith("temperature")]
+    cells = row.split()
+    assert cells[:4] == ["temperature_oven_1", "D100:float32", "40", "good"]
+    assert cells[-2:] == ["1", "40"] and len(row) <= 72
+    shown = trend_width([[*row.split()[:4], "", "1", "40"]], 72, 40)
+    assert 1 < shown < 40 and cells[4] == sparkline([float(v) for v in range(41 - shown, 41)])
 
 
 class Terminal:

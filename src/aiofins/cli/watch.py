@@ -85,8 +85,10 @@ class Trend:
             good = reading is not None and reading.quality is Quality.GOOD
             values.append(as_number(reading.value) if good and reading is not None else None)
 
-    def line(self, name: str) -> str:
-        return sparkline(self.history[name])
+    def line(self, name: str, scans: int | None = None) -> str:
+        """The sparkline of the last ``scans`` scans (all kept by default)."""
+        values = list(self.history[name])
+        return sparkline(values if scans is None else values[-scans:])
 
     def range(self, name: str) -> tuple[float, float] | None:
         numbers = [v for v in self.history[name] if v is not None]
@@ -106,8 +108,31 @@ def _number(value: float) -> str:
     return f"{value:.6g}"
 
 
-def render(url: str, tags: dict[str, str], snap: Snapshot, trend: Trend) -> RenderableType:
-    """The screen after ``snap``: a header line and the table of tags."""
+#: The table's columns; the trend takes the width the others leave (``trend_width``).
+COLUMNS = ("tag", "address", "value", "quality", "trend", "min", "max")
+#: Spaces between two columns.
+GUTTER = 2
+
+
+def trend_width(cells: list[list[str]], width: int, history: int) -> int:
+    """How many scans the trend column shows in ``width`` characters: what the other
+    columns (each as wide as its widest cell or header) leave, at most ``history``, at
+    least 1. A narrow terminal shortens the trend (its latest scans kept), not the names
+    and values."""
+    others = [
+        max([len(column), *(len(row[i]) for row in cells)])
+        for i, column in enumerate(COLUMNS)
+        if column != "trend"
+    ]
+    room = width - sum(others) - GUTTER * (len(COLUMNS) - 1)
+    return max(1, min(history, room))
+
+
+def render(
+    url: str, tags: dict[str, str], snap: Snapshot, trend: Trend, width: int
+) -> RenderableType:
+    """The screen after ``snap`` for a terminal ``width`` characters wide: a header line
+    and the table of tags."""
     from rich.console import Group
     from rich.table import Table
     from rich.text import Text
@@ -117,26 +142,36 @@ def render(url: str, tags: dict[str, str], snap: Snapshot, trend: Trend) -> Rend
     header.append(f"{snap.duration * 1000:.1f} ms   {when}", style="dim")
     if snap.error is not None:
         header.append(f"\n{escape(snap.error)}", style="bold red")
-    table = Table(box=None, pad_edge=False, header_style="bold")
-    for column in ("tag", "address"):
-        table.add_column(column, no_wrap=True)
-    table.add_column("value", justify="right", no_wrap=True)
-    table.add_column("quality", no_wrap=True)
-    table.add_column("trend", min_width=trend.length, no_wrap=True)
-    for column in ("min", "max"):
-        table.add_column(column, justify="right", no_wrap=True)
-    styles = {Quality.GOOD: "green", Quality.STALE: "yellow", Quality.ERROR: "red"}
+    cells = []
     for name, spec in tags.items():
         reading = snap.readings[name]
         span = trend.range(name)
+        low, high = (_number(span[0]), _number(span[1])) if span else ("", "")
+        value, state = format_value(reading), reading.quality.value
+        cells.append([escape(name), escape(spec), value, state, "", low, high])
+    shown = trend_width(cells, width, trend.length)
+    table = Table(box=None, pad_edge=False, header_style="bold", padding=(0, GUTTER // 2))
+    for column in COLUMNS:
+        right = column in ("value", "min", "max")
+        size = shown if column == "trend" else None
+        table.add_column(
+            column,
+            justify="right" if right else "left",
+            no_wrap=True,
+            min_width=size,
+            max_width=size,
+        )
+    styles = {Quality.GOOD: "green", Quality.STALE: "yellow", Quality.ERROR: "red"}
+    for name, row in zip(tags, cells, strict=True):
+        quality = snap.readings[name].quality
         table.add_row(
-            Text(escape(name)),
-            Text(escape(spec), style="dim"),
-            Text(format_value(reading)),
-            Text(reading.quality.value, style=styles[reading.quality]),
-            Text(trend.line(name), style="cyan"),
-            Text(_number(span[0]) if span else ""),
-            Text(_number(span[1]) if span else ""),
+            Text(row[0]),
+            Text(row[1], style="dim"),
+            Text(row[2]),
+            Text(row[3], style=styles[quality]),
+            Text(trend.line(name, shown), style="cyan"),
+            Text(row[5]),
+            Text(row[6]),
         )
     footer = Text("Ctrl-C to stop", style="dim")
     return Group(header, Text(""), table, Text(""), footer)
@@ -191,9 +226,11 @@ async def watch(args: argparse.Namespace) -> None:
         with Live(console=console, auto_refresh=False, transient=False) as live:
             async for snap in poller:
                 trend.add(snap)
-                live.update(render(args.url, tags, snap, trend), refresh=True)
+                live.update(render(args.url, tags, snap, trend, console.width), refresh=True)
                 if args.count and snap.scan >= args.count:
                     break
+        if not console.is_terminal:  # the last screen printed once: end its line
+            console.line()
 
 
 def run(args: argparse.Namespace) -> int:
