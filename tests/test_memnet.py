@@ -222,9 +222,14 @@ def test_a_lost_connection_request_leaves_the_caller_to_its_timeout() -> None:
             with anyio.move_on_after(5):
                 await net.connect(*B)
             times.append(trio.current_time())
-            net.fate = lambda p: [0.25]
+            net.fate = lambda p: [7.0] if p.kind == "connect" else [0.0]
+            with anyio.move_on_after(5):  # given up before it arrives: it makes nothing
+                await net.connect(*B)
+            net.fate = lambda p: [0.25, 0.5]  # a duplicate request makes no second connection
             await net.connect(*B)
             times.append(trio.current_time())
+            await trio.sleep(10)
+            assert len(net.streams) == 2
 
     on_virtual_time(main)
-    assert times == [5.0, 5.25]
+    assert times == [5.0, 10.25]

@@ -583,13 +583,16 @@ class MemoryNetwork:
     async def connect(self, host: str, port: int, *, local_host: str | None = None) -> MemoryStream:
         """A connection to the listener on ``(host, port)``: ``ConnectionRefusedError`` if
         there is none (or its backlog is full); waits as long as the fault hook delays the
-        request (for ever if it loses it: bound it with the caller's timeout)."""
+        request (for ever if it loses it: bound it with the caller's timeout). A duplicate of
+        the request, or one arriving after the caller gave up, makes no connection."""
         local = (local_host or self.default_host, self._ephemeral(local_host or "0.0.0.0"))
         dest = (host, int(port))
         done = anyio.Event()
         result: list[MemoryStream | OSError] = []
 
         def establish() -> None:
+            if done.is_set():  # a duplicate, or the caller gave up
+                return
             listener = self._listeners.get(dest)
             if listener is None:
                 for any_host in _ANY_HOSTS:
@@ -615,7 +618,13 @@ class MemoryNetwork:
             done.set()
 
         self._put("connect", local, dest, b"", establish)
-        await done.wait()
+        try:
+            await done.wait()
+        except BaseException:  # cancelled (a timeout): no connection is left behind
+            done.set()
+            if result and isinstance(result[0], MemoryStream):
+                self.reset(result[0])
+            raise
         got = result[0]
         if isinstance(got, OSError):
             raise got
