@@ -272,11 +272,24 @@ _SLASHES_LEFT_OUT = re.compile(r"^(udp|tcp|serial):/?([^/].*)$", re.IGNORECASE)
 _COM_PORT = re.compile(r"^COM\d+$", re.IGNORECASE)
 
 
+#: A host name (letters, digits, ``-``, ``_``, dots) or an IPv4 address: what a bare
+#: ``10.0.0.5`` given for a URL looks like.
+_HOST_NAME = re.compile(r"^[A-Za-z0-9_]([A-Za-z0-9_.-]*[A-Za-z0-9_])?\.?$")
+_SCHEME_MISSPELT = re.compile(r"^(udp|tcp|serial)[:/]*(.+)$", re.IGNORECASE)
+#: Line settings written as one value (``9600,7,E,2``, ``9600 7E2``, ``9600-8-N-1``).
+_LINE_IN_ONE = re.compile(
+    r"^(\d+)[,\s/-]*([5-8])[,\s/-]*([NEOMS])[,\s/-]*(1\.5|1|2)$", re.IGNORECASE
+)
+
+
 def _meant_without_slashes(url: str) -> str:
-    """``; did you mean udp://10.0.0.5?`` for ``udp:10.0.0.5`` or ``udp:/10.0.0.5``."""
-    meant = _SLASHES_LEFT_OUT.match(url.strip())
+    """``; did you mean udp://10.0.0.5?`` for ``udp:10.0.0.5``, ``udp:/10.0.0.5``,
+    ``udp//10.0.0.5`` or a bare ``10.0.0.5``."""
+    text = url.strip()
+    meant = _SLASHES_LEFT_OUT.match(text) or _SCHEME_MISSPELT.match(text)
     if meant is None:
-        return ""
+        host = text.split("?", 1)[0]
+        return f"; did you mean udp://{text}?" if _HOST_NAME.match(host.split(":")[0]) else ""
     scheme, rest = meant.group(1).lower(), meant.group(2)
     if scheme == "serial" and not _COM_PORT.match(rest):
         rest = "/" + rest.lstrip("/")
@@ -327,6 +340,11 @@ def parse_endpoint(url: str) -> Endpoint:
         raise _refuse(url, "bad port") from exc
     if not port:  # ``:0`` was taken for the default port
         raise _refuse(url, "port must be 1..65535 (9600 if left out); got 0")
+    if not _HOST_NAME.match(host) and ":" not in host:  # (an IPv6 address has colons)
+        raise _refuse(
+            url,
+            f"{host!r} is no host name or IP address (one PLC per URL, no spaces)",
+        )
     if parts.path not in ("", "/"):
         query = f"?{parts.query}" if parts.query else ""
         raise _refuse(
@@ -361,7 +379,7 @@ def _options(url: str, query: str, scheme: str) -> tuple[tuple[str, str], ...]:
         try:
             option.check(key, value)
         except CommandError as exc:
-            raise _refuse(url, str(exc)) from None
+            raise _refuse(url, f"{exc}{_meant_value(url, key, value)}") from None
     if "node" in given and "dest" in given:
         raise _refuse(
             url,
@@ -369,6 +387,23 @@ def _options(url: str, query: str, scheme: str) -> tuple[tuple[str, str], ...]:
             f"(node={given['node']} is dest=0.{given['node']}.0)",
         )
     return options
+
+
+def _meant_value(url: str, key: str, value: str) -> str:
+    """A form meant for an option value that did not parse: options joined by ``;`` or a
+    second ``?`` instead of ``&``, line settings in one value."""
+    if ";" in value or "?" in value:
+        base, _, query = url.partition("?")
+        joined = query.replace(";", "&").replace("?", "&")
+        return f"; did you mean {base}?{joined}? (options are joined by &)"
+    line = _LINE_IN_ONE.match(value) if key == "baudrate" else None
+    if line:
+        baud, size, parity, stop = line.groups()
+        return (
+            f"; did you mean baudrate={baud}&bytesize={size}&parity={parity.upper()}"
+            f"&stopbits={stop}?"
+        )
+    return ""
 
 
 def _unknown(key: str, scheme: str) -> str:

@@ -246,6 +246,17 @@ def test_a_url_that_says_one_thing_twice_is_refused(url: str, message: str) -> N
         ("udp://admin@10.0.0.5", "FINS has no user name or password"),
         ("udp://10.0.0.5#x", "has no #fragment"),
         ("udp://10.0.0.5?nod=3", "unknown option 'nod'; did you mean 'node'?"),
+        ("10.0.0.5", "is not a connection URL .*; did you mean udp://10.0.0.5\\?"),
+        ("udp//10.0.0.5", "did you mean udp://10.0.0.5\\?"),
+        ("udp://10.0.0.5,10.0.0.6", "is no host name or IP address \\(one PLC per URL"),
+        ("udp:// 10.0.0.5", "is no host name or IP address"),
+        ("udp://h?timeout=1;node=2", "did you mean udp://h\\?timeout=1&node=2\\? \\(options are"),
+        ("udp://h?node=1?timeout=2", "did you mean udp://h\\?node=1&timeout=2\\?"),
+        (
+            "serial:///dev/ttyUSB0?baudrate=9600,7,E,2",
+            "did you mean baudrate=9600&bytesize=7&parity=E&stopbits=2\\?",
+        ),
+        ("serial:///dev/ttyUSB0?baudrate=19200 8N1", "bytesize=8&parity=N&stopbits=1\\?"),
         ("udp://10.0.0.5?baudrate=9600", "'baudrate': it is an option of serial URLs"),
         ("udp://10.0.0.5?tcp_node=3", r"keyword of connect\(\) only, connect\(url, tcp_node=...\)"),
     ],
@@ -266,6 +277,13 @@ def test_almost_right_urls_are_refused_with_the_form_meant(url: str, meant: str)
 )
 def test_serial_devices_as_meant(url: str, device: str) -> None:
     assert parse_endpoint(url).device == device
+
+
+@pytest.mark.parametrize(
+    "url", ["udp://plc-1.example.com.:9601", "tcp://PLC_7", "udp://[fe80::1%eth0]", "tcp://h"]
+)
+def test_host_names_and_addresses_pass(url: str) -> None:
+    assert parse_endpoint(url).host
 
 
 @pytest.mark.parametrize(
