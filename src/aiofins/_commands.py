@@ -783,23 +783,22 @@ class CommandMethods:
         area_code: ParameterArea | int | str,
         disk: Disk | str,
         name: str,
-        begin: int = 0,
-        count: int = 65535,
         directory: str = "",
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> FileTransferResult:
-        """PARAMETER AREA-FILE TRANSFER (22 0B); see :class:`ParameterAreaFileTransfer`."""
+        """PARAMETER AREA-FILE TRANSFER (22 0B); see :class:`ParameterAreaFileTransfer`.
+
+        The whole area always: beginning word 0000 and number of items FFFF, as the manual
+        fixes them (5-3-40)."""
         return await self.call(
             ParameterAreaFileTransfer(
                 mode=_transfer(mode),
                 area_code=_area(area_code),
                 disk=_disk(disk),
                 name=name,
-                begin=begin,
-                count=count,
                 directory=directory,
             ),
             dest=dest,
@@ -812,24 +811,21 @@ class CommandMethods:
         mode: FileTransferMode | int | str,
         disk: Disk | str,
         name: str,
-        program_number: int = 65535,
-        begin_word: int = 0,
-        byte_count: int = 4294967295,
         directory: str = "",
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> ProgramAreaFileTransferResult:
-        """PROGRAM AREA-FILE TRANSFER (22 0C); see :class:`ProgramAreaFileTransfer`."""
+        """PROGRAM AREA-FILE TRANSFER (22 0C); see :class:`ProgramAreaFileTransfer`.
+
+        The whole program always: program number FFFF, beginning word 00000000 and number
+        of bytes FFFFFFFF, as the manual fixes them (5-3-41)."""
         return await self.call(
             ProgramAreaFileTransfer(
                 mode=_transfer(mode),
                 disk=_disk(disk),
                 name=name,
-                program_number=program_number,
-                begin_word=begin_word,
-                byte_count=byte_count,
                 directory=directory,
             ),
             dest=dest,

@@ -300,6 +300,14 @@ def test_operation_metadata() -> None:
          CommandError, "8010"),
         (lambda: ProgramAreaFileTransfer(FileTransferMode.COMPARE, CARD, "A", program_number=0),
          CommandError, "FFFF"),
+        (lambda: ParameterAreaFileTransfer(FileTransferMode.COMPARE, 0x8010, CARD, "A", begin=1),
+         CommandError, "beginning word 1 must be 0"),
+        (lambda: ParameterAreaFileTransfer(FileTransferMode.COMPARE, 0x8010, CARD, "A", count=512),
+         CommandError, "number of items 512 must be FFFF"),
+        (lambda: ProgramAreaFileTransfer(FileTransferMode.COMPARE, CARD, "A", begin_word=4),
+         CommandError, "beginning word 4 must be 0"),
+        (lambda: ProgramAreaFileTransfer(FileTransferMode.COMPARE, CARD, "A", byte_count=1024),
+         CommandError, "must be FFFFFFFF"),
         (lambda: CreateDeleteDirectory(CARD, 2, "D"), CommandError, "directory parameter"),  # type: ignore[arg-type]
         (lambda: CreateDeleteDirectory(CARD, DirectoryOperation.CREATE, "D.IR.X"), CommandError,
          "directory name"),
@@ -446,11 +454,12 @@ requests = st.one_of(
     ),
     st.builds(
         ParameterAreaFileTransfer, transfer_modes,
-        st.sampled_from(sorted(file_ops.FILE_TRANSFER_PARAMETER_AREAS)), disks, file_names(), u16,
-        u16, directories(),
+        st.sampled_from(sorted(file_ops.FILE_TRANSFER_PARAMETER_AREAS)), disks, file_names(),
+        st.just(0), st.just(0xFFFF), directories(),
     ),
     st.builds(
-        ProgramAreaFileTransfer, transfer_modes, disks, file_names(), st.just(0xFFFF), u32, u32,
+        ProgramAreaFileTransfer, transfer_modes, disks, file_names(), st.just(0xFFFF), st.just(0),
+        st.just(0xFFFFFFFF),
         directories(),
     ),
     st.builds(

@@ -428,6 +428,17 @@ def test_parameter_and_program_area_file_transfer(plc: VirtualPLC) -> None:
     assert call(plc, "220C", bytes.fromhex("0002" + head) + tail) == (0, b"\x00\x00\x00\x04")
 
 
+def test_area_file_transfers_check_their_fixed_parameters(plc: VirtualPLC) -> None:
+    """Manual 5-3-40/5-3-41: 220B's begin is always 0000 and its count FFFF; 220C's begin
+    00000000 and its byte count FFFFFFFF. Anything else is refused (1103 begin, 1104 count)."""
+    tail = b"\x80\x01" + NAME + _dir()
+    assert call(plc, "220B", bytes.fromhex("0000 8010 0001 FFFF") + tail) == (0x1103, b"")
+    assert call(plc, "220B", bytes.fromhex("0000 8010 0000 0200") + tail) == (0x1104, b"")
+    tail = b"\x80\x00" + NAME + _dir()
+    assert call(plc, "220C", bytes.fromhex("0000 FFFF 00000004 FFFFFFFF") + tail) == (0x1103, b"")
+    assert call(plc, "220C", bytes.fromhex("0000 FFFF 00000000 00000400") + tail) == (0x1104, b"")
+
+
 # ---- serial gateway ------------------------------------------------------------------------
 
 

@@ -132,6 +132,13 @@ class _AreaFileTransfer(FileCommand[R]):
         return finish(cls, r, mode=mode, disk=disk, name=name, directory=directory, **area)
 
 
+#: The fixed parameters of 220B (manual 5-3-40): the whole parameter area, from word 0.
+PARAMETER_FILE_BEGIN = 0x0000
+PARAMETER_FILE_COUNT = 0xFFFF
+#: The fixed parameters of 220C (manual 5-3-41): the whole program, from byte 0.
+PROGRAM_FILE_BEGIN = 0x00000000
+PROGRAM_FILE_BYTES = 0xFFFFFFFF
+
 # --------------------------------------------------------------------------- 220A
 
 
@@ -183,7 +190,9 @@ class MemoryAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
 class ParameterAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
     """220B: transfer a parameter area to a file, back, or compare them.
 
-    The manual specifies ``begin`` 0000 and ``count`` FFFF (the whole area).
+    The manual fixes ``begin`` 0000 and ``count`` FFFF (the whole area, 5-3-40): other
+    values are refused before anything is sent, and a command carrying them is answered
+    with 1103 (beginning word) or 1104 (number of items) by the simulator.
     """
 
     SRC: ClassVar[int] = 0x0B
@@ -202,8 +211,10 @@ class ParameterAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
         if self.area_code not in FILE_TRANSFER_PARAMETER_AREAS:
             codes = ", ".join(f"{c:04X}" for c in sorted(FILE_TRANSFER_PARAMETER_AREAS))
             raise CommandError(f"parameter area code {self.area_code!r} is not one of {codes}")
-        check_u("beginning word", self.begin, 16)
-        check_u("number of words", self.count, 16)
+        if self.begin != PARAMETER_FILE_BEGIN:
+            raise CommandError(f"beginning word {self.begin!r} must be 0 (manual 5-3-40)")
+        if self.count != PARAMETER_FILE_COUNT:
+            raise CommandError(f"number of items {self.count!r} must be FFFF hex (5-3-40)")
 
     def _encode_area(self) -> bytes:
         return u16(self.area_code) + u16(self.begin) + u16(self.count)
@@ -213,7 +224,12 @@ class ParameterAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
         area_code = r.u16()
         if area_code not in FILE_TRANSFER_PARAMETER_AREAS:
             raise DecodeError(f"parameter area code {area_code:04X}", end_code=0x1101)
-        return {"area_code": area_code, "begin": r.u16(), "count": r.u16()}
+        begin, count = r.u16(), r.u16()
+        if begin != PARAMETER_FILE_BEGIN:
+            raise DecodeError(f"beginning word {begin:04X} (always 0000)", end_code=0x1103)
+        if count != PARAMETER_FILE_COUNT:
+            raise DecodeError(f"number of items {count:04X} (always FFFF)", end_code=0x1104)
+        return {"area_code": area_code, "begin": begin, "count": count}
 
     def decode_response(self, data: bytes) -> FileTransferResult:
         return FileTransferResult.decode(data, f"{self.NAME} response")
@@ -226,7 +242,9 @@ class ParameterAreaFileTransfer(_AreaFileTransfer[FileTransferResult]):
 class ProgramAreaFileTransfer(_AreaFileTransfer[ProgramAreaFileTransferResult]):
     """220C: transfer the user program to a file, back (PROGRAM mode), or compare them.
 
-    The manual fixes program number FFFF, beginning word 00000000, bytes FFFFFFFF.
+    The manual fixes program number FFFF, beginning word 00000000, bytes FFFFFFFF
+    (5-3-41): other values are refused before anything is sent, and a command carrying
+    them is answered with 1106, 1103 or 1104 by the simulator.
     """
 
     SRC: ClassVar[int] = 0x0C
@@ -246,8 +264,12 @@ class ProgramAreaFileTransfer(_AreaFileTransfer[ProgramAreaFileTransferResult]):
     def _check_area(self) -> None:
         if self.program_number != PROGRAM_NUMBER:
             raise CommandError(f"program number {self.program_number!r} must be FFFF hex")
-        check_u("beginning word", self.begin_word, 32)
-        check_u("number of bytes", self.byte_count, 32)
+        if self.begin_word != PROGRAM_FILE_BEGIN:
+            raise CommandError(f"beginning word {self.begin_word!r} must be 0 (manual 5-3-41)")
+        if self.byte_count != PROGRAM_FILE_BYTES:
+            raise CommandError(
+                f"number of bytes {self.byte_count!r} must be FFFFFFFF hex (manual 5-3-41)"
+            )
 
     def _encode_area(self) -> bytes:
         return u16(self.program_number) + u32(self.begin_word) + u32(self.byte_count)
@@ -257,7 +279,12 @@ class ProgramAreaFileTransfer(_AreaFileTransfer[ProgramAreaFileTransferResult]):
         program_number = r.u16()
         if program_number != PROGRAM_NUMBER:
             raise DecodeError(f"program number {program_number:04X}", end_code=0x1106)
-        return {"program_number": program_number, "begin_word": r.u32(), "byte_count": r.u32()}
+        begin, size = r.u32(), r.u32()
+        if begin != PROGRAM_FILE_BEGIN:
+            raise DecodeError(f"beginning word {begin:08X} (always 00000000)", end_code=0x1103)
+        if size != PROGRAM_FILE_BYTES:
+            raise DecodeError(f"number of bytes {size:08X} (always FFFFFFFF)", end_code=0x1104)
+        return {"program_number": program_number, "begin_word": begin, "byte_count": size}
 
     def decode_response(self, data: bytes) -> ProgramAreaFileTransferResult:
         return ProgramAreaFileTransferResult.decode(data)
