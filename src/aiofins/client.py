@@ -36,7 +36,7 @@ from .protocol.errors import CommandError, ConnectionLost, DecodeError, EndCodeE
 from .protocol.guard import changes, check_read_only
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
-from .protocol.limits import RouteLimits, limits_for
+from .protocol.limits import RouteLimits, check_command, limits_for
 from .protocol.values import (
     BoolTypeName,
     FloatTypeName,
@@ -148,9 +148,12 @@ class Client(CommandMethods):
     """A FINS client for one PLC (``dest``), over one session.
 
     Options: ``dest`` (the PLC's FINS address; per call too), ``limits`` (the route's
-    :class:`RouteLimits`, Ethernet by default), ``word_order`` for typed values (Omron's CDAB
-    by default). CPU error flags of the last response (end code bits 6/7) are in
-    :attr:`last_end_code`; they are not raised.
+    :class:`RouteLimits`, Ethernet by default), ``routes`` (limits per destination network,
+    for destinations behind gateways: ``{3: limits_for(NetworkType.SYSMAC_LINK)}``; a
+    network not in it, and network 0, take ``limits``), ``word_order`` for typed values
+    (Omron's CDAB by default). Every command is checked against its destination's route
+    before it is sent (:func:`~aiofins.protocol.limits.check_command`). CPU error flags of
+    the last response (end code bits 6/7) are in :attr:`last_end_code`; they are not raised.
 
     A client made by :func:`aiofins.connect` is opened and closed either with ``async with``
     or explicitly, for a client kept in an object of its own (a service class)::
@@ -170,12 +173,21 @@ class Client(CommandMethods):
         *,
         dest: FinsAddress | str | None = None,
         limits: RouteLimits | None = None,
+        routes: Mapping[int, RouteLimits] | None = None,
         word_order: WordOrder | str = WordOrder.LOW_FIRST,
         read_only: bool = False,
     ) -> None:
         self.session = session
         self.dest = session.dest if dest is None else FinsAddress.of(dest)
-        self.limits = limits if limits is not None else limits_for()
+        #: The limits of a destination network not in :attr:`routes` (and of network 0).
+        self.default_limits = limits if limits is not None else limits_for()
+        #: Limits per destination network (its route's smallest, manual 5-2-2).
+        self.routes: dict[int, RouteLimits] = dict(routes or {})
+        #: The limits of the route to :attr:`dest` (what bulk transfers and tag plans use).
+        network = self.dest.network
+        self.limits = (
+            self.routes.get(network, self.default_limits) if network else self.default_limits
+        )
         self.word_order = WordOrder.parse(word_order)
         #: Refuse every command that changes the PLC (:class:`ReadOnlyError`, nothing sent).
         self.read_only = read_only
@@ -197,7 +209,7 @@ class Client(CommandMethods):
         """A client in state ``NEW`` whose connection ``opener`` makes when it is opened
         (what :func:`aiofins.connect` returns; ``where`` names the PLC in errors). Its
         ``dest``, ``limits``, ``word_order`` and ``read_only`` are those of the connection
-        once open."""
+        once open, and so are its ``routes``."""
         client = cls.__new__(cls)
         Client.__init__(client, cast(Session, _NoSession(client)), dest=FinsAddress(0, 0, 0))
         client._state = ClientState.NEW
@@ -262,6 +274,8 @@ class Client(CommandMethods):
         self.session = inner.session
         self.dest = inner.dest
         self.limits = inner.limits
+        self.default_limits = inner.default_limits
+        self.routes = inner.routes
         self.word_order = inner.word_order
         self.read_only = inner.read_only
 
@@ -369,11 +383,26 @@ class Client(CommandMethods):
             return self
         twin = self._twin
         if twin is None:
-            twin = Client(self.session, dest=self.dest, limits=self.limits, read_only=read_only)
+            twin = Client(
+                self.session,
+                dest=self.dest,
+                limits=self.default_limits,
+                routes=self.routes,
+                read_only=read_only,
+            )
             twin.word_order = self.word_order
             twin._twin = self
             self._twin = twin
         return twin
+
+    def route_to(self, dest: FinsAddress | str | None = None) -> RouteLimits:
+        """The limits of the route to ``dest`` (the client's own by default)."""
+        if dest is None:
+            return self.limits
+        network = FinsAddress.of(dest).network
+        if network == self.dest.network:
+            return self.limits
+        return self.routes.get(network, self.default_limits) if network else self.default_limits
 
     def guard(self, operation: type[Request[Any]]) -> None:
         """Raise :class:`ReadOnlyError` now if this client is read-only and ``operation``
@@ -406,6 +435,7 @@ class Client(CommandMethods):
         if self.read_only:
             _check_read_only(mrc, src, params)
         target = self._target(dest)
+        check_command(self.limits if dest is None else self.route_to(target), mrc, src, params)
         try:
             response = await self.session.request(
                 mrc,
@@ -442,6 +472,9 @@ class Client(CommandMethods):
         if self.read_only:
             for mrc, src, params in commands:
                 _check_read_only(mrc, src, params)
+        route = self.route_to(dest)
+        for mrc, src, params in commands:
+            check_command(route, mrc, src, params)
         return await self._execute_many(commands, dest, timeout, retries, None, idempotent)
 
     async def _execute_many(
@@ -537,7 +570,7 @@ class Client(CommandMethods):
         """
         if type(count) is not int or count < 0:
             count = whole_number("count", count, 0)
-        limit = self.limits.memory_read_words
+        limit = (self.limits if dest is None else self.route_to(dest)).memory_read_words
         plan = (
             read_frames(address, count, limit)
             if cacheable(address)
@@ -598,7 +631,7 @@ class Client(CommandMethods):
         """
         if type(values) is not list and type(values) is not tuple:
             _check_words(values)
-        limit = self.limits.memory_write_words
+        limit = (self.limits if dest is None else self.route_to(dest)).memory_write_words
         count = len(values)
         plan = (
             write_frames(address, count, limit)

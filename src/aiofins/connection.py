@@ -39,7 +39,7 @@ from .hooks import EventHooks
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
-from .protocol.limits import NetworkType, RouteLimits, limits_for
+from .protocol.limits import NetworkType, RouteLimits, RouteSpec, limits_for, parse_routes
 from .protocol.values import WordOrder
 from .session import Session
 from .session.nodes import SOURCE_NODES
@@ -86,9 +86,15 @@ def local_node_towards(host: str, avoid: int | None = None) -> int:
 
 
 def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
-    """The transport for an endpoint (serial settings come from the URL or ``options``)."""
+    """The transport for an endpoint (serial settings come from the URL or ``options``;
+    ``local_port``, the UDP port to bind, from ``options`` or ``?local_port=``)."""
     if endpoint.scheme == "udp":
-        return UdpTransport(endpoint.host, endpoint.port)
+        port = options.get("local_port")
+        if port is None:
+            port = endpoint.option("local_port", "0")
+        return UdpTransport(
+            endpoint.host, endpoint.port, local_port=int(option_value("local_port", port))
+        )
     if endpoint.scheme == "tcp":
         return TcpTransport(
             endpoint.host,
@@ -230,6 +236,9 @@ _NUMBER_CHECKS: dict[str, Callable[[object], object]] = {
     "breaker_threshold": lambda v: whole_number("breaker_threshold", v, 0),
     "breaker_cooldown": lambda v: _pair("breaker_cooldown", v),
     "reconnect_backoff": lambda v: _pair("reconnect_backoff", v),
+    "routes": lambda v: parse_routes(v),
+    "source_network": lambda v: whole_number("source_network", v, 0, 127),
+    "local_port": lambda v: whole_number("local_port", v, 0, 65535),
 }
 
 
@@ -290,6 +299,9 @@ def connect(
     gct: int = 2,
     networks: tuple[NetworkType, ...] = (),
     limits: RouteLimits | None = None,
+    routes: Mapping[int, RouteSpec] | str | None = None,
+    source_network: int | None = None,
+    local_port: int | None = None,
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
     read_only: bool = False,
     hooks: EventHooks | None = None,
@@ -304,7 +316,16 @@ def connect(
     before then; a bad URL or option is raised on opening.
 
     ``networks`` names the networks a routed request crosses (their smallest limits apply);
-    ``limits`` overrides them altogether. ``max_in_flight`` caps concurrent requests to the
+    ``limits`` overrides them altogether. ``routes`` (or ``?routes=3:sysmac_link``) gives
+    limits per destination network, for a client that reaches PLCs behind gateways: a
+    mapping of network number to :class:`RouteLimits`, a network type or the types the
+    route crosses (see docs/plant-networks.md); other networks take ``networks``/``limits``.
+    ``source_network`` (or ``?source_network=N``) is our own FINS network, written into
+    SNA so that a gateway can route the reply back (a routed request with SNA 0 is answered
+    onto the destination's own network, where we are not). ``local_port`` (or
+    ``?local_port=9600``) binds the UDP socket to that port, for a PLC whose Ethernet unit
+    answers to a fixed port (static address conversion, IP address table); the session then
+    has one SID space (``max_sid_spaces`` 1). ``max_in_flight`` caps concurrent requests to the
     PLC (default 5; serial lines carry one at a time). ``max_sid_spaces`` (or
     ``?max_sid_spaces=N``) caps the sockets (UDP, each with a source node of its own) or
     connections (FINS/TCP) the session may open to the PLC when the 256 SIDs of one are all
@@ -363,6 +384,9 @@ def connect(
             gct=gct,
             networks=networks,
             limits=limits,
+            routes=routes,
+            source_network=source_network,
+            local_port=local_port,
             word_order=word_order,
             read_only=read_only,
             hooks=hooks,
@@ -398,6 +422,9 @@ async def _connect(
     gct: int = 2,
     networks: tuple[NetworkType, ...] = (),
     limits: RouteLimits | None = None,
+    routes: Mapping[int, RouteSpec] | str | None = None,
+    source_network: int | None = None,
+    local_port: int | None = None,
     word_order: WordOrder | str = WordOrder.LOW_FIRST,
     read_only: bool = False,
     hooks: EventHooks | None = None,
@@ -426,9 +453,15 @@ async def _connect(
             "breaker_threshold": breaker_threshold,
             "breaker_cooldown": breaker_cooldown,
             "reconnect_backoff": reconnect_backoff,
+            "routes": routes,
+            "source_network": source_network,
+            "local_port": local_port,
         }
     )
     check_options(transport_options)
+    if routes is None and url is not None:
+        routes = parse_endpoint(url).option("routes")
+    route_map = parse_routes(routes) if routes is not None else {}
     endpoint: Endpoint | None = None
     guarded = read_only
     held: tuple[str, int] | None = None  # our source node in SOURCE_NODES (UDP)
@@ -437,7 +470,19 @@ async def _connect(
         endpoint = parse_endpoint(url)
         guarded = guarded or bool(option_value("read_only", endpoint.option("read_only", "0")))
         d, s = await default_addresses(endpoint, dest, src)
-        transport = make_transport(endpoint, **transport_options)
+        if local_port is None and endpoint.option("local_port"):
+            local_port = int(option_value("local_port", endpoint.option("local_port")))
+        if local_port:
+            if endpoint.scheme != "udp":
+                raise CommandError("local_port binds a UDP socket: it needs a udp:// URL")
+            spaces = _sid_spaces(endpoint, max_sid_spaces)
+            if spaces is not None and spaces > 1:
+                raise CommandError(
+                    f"local_port={local_port} binds one socket: max_sid_spaces must be 1, "
+                    f"not {spaces}"
+                )
+            max_sid_spaces = 1
+        transport = make_transport(endpoint, local_port=local_port, **transport_options)
         if endpoint.scheme == "udp" and not source_held:
             link = await peer_link(endpoint)
             named = src is not None or endpoint.option("src") is not None
@@ -453,6 +498,10 @@ async def _connect(
             )
         d = _address(dest) or FinsAddress(0, 1, 0)
         s = _address(src) or FinsAddress(0, 254, 0)
+    if source_network is None and endpoint is not None and endpoint.option("source_network"):
+        source_network = int(option_value("source_network", endpoint.option("source_network")))
+    if source_network and s.network == 0:
+        s = FinsAddress(source_network, s.node, s.unit)
     try:
         serial = endpoint is not None and endpoint.scheme == "serial"
         route = limits or limits_for(*(networks or ((NetworkType.HOST_LINK,) if serial else ())))
@@ -491,7 +540,9 @@ async def _connect(
                 )
             ):
                 session.dest = FinsAddress(0, transport.remote_node, 0)
-            yield Client(session, limits=route, word_order=word_order, read_only=guarded)
+            yield Client(
+                session, limits=route, routes=route_map, word_order=word_order, read_only=guarded
+            )
     finally:
         if held is not None:
             SOURCE_NODES.release(*held)

@@ -9,7 +9,10 @@ The query's options are those of :data:`OPTIONS`, one table for :func:`aiofins.c
 :class:`aiofins.Pool`, the command line and the gateway: ``?dest=1.2.0`` (DNA.DA1.DA2),
 ``?src=0.10.0`` and ``?node=N`` (the destination node, DA1) on UDP/TCP URLs,
 ``?max_sid_spaces=N`` the sockets (UDP) or connections (FINS/TCP) a session may open to the
-PLC when the 256 SIDs of one are not enough (see docs/session.md); on every URL
+PLC when the 256 SIDs of one are not enough (see docs/session.md), ``?routes=3:sysmac_link``
+the limits per destination network, ``?source_network=N`` our own FINS network (SNA) for
+routed requests and, on UDP, ``?local_port=9600`` the port to bind (see
+docs/plant-networks.md); on every URL
 ``?timeout=S`` the seconds a call may take, ``?read_only=1`` a read-only client,
 ``?breaker_threshold=N``, ``?breaker_cooldown=MIN,MAX`` and ``?reconnect_backoff=MIN,MAX``
 the circuit breaker and the reconnection (see :mod:`aiofins.session.breaker`); on a serial
@@ -34,6 +37,7 @@ from urllib.parse import parse_qsl, urlsplit
 from .protocol.errors import CommandError
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, switch, whole_number
+from .protocol.limits import routes_text
 from .transport import tcp, udp
 from .transport.base import url_host
 
@@ -83,6 +87,10 @@ def _switch(name: str, value: object) -> bool:
 
 def _address(name: str, value: object) -> str:
     return str(FinsAddress.parse(str(value)))
+
+
+def _routes(name: str, value: object) -> str:
+    return routes_text(value)
 
 
 def _stopbits(name: str, value: object) -> float:
@@ -135,6 +143,17 @@ OPTIONS: dict[str, UrlOption] = {
         "sockets (UDP) or connections (TCP) a session may open, 1..254",
         _NET,
         _integer(1, MAX_SID_SPACES),
+    ),
+    "routes": UrlOption(
+        "limits per destination network, NET:TYPE[+TYPE],... (3:sysmac_link)", _NET, _routes
+    ),
+    "source_network": UrlOption(
+        "our FINS network (SNA) for routed requests, 0..127", _NET, _integer(0, 127)
+    ),
+    "local_port": UrlOption(
+        "the UDP port to bind (9600 for a PLC answering to a fixed port)",
+        frozenset({"udp"}),
+        _integer(0, 65535),
     ),
     "timeout": UrlOption("seconds a call may take", _ALL, _seconds),
     "read_only": UrlOption("refuse every command that changes the PLC", _ALL, _switch),

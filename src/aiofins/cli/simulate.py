@@ -24,6 +24,8 @@ from ..simulator.tcp import DEFAULT_MAX_CONNECTIONS
 from . import report
 
 if TYPE_CHECKING:
+    from ..simulator.plant import Plant
+
     SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
 else:
     SubParsers = Any
@@ -120,6 +122,12 @@ def register(subparsers: SubParsers) -> None:
     where.add_argument("--udp", type=endpoint, metavar="HOST:PORT", help="FINS/UDP endpoint")
     where.add_argument("--tcp", type=endpoint, metavar="HOST:PORT", help="FINS/TCP endpoint")
     where.add_argument("--serial", metavar="DEVICE", help="serial device for Host Link FINS")
+    where.add_argument(
+        "--plant",
+        metavar="FILE",
+        help="serve a plant of routed networks described in a TOML file instead of one PLC "
+        "(see docs/plant-networks.md)",
+    )
     where.add_argument(
         "--serial-unit", type=integer_in(0, 31), default=0, metavar="N", help="Host Link unit"
     )
@@ -286,6 +294,8 @@ def build_plan(args: argparse.Namespace) -> FaultPlan:
 def run(args: argparse.Namespace) -> int:
     """The ``simulate`` handler: exit code 0 after an interrupt, 2 on bad options (most are
     refused by argparse already, as ``aiofins simulate: error: argument ...``)."""
+    if args.plant is not None:
+        return _run_plant(args)
     try:
         plan = build_plan(args)
     except (ValueError, OSError) as exc:
@@ -305,6 +315,52 @@ def run(args: argparse.Namespace) -> int:
         if plan.log is not None:
             plan.log.close()
     return 0
+
+
+def _run_plant(args: argparse.Namespace) -> int:
+    """``--plant FILE``: every Ethernet unit of the plant on its own UDP endpoint."""
+    from ..simulator.plantfile import load_plant
+
+    if args.udp is not None or args.tcp is not None or args.serial is not None:
+        print("aiofins simulate: --plant takes its endpoints from the file", file=sys.stderr)
+        return 2
+    try:
+        plant = load_plant(args.plant)
+    except (FinsError, OSError) as exc:
+        print(f"aiofins simulate: {exc}", file=sys.stderr)
+        return 2
+    try:
+        anyio.run(_serve_plant, plant, backend=args.backend)
+    except KeyboardInterrupt:
+        pass
+    except Exception as exc:  # cannot listen (port in use, bad host)
+        if report("aiofins simulate", exc, (OSError, FinsError)):
+            return 1
+        raise
+    return 0
+
+
+async def _serve_plant(plant: Plant) -> None:
+    from ..simulator.plantserver import serve_plant
+
+    async with serve_plant(plant) as server:
+        for station in plant.stations:
+            where = ", ".join(f"network {u.network} node {u.node}" for u in station.units)
+            print(f"PLC {station.name}: {where}", flush=True)
+        for station in plant.stations:
+            for unit in station.units:
+                if unit.host is not None:
+                    host = f"[{unit.host}]" if ":" in unit.host else unit.host
+                    print(
+                        f"listening on udp://{host}:{server.port_of(unit)} "
+                        f"(PLC {station.name}, network {unit.network} node {unit.node})",
+                        flush=True,
+                    )
+        try:
+            await _wait_for_signal()
+        finally:
+            counts = " ".join(f"{k}={v}" for k, v in sorted(plant.counts.items()))
+            print(f"stopped: {counts or 'no frames'}", file=sys.stderr, flush=True)
 
 
 def endpoints(

@@ -9,6 +9,7 @@ units whose limits differ (e.g. an older Ethernet unit, or a test that wants tin
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 
@@ -152,3 +153,128 @@ def limits_for(*network_types: NetworkType, **overrides: int) -> RouteLimits:
             raise CommandError(f"unknown route limit(s): {', '.join(unknown)}")
         result = replace(result, **overrides)
     return result
+
+
+#: Network type names in route maps (``?routes=3:sysmac_link``) and plant files; ``serial``
+#: is Host Link.
+NETWORK_NAMES: dict[str, NetworkType] = {
+    **{t.value: t for t in NetworkType},
+    "serial": NetworkType.HOST_LINK,
+}
+
+#: What a route map entry may be: limits, a network type (or its name), or several of them
+#: (the networks the route crosses).
+RouteSpec = (
+    RouteLimits | NetworkType | str | tuple[NetworkType | str, ...] | list[NetworkType | str]
+)
+
+
+def _network_type(value: object) -> NetworkType:
+    if isinstance(value, NetworkType):
+        return value
+    name = str(value).strip().lower().replace("-", "_").replace(" ", "_")
+    if name not in NETWORK_NAMES:
+        raise CommandError(
+            f"unknown network type {value!r}; known: {', '.join(sorted(NETWORK_NAMES))}"
+        )
+    return NETWORK_NAMES[name]
+
+
+def route_limits(spec: RouteSpec) -> RouteLimits:
+    """The limits of one route map entry (see :data:`RouteSpec`)."""
+    if isinstance(spec, RouteLimits):
+        return spec
+    if isinstance(spec, str):
+        return limits_for(*(_network_type(p) for p in spec.split("+")))
+    if isinstance(spec, NetworkType):
+        return limits_for(spec)
+    if isinstance(spec, (tuple, list)):
+        return limits_for(*(_network_type(p) for p in spec))
+    raise CommandError(
+        f"a route is RouteLimits, a network type or a sequence of them; got {spec!r}"
+    )
+
+
+def parse_routes(value: object) -> dict[int, RouteLimits]:
+    """A route map: destination network (1..127) -> :class:`RouteLimits`.
+
+    From a mapping (``{3: NetworkType.SYSMAC_LINK, 2: "controller_link"}``) or from text as
+    in a URL (``"3:sysmac_link,2:controller_link"``; ``+`` joins the networks of one route,
+    ``3:controller_link+sysmac_link``). Each route's limits are the smallest of its networks
+    and of the first hop's Ethernet (:func:`limits_for`).
+    """
+    items: list[tuple[object, object]] = []
+    if isinstance(value, str):
+        for piece in filter(None, (p.strip() for p in value.split(","))):
+            number_text, sep, text = piece.partition(":")
+            if not sep or not text:
+                raise CommandError(f"route {piece!r}: write NETWORK:TYPE, e.g. 3:sysmac_link")
+            items.append((number_text, text))
+    elif isinstance(value, Mapping):
+        items = list(value.items())
+    else:
+        raise CommandError(
+            f"routes must be a mapping or text such as '3:sysmac_link'; got {value!r}"
+        )
+    routes: dict[int, RouteLimits] = {}
+    for network, spec in items:
+        try:
+            number = int(str(network)) if not isinstance(network, bool) else -1
+        except ValueError:
+            number = -1
+        if not 1 <= number <= 127:
+            raise CommandError(f"route network {network!r} must be 1..127")
+        if number in routes:
+            raise CommandError(f"route network {number} given twice")
+        routes[number] = route_limits(spec)  # type: ignore[arg-type]  # checked there
+    return routes
+
+
+def routes_text(value: object) -> str:
+    """One spelling of a URL's ``?routes=`` (sorted by network; types as named)."""
+    if not isinstance(value, str):
+        raise CommandError(f"routes must be text such as '3:sysmac_link'; got {value!r}")
+    parse_routes(value)  # checked
+    pieces = []
+    for piece in filter(None, (p.strip() for p in value.split(","))):
+        network, _, spec = piece.partition(":")
+        kinds = "+".join(_network_type(p).value for p in spec.split("+"))
+        pieces.append((int(network), f"{int(network)}:{kinds}"))
+    return ",".join(text for _, text in sorted(pieces))
+
+
+def _count(params: bytes, at: int) -> int:
+    return int.from_bytes(params[at : at + 2], "big") & 0x7FFF if len(params) >= at + 2 else 0
+
+
+#: Per command code: (the limit's field name, what the command carries of it, its unit).
+_COMMAND_SIZES: dict[int, tuple[str, Callable[[bytes], int], str]] = {
+    0x0101: ("memory_read_words", lambda p: _count(p, 4), "words"),
+    0x0102: ("memory_write_words", lambda p: _count(p, 4), "words"),
+    0x0104: ("multiple_read_elements", lambda p: len(p) // 4, "elements"),
+    0x0201: ("parameter_read_words", lambda p: _count(p, 4), "words"),
+    0x0202: ("parameter_write_words", lambda p: _count(p, 4), "words"),
+    0x0306: ("program_read_bytes", lambda p: _count(p, 6), "bytes"),
+    0x0307: ("program_write_bytes", lambda p: len(p) - 8, "bytes"),
+}
+
+
+def check_command(limits: RouteLimits, mrc: int, src: int, params: bytes) -> None:
+    """Refuse a command that the route does not carry, with :class:`CommandError` naming
+    the limit (before anything is sent): its parameter bytes, and per command its words,
+    elements or bytes (0101, 0102, 0104, 0201, 0202, 0306, 0307)."""
+    if len(params) > limits.max_parameter_bytes:
+        raise CommandError(
+            f"command {mrc:02X}{src:02X} carries {len(params)} parameter bytes; this route "
+            f"carries {limits.max_parameter_bytes}"
+        )
+    size = _COMMAND_SIZES.get((mrc << 8) | src)
+    if size is None:
+        return
+    name, measure, unit = size
+    amount, limit = measure(params), getattr(limits, name)
+    if amount > limit:
+        raise CommandError(
+            f"command {mrc:02X}{src:02X} carries {amount} {unit}; this route carries "
+            f"{limit} ({name}, manual 5-2-2/5-3-5): split it or check the route map"
+        )

@@ -332,10 +332,16 @@ class VirtualPLC:
         if dest.node not in (self.address.node, LOCAL_NODE, BROADCAST_NODE):
             self.frames_ignored += 1
             return None
+        return self.answer(command, from_network=from_network)
+
+    def answer(self, command: CommandFrame, *, from_network: bool = True) -> ResponseFrame | None:
+        """Execute a command already known to be for this PLC (a plant's routing decided
+        that) and build its response; ``None`` for a broadcast or a no-response command."""
+        header = command.header
         self.frames_handled += 1
         self.commands[command.command_code] += 1
         end_code, data = self.execute(command, from_network=from_network)
-        if dest.node == BROADCAST_NODE or not header.response_required:
+        if header.destination.node == BROADCAST_NODE or not header.response_required:
             return None
         return self._reply(command, end_code, data)
 
