@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from aiofins.protocol.endcodes import EndCode
@@ -19,6 +21,8 @@ from aiofins.simulator.plant import (
 )
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.state import Mode
+
+from ..protocol.test_tshark import TSHARK, _warnings, pcap, run_tshark, udp_packet
 
 CLIENT = ("127.0.0.1", 40000)
 
@@ -213,3 +217,27 @@ def test_garbage_and_responses_are_counted_not_raised() -> None:
     assert plant.receive(unit, stray, *CLIENT) == []
     assert plant.counts["dropped:malformed"] == 1
     assert plant.counts["dropped:response-for-a-plc"] == 1
+
+
+def test_tshark_decodes_every_hop(tmp_path: Path) -> None:
+    """Wireshark's dissector reads each frame as it travelled on each network: a read and a
+    write two networks away, command and response, with the GCT of that hop."""
+    if TSHARK is None:
+        pytest.skip("tshark is not installed")
+    plant = three_networks()
+    send(plant, read_d0("3.5.0", 10))
+    write = build_command(
+        FinsAddress(3, 5, 0), FinsAddress(1, 254, 0), 8, 1, 2, bytes.fromhex("8200640000010102")
+    )
+    send(plant, write)
+    hops = list(plant.trace)
+    assert len(hops) == 12
+    path = tmp_path / "hops.pcap"
+    path.write_bytes(pcap([udp_packet(h.frame, to_plc=not h.frame[0] & 0x40) for h in hops]))
+    rows = run_tshark(path, "udp.port==9600,omron")
+    assert len(rows) == 12
+    for row, hop in zip(rows, hops, strict=True):
+        assert int(row["omron.icf"], 16) == hop.frame[0]
+        assert int(row["omron.command"], 16) == (hop.frame[10] << 8) | hop.frame[11]
+        assert row["_ws.malformed"] == "" and not _warnings(row), row["_ws.expert.message"]
+    assert [h.frame[2] for h in hops[:3]] == [2, 1, 0]

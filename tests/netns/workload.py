@@ -1,0 +1,110 @@
+"""The client side of the namespace tests, run inside the client's namespace:
+``python -m tests.netns.workload BACKEND SCENARIO``. Prints one JSON document of counts.
+
+Every call's outcome is counted: ``ok`` (the exact values expected), ``wrong`` (other
+values: must stay 0), or the name of the typed :class:`aiofins.FinsError` it raised. Any
+other exception ends the run with a traceback (the test fails).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections import Counter
+from typing import Any
+
+import anyio
+
+import aiofins
+
+ROUNDS = 100
+
+
+async def _count(
+    plc: aiofins.Client, counts: Counter[str], expected: list[int], rounds: int, **kw: Any
+) -> None:
+    for _ in range(rounds):
+        try:
+            values = await plc.read("D0", len(expected), **kw)
+        except aiofins.FinsError as exc:
+            counts[type(exc).__name__] += 1
+            continue
+        counts["ok" if values == expected else "wrong"] += 1
+
+
+async def udp_plant() -> dict[str, dict[str, int]]:
+    """Three PLCs of a plant, by IP address: dynamic conversion (.3), an IP address table
+    answering to port 9600 only (.4; without local_port nothing comes back), and a
+    gateway (.10) to a PLC two networks away."""
+    out: dict[str, dict[str, int]] = {}
+    targets = {
+        "dynamic": ("udp://192.168.250.3", {}, [300 + i for i in range(10)]),
+        "ip_table": (
+            "udp://192.168.250.4?local_port=9600",
+            {"max_sid_spaces": 1},
+            [400 + i for i in range(10)],
+        ),
+        "routed": (
+            "udp://192.168.250.10?source_network=1&routes=2:controller_link,3:sysmac_link",
+            {"dest": "3.5.0"},
+            [1234, 5678],
+        ),
+    }
+    for name, (url, options, expected) in targets.items():
+        counts: Counter[str] = Counter()
+        async with aiofins.connect(url, timeout=1.0, retries=3, **options) as plc:
+            await _count(plc, counts, expected, ROUNDS)
+            out[name] = dict(counts)
+            out[name]["source_node"] = plc.session.source.node
+            stats = plc.session.stats
+            out[name]["stats"] = {  # type: ignore[assignment]
+                "retries": stats.retries,
+                "duplicates": stats.duplicates,
+                "late_replies": stats.late_replies,
+                "timeouts": stats.timeouts,
+            }
+    counts = Counter()
+    async with aiofins.connect("udp://192.168.250.4", timeout=0.2, retries=0) as plc:
+        await _count(plc, counts, [400 + i for i in range(10)], 3)
+    out["ip_table_without_local_port"] = dict(counts)
+    return out
+
+
+async def tcp_link_drops() -> dict[str, dict[str, int]]:
+    """FINS/TCP to .5 (netem loss on the link), then the client's link goes down (every
+    call fails, typed), then up again (calls succeed again)."""
+    out: dict[str, dict[str, int]] = {}
+    device = sys.argv[3]
+    async with aiofins.connect("tcp://192.168.250.5", timeout=1.0, retries=2) as plc:
+        await plc.write("D0", list(range(500, 510)))
+        expected = list(range(500, 510))
+        counts: Counter[str] = Counter()
+        await _count(plc, counts, expected, ROUNDS)
+        out["lossy"] = dict(counts)
+        subprocess.run(["ip", "link", "set", device, "down"], check=True)
+        counts = Counter()
+        await _count(plc, counts, expected, 3)
+        out["down"] = dict(counts)
+        subprocess.run(["ip", "link", "set", device, "up"], check=True)
+        counts = Counter()
+        for _ in range(30):  # until the session has reconnected: bounded by count, not time
+            await _count(plc, counts, expected, 1)
+            if counts["ok"]:
+                break
+        await _count(plc, counts, expected, 10)
+        out["up_again"] = dict(counts)
+    return out
+
+
+SCENARIOS = {"udp_plant": udp_plant, "tcp_link_drops": tcp_link_drops}
+
+
+def main() -> None:
+    backend, scenario = sys.argv[1], sys.argv[2]
+    result = anyio.run(SCENARIOS[scenario], backend=backend)
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
