@@ -69,7 +69,7 @@ def check_route(lab: Lab, client: str, octet: int) -> None:
 
 def workload(
     lab: Lab, client: str, backend: str, scenario: str, *extra: str
-) -> dict[str, dict[str, int]]:
+) -> dict[str, dict[str, Any]]:
     done = lab.exec(client, sys.executable, "-m", "tests.netns.workload", backend, scenario, *extra)
     result: dict[str, dict[str, Any]] = json.loads(done.stdout)
     return result

@@ -33,12 +33,12 @@ async def _count(
         counts["ok" if values == expected else "wrong"] += 1
 
 
-async def udp_plant() -> dict[str, dict[str, int]]:
+async def udp_plant() -> dict[str, dict[str, Any]]:
     """Three PLCs of a plant, by IP address: dynamic conversion (.3), an IP address table
     answering to port 9600 only (.4; without local_port nothing comes back), and a
     gateway (.10) to a PLC two networks away."""
-    out: dict[str, dict[str, int]] = {}
-    targets = {
+    out: dict[str, dict[str, Any]] = {}
+    targets: dict[str, tuple[str, dict[str, Any], list[int]]] = {
         "dynamic": ("udp://192.168.250.3", {}, [300 + i for i in range(10)]),
         "ip_table": (
             "udp://192.168.250.4?local_port=9600",
@@ -58,7 +58,7 @@ async def udp_plant() -> dict[str, dict[str, int]]:
             out[name] = dict(counts)
             out[name]["source_node"] = plc.session.source.node
             stats = plc.session.stats
-            out[name]["stats"] = {  # type: ignore[assignment]
+            out[name]["stats"] = {
                 "retries": stats.retries,
                 "duplicates": stats.duplicates,
                 "late_replies": stats.late_replies,
