@@ -147,10 +147,15 @@ class Lab:
         return f"{self.prefix}h{octet}"
 
     def exec(self, ns: str, *command: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
+        done = subprocess.run(
             ["ip", "netns", "exec", ns, *command],
-            capture_output=True, text=True, timeout=TIMEOUT, check=True, cwd=REPO,
+            capture_output=True, text=True, timeout=TIMEOUT, cwd=REPO,
         )  # fmt: skip
+        if done.returncode:
+            raise AssertionError(
+                f"{' '.join(command)} in {ns} exited {done.returncode}:\n{done.stderr[-3000:]}"
+            )
+        return done
 
     def start(self, ns: str, *command: str, ready: str) -> subprocess.Popen[str]:
         """Start ``command`` in ``ns`` and wait for a line of stdout that starts with

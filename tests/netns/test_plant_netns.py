@@ -113,9 +113,11 @@ def test_fins_tcp_through_a_link_that_drops(lab: Lab, backend: str) -> None:
               "192.168.250.5:9600", "--node", "5", ready="listening on")  # fmt: skip
     check_route(lab, client, 5)
     result = workload(lab, client, backend, "tcp_link_drops", lab.device(100))
-    assert_counted(result["lossy"], 100, errors={"FinsTimeout", "ConnectionLost"})
-    assert result["lossy"]["ok"] >= 90, result  # TCP retransmits what netem drops
+    assert_counted(result["lossy"], 50, errors={"FinsTimeout", "ConnectionLost"})
+    assert result["lossy"]["ok"] >= 40, result  # TCP retransmits what the link drops
     assert_counted(result["down"], 3, errors={"FinsTimeout", "ConnectionLost"})
     assert result["down"].get("ok", 0) == 0
-    up = result["up_again"]
-    assert up.get("wrong", 0) == 0 and up["ok"] >= 10, result
+    up = result["up_again"]  # until the first success (at most 60 calls), then 10 more
+    calls = up.get("ok", 0) + up.get("FinsTimeout", 0) + up.get("ConnectionLost", 0)
+    assert_counted(up, calls, errors={"FinsTimeout", "ConnectionLost"})
+    assert up.get("ok", 0) >= 1, result  # the session reconnected by itself

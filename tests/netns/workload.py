@@ -19,6 +19,8 @@ import anyio
 import aiofins
 
 ROUNDS = 100
+#: FINS/TCP calls over the lossy link (a lost segment costs TCP's 200 ms retransmission).
+TCP_ROUNDS = 50
 
 
 async def _count(
@@ -76,19 +78,27 @@ async def tcp_link_drops() -> dict[str, dict[str, int]]:
     call fails, typed), then up again (calls succeed again)."""
     out: dict[str, dict[str, int]] = {}
     device = sys.argv[3]
-    async with aiofins.connect("tcp://192.168.250.5", timeout=1.0, retries=2) as plc:
+    # No circuit breaker (it would fail calls at once while it waits to probe: this test
+    # counts calls until the link is back), quick reconnection attempts.
+    async with aiofins.connect(
+        "tcp://192.168.250.5",
+        timeout=2.0,
+        retries=2,
+        breaker_threshold=0,
+        reconnect_backoff=(0.05, 0.5),
+    ) as plc:
         await plc.write("D0", list(range(500, 510)))
         expected = list(range(500, 510))
         counts: Counter[str] = Counter()
-        await _count(plc, counts, expected, ROUNDS)
+        await _count(plc, counts, expected, TCP_ROUNDS)
         out["lossy"] = dict(counts)
         subprocess.run(["ip", "link", "set", device, "down"], check=True)
         counts = Counter()
-        await _count(plc, counts, expected, 3)
+        await _count(plc, counts, expected, 3, timeout=0.5)
         out["down"] = dict(counts)
         subprocess.run(["ip", "link", "set", device, "up"], check=True)
         counts = Counter()
-        for _ in range(30):  # until the session has reconnected: bounded by count, not time
+        for _ in range(60):  # until the session has reconnected: bounded by count, not time
             await _count(plc, counts, expected, 1)
             if counts["ok"]:
                 break
