@@ -46,7 +46,7 @@ async def plant_client(
     plant = example_plant()
     async with serve_plant(plant) as server:
         port = server.port_of(plant.station("line").units[0])
-        url = f"udp://127.0.0.1:{port}?node=10&timeout=0.5&{query}"
+        url = f"udp://127.0.0.10:{port}?timeout=0.5&{query}"
         async with aiofins.connect(url, retries=0, **options) as plc:  # type: ignore[arg-type]
             yield plant, plc
 
@@ -188,7 +188,7 @@ async def test_routes_and_source_network_in_connect_and_pool() -> None:
     async with serve_plant(plant) as server:
         port = server.port_of(plant.station("line").units[0])
         pool = aiofins.Pool(source_network=1, routes=ROUTES)
-        async with pool, pool.client(f"udp://127.0.0.1:{port}?dest=3.5.0") as plc:
+        async with pool, pool.client(f"udp://127.0.0.10:{port}?dest=3.5.0") as plc:
             assert plc.limits == SYSMAC
             assert await plc.read("D0", 2) == [1234, 5678]
 

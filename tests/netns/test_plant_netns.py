@@ -89,7 +89,7 @@ def test_udp_plcs_by_ip_address_with_netem_faults(lab: Lab, tmp_path: Path, back
     serve(lab, lab.host("plc3", 3), one_plc(tmp_path, 3))
     serve(lab, lab.host("plc4", 4), one_plc(tmp_path, 4, "table"))
     gateway = tmp_path / "plant.toml"
-    gateway.write_text(EXAMPLE.read_text().replace("127.0.0.1:9600", "192.168.250.10:9600"))
+    gateway.write_text(EXAMPLE.read_text().replace("127.0.0.10:9600", "192.168.250.10:9600"))
     serve(lab, lab.host("line", 10), gateway)
     for octet in (3, 4, 10):
         check_route(lab, client, octet)

@@ -30,7 +30,7 @@ def aiofins(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_read_a_plc_two_networks_away(tmp_path: Path) -> None:
     plant = tmp_path / "plant.toml"  # the example on a free port instead of 9600
-    plant.write_text(EXAMPLE.read_text().replace('"127.0.0.1:9600"', '"127.0.0.1:0"'))
+    plant.write_text(EXAMPLE.read_text().replace('"127.0.0.10:9600"', '"127.0.0.10:0"'))
     proc = subprocess.Popen(
         [sys.executable, "-m", "aiofins.cli", "simulate", "--plant", str(plant)],
         stdout=subprocess.PIPE,
@@ -46,14 +46,14 @@ def test_read_a_plc_two_networks_away(tmp_path: Path) -> None:
             if not line:
                 pytest.fail(f"simulator exited: {proc.communicate(timeout=TIMEOUT)}")
             lines.append(line)
-            match = re.match(r"listening on udp://127\.0\.0\.1:(\d+) \(PLC line", line)
+            match = re.match(r"listening on udp://127\.0\.0\.10:(\d+) \(PLC line", line)
             port = int(match.group(1)) if match else None
         assert lines[:3] == [
             "PLC line: network 1 node 10, network 2 node 1\n",
             "PLC cell: network 2 node 2, network 3 node 3\n",
             "PLC press: network 3 node 5\n",
         ]
-        url = f"udp://127.0.0.1:{port}?source_network=1&routes=2:controller_link,3:sysmac_link"
+        url = f"udp://127.0.0.10:{port}?source_network=1&routes=2:controller_link,3:sysmac_link"
         read = aiofins("read", url, "D0", "2", "--dest", "3.5.0", "--json")
         assert read.returncode == 0, read.stderr
         assert '"values": [1234, 5678]' in read.stdout

@@ -10,8 +10,8 @@ from aiofins.protocol.endcodes import EndCode
 from aiofins.protocol.errors import CommandError
 from aiofins.protocol.header import FinsAddress, Header, ResponseFrame, build_command
 from aiofins.protocol.limits import NetworkType
+from aiofins.simulator.ethernet import AddressConversion, EthernetUnit
 from aiofins.simulator.plant import (
-    Conversion,
     Network,
     Plant,
     RoutingTables,
@@ -30,7 +30,7 @@ CLIENT = ("127.0.0.1", 40000)
 def three_networks() -> Plant:
     """Ethernet 1 (gateway A node 10) - Controller Link 2 (A node 1, B node 2) - SYSMAC
     LINK 3 (B node 3, C node 5). C is two networks away from a client on network 1."""
-    a_eth = Unit(0x10, 1, 10, host="127.0.0.1", port=0)
+    a_eth = Unit(0x10, 1, 10, host="127.0.0.10", port=0)
     a = Station(
         "A",
         VirtualPLC(network=1, node=10, mode=Mode.RUN),
@@ -50,7 +50,7 @@ def three_networks() -> Plant:
         RoutingTables({0x10: 3}, {1: (3, 3), 2: (3, 3)}),
     )
     d = Station(  # a PLC on the Ethernet without routing tables
-        "D", VirtualPLC(network=1, node=20, mode=Mode.RUN), [Unit(0x10, 1, 20, host="127.0.0.1")]
+        "D", VirtualPLC(network=1, node=20, mode=Mode.RUN), [Unit(0x10, 1, 20, host="127.0.0.20")]
     )
     c.plc.write("D0", [0x1234, 0x5678])
     b.plc.write("D0", [0x0B0B])
@@ -176,15 +176,24 @@ def test_a_routed_request_without_its_source_network_gets_no_reply() -> None:
 
 
 def test_table_and_static_conversion_answer_to_the_fins_port() -> None:
+    """The Ethernet unit's address conversion (simulator/ethernet.py) decides where a reply
+    leaves the plant: a node in the IP address table at its address, port 9600; automatic
+    static conversion at the unit's subnet + the node, port 9600."""
     plant = three_networks()
     unit = plant.station("A").units[0]
-    unit.conversion, unit.ip_table = Conversion.TABLE, {254: "127.0.0.9"}
+    unit.ethernet = EthernetUnit(
+        "127.0.0.10", conversion=AddressConversion.IP_ADDRESS_TABLE, ip_table={254: "127.0.0.9"},
+        node=10,
+    )  # fmt: skip
     (out,) = plant.receive(unit, read_d0("0.10.0", 1), *CLIENT)
     assert (out.host, out.port) == ("127.0.0.9", 9600)
-    assert plant.receive(unit, read_d0("0.10.0", 1, src="1.77.0"), *CLIENT) == []
-    unit.conversion = Conversion.STATIC
+    (out,) = plant.receive(unit, read_d0("0.10.0", 1, src="1.77.0"), *CLIENT)
+    assert (out.host, out.port) == CLIENT  # not in the table: learnt from its command
+    unit.ethernet = EthernetUnit("127.0.0.10", conversion=AddressConversion.AUTOMATIC_STATIC)
     (out,) = plant.receive(unit, read_d0("0.10.0", 1, src="1.77.0"), *CLIENT)
     assert (out.host, out.port) == ("127.0.0.77", 9600)
+    with pytest.raises(CommandError, match="host number"):
+        Unit(0x10, 1, 10, host="127.0.0.1")  # automatic conversion: node 1 at 127.0.0.1
 
 
 def test_tables_are_checked_against_the_manuals_rules() -> None:

@@ -33,12 +33,11 @@ How a frame travels (manual 5-1-1/5-1-3; wire-format §1):
 * The responder starts its response with GCT 2 (what Omron units send); each crossing back
   takes one.
 
-Ethernet units reach hosts outside the plant (a client) through their address conversion
-(:class:`Conversion`): *dynamic* answers to the IP address and port the node's last request
-came from; *static* (automatic) answers to the unit's own subnet with the node number as
-the last octet, on the FINS port; *table* answers to the IP address the unit's IP address
-table gives for the node, on the FINS port (9600), and nowhere for a node not in it. With
-static or table conversion a client must bind the FINS port itself (``local_port=9600``)
+Ethernet units reach hosts outside the plant (a client) through their FINS address
+conversion, :class:`~aiofins.simulator.ethernet.EthernetUnit` (automatic dynamic: the
+address and port the node's last request came from; automatic static: the unit's subnet
+with the node number as host part, FINS port 9600; IP address table; combined). With
+static conversion or a table a client must bind the FINS port itself (``local_port=9600``)
 and use one SID space (``max_sid_spaces=1``).
 
 Pure routing: :meth:`Plant.receive` takes a datagram that reached a unit and returns the
@@ -47,7 +46,6 @@ datagrams to send, so the UDP servers (:mod:`.plantserver`) and in-memory tests 
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 from collections import Counter, deque
 from collections.abc import Iterable, Mapping
@@ -58,6 +56,7 @@ from ..protocol.endcodes import RELAY_ERROR_FLAG, EndCode
 from ..protocol.errors import CommandError, DecodeError, FrameError
 from ..protocol.header import CommandFrame, FinsAddress, Header, ResponseFrame
 from ..protocol.limits import NETWORK_LIMITS, NetworkType
+from .ethernet import AddressConversion, EthernetUnit
 from .plc import VirtualPLC
 
 _logger = logging.getLogger("aiofins.simulator")
@@ -74,23 +73,10 @@ COMMAND_TOO_LONG = 0x1001
 RESPONSE_TOO_LONG = 0x110B
 #: The GCT a station writes into the responses it makes.
 RESPONSE_GCT = 2
-#: The FINS port a static or table conversion answers to.
+#: The FINS UDP port (where an Ethernet unit listens unless told).
 FINS_PORT = 9600
 #: Frames each network's trace keeps (the oldest dropped).
 TRACE_LENGTH = 1000
-
-
-class Conversion(Enum):
-    """How an Ethernet unit finds the IP address and port of a FINS node outside the plant."""
-
-    #: Answer to the address and port of the node's last request (automatic, dynamic).
-    DYNAMIC = "dynamic"
-    #: The unit's subnet with the node number as host part, FINS port 9600 (automatic,
-    #: static): the client must bind port 9600.
-    STATIC = "static"
-    #: The unit's IP address table (node -> IP address), FINS port 9600; a node not in the
-    #: table cannot be answered.
-    TABLE = "table"
 
 
 class StationState(Enum):
@@ -118,38 +104,41 @@ class Network:
 
 @dataclass(slots=True)
 class Unit:
-    """A communications unit of a station: its unit address, network, node and, for an
-    Ethernet unit served on UDP, its host, port and address conversion."""
+    """A communications unit of a station: its unit address, network and node; an Ethernet
+    unit served on UDP also has its IPv4 ``host``, the ``port`` it is bound to (0: any free
+    port) and its address conversion (:attr:`ethernet`)."""
 
     address: int
     network: int
     node: int
     host: str | None = None
     port: int = FINS_PORT
-    conversion: Conversion = Conversion.DYNAMIC
-    #: The IP address table (node -> IP address), for :attr:`Conversion.TABLE`.
+    conversion: AddressConversion = AddressConversion.AUTOMATIC_DYNAMIC
+    #: The IP address table (node -> IP address), for the table and combined methods.
     ip_table: dict[int, str] = field(default_factory=dict)
-    #: What dynamic conversion learned: node -> (IP address, port) of its last request.
-    learned: dict[int, tuple[str, int]] = field(default_factory=dict)
+    #: The address conversion of a unit served on UDP (``None`` without ``host``).
+    ethernet: EthernetUnit | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
         if not 0 <= self.address <= 0xFF:
             raise CommandError(f"unit address {self.address} out of range 0..255")
         if not 1 <= self.node <= 254:
             raise CommandError(f"node {self.node} out of range 1..254")
-        self.conversion = Conversion(self.conversion)
+        self.conversion = AddressConversion(self.conversion)
+        if self.host is not None:
+            try:
+                self.ethernet = EthernetUnit(
+                    self.host,
+                    conversion=self.conversion,
+                    ip_table=self.ip_table,
+                    node=self.node,
+                )
+            except ValueError as exc:
+                raise CommandError(f"unit {self.address:#04x} at {self.host}: {exc}") from None
 
     def peer_of(self, node: int) -> tuple[str, int] | None:
         """Where this unit sends a frame for ``node`` outside the plant (``None``: nowhere)."""
-        if self.conversion is Conversion.DYNAMIC:
-            return self.learned.get(node)
-        if self.conversion is Conversion.TABLE:
-            host = self.ip_table.get(node)
-            return None if host is None else (host, FINS_PORT)
-        if self.host is None:
-            return None
-        network = ipaddress.ip_network(f"{self.host}/24", strict=False)
-        return (str(network.network_address + node), FINS_PORT)
+        return None if self.ethernet is None else self.ethernet.address_of(node)
 
 
 @dataclass(frozen=True, slots=True)
@@ -270,8 +259,8 @@ class Plant:
         except (DecodeError, FrameError):
             self.counts["dropped:malformed"] += 1
             return out
-        if unit.conversion is Conversion.DYNAMIC:
-            unit.learned[header.source.node] = (host, port)
+        if unit.ethernet is not None and not header.is_response:
+            unit.ethernet.received(frame, (host, port))
         self.trace.append(Hop(unit.network, bytes(frame)))
         self._at(station, unit.network, frame, header, out)
         return out
@@ -358,7 +347,7 @@ class Plant:
         assert unit is not None
         target = self._nodes.get((network, node))
         if target is None:
-            peer = unit.peer_of(node) if unit.host is not None else None
+            peer = unit.peer_of(node)
             if peer is not None:
                 self.trace.append(Hop(network, frame))
                 out.append(Datagram(unit, frame, *peer))

@@ -21,7 +21,7 @@
     network = 1
     node = 10
     udp = "127.0.0.1:9600"     # Ethernet units only: where it listens (port 0: any)
-    conversion = "dynamic"     # dynamic, static, table
+    conversion = "dynamic"     # dynamic, static, table, combined
     ip_table = { 1 = "192.168.250.1" }   # node -> IP address, for conversion = "table"
 
 Every mistake is a :class:`~aiofins.protocol.errors.CommandError` naming the entry.
@@ -35,8 +35,8 @@ from typing import Any
 
 from ..protocol.errors import CommandError
 from ..protocol.limits import NetworkType
+from .ethernet import AddressConversion
 from .plant import (
-    Conversion,
     Network,
     Plant,
     RoutingTables,
@@ -59,6 +59,15 @@ NETWORK_TYPES = {
     "sysmac_link": NetworkType.SYSMAC_LINK,
     "devicenet": NetworkType.DEVICENET,
     "serial": NetworkType.HOST_LINK,
+}
+
+
+#: Address conversion names in a plant file.
+CONVERSIONS = {
+    "dynamic": AddressConversion.AUTOMATIC_DYNAMIC,
+    "static": AddressConversion.AUTOMATIC_STATIC,
+    "table": AddressConversion.IP_ADDRESS_TABLE,
+    "combined": AddressConversion.COMBINED,
 }
 
 
@@ -173,9 +182,7 @@ def _unit(where: str, data: Mapping[str, Any]) -> Unit:
             host, text = udp, "9600"
         port = _int(f"{where} udp port", int(text) if text.isdigit() else -1, 0, 65535)
         host = host.strip("[]")
-    conversion = _choice(
-        f"{where} conversion", data.get("conversion", "dynamic"), [c.value for c in Conversion]
-    )
+    conversion = _choice(f"{where} conversion", data.get("conversion", "dynamic"), CONVERSIONS)
     table = data.get("ip_table", {})
     if not isinstance(table, Mapping):
         raise CommandError(f"{where} ip_table: expected a table of node = 'IP address'")
@@ -189,6 +196,6 @@ def _unit(where: str, data: Mapping[str, Any]) -> Unit:
         node=_int(f"{where} node", data.get("node"), 1, 254),
         host=host,
         port=port,
-        conversion=Conversion(conversion),
+        conversion=CONVERSIONS[conversion],
         ip_table=ip_table,
     )
