@@ -6,6 +6,7 @@ import inspect
 import socket
 import threading
 import time
+from array import array
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
@@ -65,6 +66,19 @@ def test_typed_values_are_typed_by_their_type_name(url: str) -> None:
         ns: list[int] = plc.read_values("D702", "DINT", 1)
         assert (x, n, b, bits, ns) == (21.5, -7, True, [True, False], [-7])
         assert isinstance(w, int) and type(x) is float
+
+
+def test_arrays_of_words_and_typed_values(url: str) -> None:
+    with aiofins.sync.connect(url) as plc:
+        words = array("H", [(i * 3) & 0xFFFF for i in range(3000)])
+        plc.write_array("D1000", words, allow_split=True)
+        got: array[int] = plc.read_array("D1000", 3000)  # mypy: array[int] for words
+        assert got.typecode == "H" and got == words
+        assert plc.read("D1000", 3) == [0, 3, 6]
+        plc.write_array("D5000", array("f", [-2.5, 0.5]), "float32")
+        floats: array[float] = plc.read_array("D5000", 2, "float32")
+        assert floats.tolist() == [-2.5, 0.5]
+        assert plc.read("D5000", 2) == [0x0000, 0xC020]  # CDAB
 
 
 def test_a_plc_error_is_raised_in_the_calling_thread(url: str) -> None:

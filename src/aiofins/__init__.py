@@ -18,6 +18,7 @@ from .hooks import (
 from .poller import Poller, Quality, ScanState, Snapshot
 from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
+from .protocol.arrays import array_to_words, words_to_array
 from .protocol.endcodes import EndCode
 from .protocol.errors import (
     AddressError,
@@ -80,6 +81,8 @@ __all__ = [
     "Snapshot",
     "TagFileError",
     "__version__",
+    "array_to_words",
     "connect",
     "load_tags",
+    "words_to_array",
 ]

@@ -19,6 +19,7 @@ from functools import lru_cache
 from .chunking import plan_memory
 from .protocol.addresses import parse_span
 from .protocol.areas import MemoryAddress
+from .protocol.arrays import WordArray
 from .protocol.commands.memory import MemoryAreaRead, MemoryAreaWrite
 from .protocol.errors import CommandError
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type, words_to_values
@@ -89,6 +90,19 @@ class ReadFrames:
             return words.tolist()
         return list(unpack_elements(raw, self.element_size))
 
+    def words_array(self, data: Sequence[bytes]) -> WordArray:
+        """The words of the replies' data as an ``array('H')`` in the host's byte order
+        (each reply checked for its size first): one copy per frame and one byte swap, no
+        Python object per word. The plan must be of words (element size 2)."""
+        words = array("H")
+        for request, size, part in zip(self.requests, self.sizes, data, strict=True):
+            if len(part) != size:
+                request.decode_response(part)  # raises DecodeError saying what is wrong
+            words.frombytes(part)
+        if _SWAP:
+            words.byteswap()
+        return words
+
 
 @lru_cache(maxsize=PLAN_CACHE_SIZE)
 def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
@@ -131,6 +145,15 @@ class WriteFrames:
             address = MemoryAddress.decode(prefix[:4])
             return MemoryAreaWrite.from_values(address, part).encode()  # raises the error
         return prefix + data
+
+    def array_params(self, index: int, words: WordArray) -> bytes:
+        """The parameters of frame ``index`` with its share of ``words`` (an ``array('H')``
+        in the host's byte order: every element is a word already, nothing to check)."""
+        offset, count, prefix = self.frames[index]
+        part = words[offset : offset + count]
+        if _SWAP:
+            part.byteswap()
+        return prefix + part.tobytes()
 
 
 @lru_cache(maxsize=PLAN_CACHE_SIZE)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import enum
+from array import array
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, AsyncExitStack
 from types import TracebackType
@@ -19,6 +20,8 @@ from typing import Any, NoReturn, TypeVar, cast, overload
 import anyio
 
 from ._callplan import (
+    ReadFrames,
+    WriteFrames,
     cacheable,
     read_frames,
     start_address,
@@ -29,6 +32,14 @@ from ._callplan import (
 )
 from ._commands import CommandMethods
 from .protocol.areas import MemoryAddress
+from .protocol.arrays import (
+    FloatArray,
+    NumberArray,
+    WordArray,
+    array_to_words,
+    array_type,
+    words_to_array,
+)
 from .protocol.commands import Request, operation_for
 from .protocol.commands.memory import MemoryAreaWrite
 from .protocol.endcodes import EndCode
@@ -570,12 +581,7 @@ class Client(CommandMethods):
         """
         if type(count) is not int or count < 0:
             count = whole_number("count", count, 0)
-        limit = (self.limits if dest is None else self.route_to(dest)).memory_read_words
-        plan = (
-            read_frames(address, count, limit)
-            if cacheable(address)
-            else read_frames(start_address(address, count), count, limit)
-        )
+        plan = self._read_plan(address, count, dest)
         commands = plan.commands
         if len(commands) == 1:  # the usual read: one frame, no extra coroutine
             mrc, src, params = commands[0]
@@ -596,9 +602,43 @@ class Client(CommandMethods):
             if progress is not None:
                 progress(count, count)
             return plan.one(response.data)
+        return plan.values(await self._fetch(plan, dest, timeout, retries, progress))
+
+    def _read_plan(
+        self, address: AddressLike, count: int, dest: FinsAddress | str | None
+    ) -> ReadFrames:
+        """The 0101 frames of ``count`` elements from ``address`` to ``dest`` (the one place
+        :meth:`read` and :meth:`read_array` take their chunking from)."""
+        limit = (self.limits if dest is None else self.route_to(dest)).memory_read_words
+        if cacheable(address):
+            return read_frames(address, count, limit)
+        return read_frames(start_address(address, count), count, limit)
+
+    def _write_plan(
+        self, address: AddressLike, count: int, dest: FinsAddress | str | None
+    ) -> WriteFrames:
+        """The 0102 frames of a write of ``count`` elements from ``address`` to ``dest``
+        (the one place :meth:`write` and :meth:`write_array` take their chunking from)."""
+        limit = (self.limits if dest is None else self.route_to(dest)).memory_write_words
+        if cacheable(address):
+            return write_frames(address, count, limit)
+        return write_frames(start_address(address, count), count, limit)
+
+    async def _fetch(
+        self,
+        plan: ReadFrames,
+        dest: FinsAddress | str | None,
+        timeout: float | None,
+        retries: int | None,
+        progress: Progress | None,
+    ) -> list[bytes]:
+        """The reply data of every frame of ``plan``, in order (pipelined, reported to
+        ``progress`` frame by frame as the replies come in)."""
+        commands = plan.commands
+        count = sum(plan.counts)
         if progress is None:
             responses = await self._execute_many(commands, dest, timeout, retries, None)
-            return plan.values([response.data for response in responses])
+            return [response.data for response in responses]
         counts = plan.counts
         done = 0
 
@@ -608,7 +648,7 @@ class Client(CommandMethods):
             progress(done, count)
 
         responses = await self._execute_many(commands, dest, timeout, retries, report)
-        return plan.values([response.data for response in responses])
+        return [response.data for response in responses]
 
     async def write(
         self,
@@ -631,18 +671,36 @@ class Client(CommandMethods):
         """
         if type(values) is not list and type(values) is not tuple:
             _check_words(values)
-        limit = (self.limits if dest is None else self.route_to(dest)).memory_write_words
         count = len(values)
-        plan = (
-            write_frames(address, count, limit)
-            if cacheable(address)
-            else write_frames(start_address(address, count), count, limit)
-        )
+        plan = self._write_plan(address, count, dest)
+
+        def params_of(index: int) -> bytes:
+            try:
+                return plan.params(index, values)
+            except CommandError as exc:
+                raise unfit_word(exc, address, values, plan.element_size) from None
+
+        await self._send_writes(plan, params_of, count, allow_split, dest, timeout, retries,
+                                progress)  # fmt: skip
+
+    async def _send_writes(
+        self,
+        plan: WriteFrames,
+        params_of: Callable[[int], bytes],
+        count: int,
+        allow_split: bool,
+        dest: FinsAddress | str | None,
+        timeout: float | None,
+        retries: int | None,
+        progress: Progress | None,
+    ) -> None:
+        """Send the 0102 frames of ``plan`` one after another (``params_of(i)``: frame
+        ``i``'s parameters), refusing a split write unless ``allow_split``."""
         frames = plan.frames
         if len(frames) > 1 and not allow_split:
             raise CommandError(
                 f"writing {count} elements needs {len(frames)} frames on this route "
-                f"(limit {limit}); such a write is not atomic — pass "
+                f"(limit {plan.limit}); such a write is not atomic — pass "
                 "allow_split=True to accept that"
             )
         if not frames:  # count 0: a normal response that writes nothing (manual 5-3-3)
@@ -650,10 +708,7 @@ class Client(CommandMethods):
                 MemoryAreaWrite(plan.start, b""), dest=dest, timeout=timeout, retries=retries
             )
         for i, (offset, n, _) in enumerate(frames):
-            try:
-                params = plan.params(i, values)
-            except CommandError as exc:
-                raise unfit_word(exc, address, values, plan.element_size) from None
+            params = params_of(i)
             response = await self.execute(
                 0x01, 0x02, params, dest=dest, timeout=timeout, retries=retries
             )
@@ -668,6 +723,112 @@ class Client(CommandMethods):
     async def read_bit(self, address: AddressLike, **kw: Any) -> bool:
         """Read one bit (``"CIO 0.01"``) as a bool."""
         return bool((await self.read(address, 1, **kw))[0] & 1)
+
+    # -- big data: arrays ---------------------------------------------------------------
+
+    @overload
+    async def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: FloatTypeName,
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> FloatArray: ...
+    @overload
+    async def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: IntTypeName = "uint16",
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> WordArray: ...
+    @overload
+    async def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: str | ValueType,
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> NumberArray: ...
+    async def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: str | ValueType = "uint16",
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> NumberArray:
+        """Read ``count`` words (or values of a numeric ``vtype``) into an :class:`array.array`.
+
+        ``await plc.read_array("D0", 32768)`` is ``read("D0", 32768)`` without a Python
+        ``int`` per word: an ``array('H')`` of the word values (``words[0]`` from
+        ``address``) in the host's byte order, which NumPy views without a copy
+        (``numpy.frombuffer(words, dtype=numpy.uint16)``). With ``vtype`` (``"float32"``,
+        ``"int32:ABCD"``, ...; the client's word order unless the spec names one) it reads
+        ``count`` values of that type as :func:`~aiofins.words_to_array` decodes them
+        (``array('f')`` for ``float32``). The frames, the pipelining and ``progress``
+        (words read so far) are :meth:`read`'s.
+        """
+        if type(count) is not int or count < 0:
+            count = whole_number("count", count, 0)
+        t = array_type(vtype, self.word_order)
+        words = t.words * count
+        if not cacheable(address):
+            start_address(address, words)  # says what is wrong with the address
+        start = typed_start(address, t, count)
+        plan = self._read_plan(start, words, dest)
+        out = plan.words_array(await self._fetch(plan, dest, timeout, retries, progress))
+        if t.kind == "uint16":  # one word per value, whatever the word order
+            return out
+        return words_to_array(out, t)
+
+    async def write_array(
+        self,
+        address: AddressLike,
+        values: NumberArray | Sequence[int | float] | Any,
+        vtype: str | ValueType = "uint16",
+        *,
+        allow_split: bool = False,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> None:
+        """Write an :class:`array.array` of words (or of values of a numeric ``vtype``).
+
+        ``values``: an ``array('H')`` of word values in the host's byte order (as
+        :meth:`read_array` returns it; a NumPy ``uint16`` array too), sent without a Python
+        object per word; with ``vtype`` an array (or buffer, or sequence) of that type's
+        values, stored as :func:`~aiofins.array_to_words` says. Frames, ``allow_split`` and
+        ``progress`` (words written so far) are :meth:`write`'s.
+        """
+        t = array_type(vtype, self.word_order)
+        if t.kind == "uint16" and isinstance(values, array) and values.typecode == "H":
+            words = values  # sent as it is (each frame's share is swapped in a copy)
+        else:
+            words = array_to_words(values, t)
+        count = len(words)
+        if not cacheable(address):
+            start_address(address, count)  # says what is wrong with the address
+        start = typed_start(address, t, count // t.words)
+        plan = self._write_plan(start, count, dest)
+        await self._send_writes(plan, lambda index: plan.array_params(index, words), count,
+                                allow_split, dest, timeout, retries, progress)  # fmt: skip
 
     # -- typed values -------------------------------------------------------------------
 

@@ -29,9 +29,10 @@ from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 import anyio
 from anyio.from_thread import BlockingPortal
 
-from .client import AddressLike
+from .client import AddressLike, Progress
 from .client import Client as AsyncClient
 from .connection import connect as _async_connect
+from .protocol.arrays import FloatArray, NumberArray, WordArray
 from .protocol.endcodes import EndCode
 from .protocol.errors import ConnectionLost
 from .protocol.header import FinsAddress
@@ -283,6 +284,69 @@ class Client:
         )
         return values
 
+    @overload
+    def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: FloatTypeName,
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> FloatArray: ...
+    @overload
+    def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: IntTypeName = "uint16",
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> WordArray: ...
+    @overload
+    def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: str | ValueType,
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> NumberArray: ...
+    def read_array(
+        self,
+        address: AddressLike,
+        count: int,
+        vtype: str | ValueType = "uint16",
+        *,
+        dest: FinsAddress | str | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+        progress: Progress | None = None,
+    ) -> NumberArray:
+        """Read ``count`` words (or numeric values of ``vtype``) into an :class:`array.array`
+        (see :meth:`aiofins.Client.read_array`: ``array('H')`` of host-order words, NumPy
+        views it with ``numpy.frombuffer(words, dtype=numpy.uint16)``). ``progress`` is
+        called on the loop thread."""
+        words: NumberArray = self._call_any(
+            self.async_client.read_array,
+            address,
+            count,
+            vtype,
+            dest=dest,
+            timeout=timeout,
+            retries=retries,
+            progress=progress,
+        )
+        return words
+
     def write_value(
         self, address: AddressLike, value: Value, vtype: str | ValueType = "uint16", **kw: Any
     ) -> None:
@@ -302,6 +366,7 @@ class Client:
     call = _Blocking(AsyncClient.call)
     read = _Blocking(AsyncClient.read)
     write = _Blocking(AsyncClient.write)
+    write_array = _Blocking(AsyncClient.write_array)
     read_tags = _Blocking(AsyncClient.read_tags)
     memory_area_read = _Blocking(AsyncClient.memory_area_read)
     memory_area_write = _Blocking(AsyncClient.memory_area_write)

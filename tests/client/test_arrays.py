@@ -1,0 +1,125 @@
+"""read_array / write_array against the virtual PLC over loopback UDP and FINS/TCP (asyncio,
+uvloop, trio): words, bytes, typed arrays, chunking and progress."""
+
+from __future__ import annotations
+
+from array import array
+from typing import cast
+
+import pytest
+
+from aiofins.connection import connect
+from aiofins.protocol.arrays import word_bytes
+from aiofins.protocol.errors import AddressError, CommandError
+from aiofins.protocol.limits import NetworkType
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator
+
+pytestmark = pytest.mark.anyio
+
+DM = 0x82
+
+
+def memory(sim: Simulator) -> VirtualPLC:
+    return cast(VirtualPLC, sim.plc)
+
+
+async def test_a_full_dm_read_is_an_array_of_the_plcs_words_in_33_frames(
+    sim: Simulator, url: str
+) -> None:
+    data = [(i * 7 + 3) & 0xFFFF for i in range(32768)]
+    memory(sim).memory.write_words(DM, 0, data)
+    async with connect(url, timeout=2) as plc:
+        before = plc.session.stats.completed
+        words = await plc.read_array("D0", 32768)
+        assert plc.session.stats.completed - before == 33  # ceil(32768 / 999), as read()
+        assert words.typecode == "H" and len(words) == 32768
+        assert words.tolist() == data
+        # The bytes: what the PLC sent (big-endian words) is word_bytes() of the array.
+        raw = (await plc.memory_area_read("D1000", 999)).data
+        assert word_bytes(words[1000:1999]) == raw
+        assert raw[:2] == data[1000].to_bytes(2, "big")
+
+
+async def test_a_route_of_smaller_frames_chunks_the_same_way(sim: Simulator, url: str) -> None:
+    memory(sim).memory.write_words(DM, 0, list(range(32768)))
+    async with connect(url, timeout=2, networks=(NetworkType.SYSMAC_LINK,)) as plc:
+        before = plc.session.stats.completed
+        words = await plc.read_array("D0", 32768)
+        assert plc.session.stats.completed - before == 122  # ceil(32768 / 269)
+        assert words == array("H", range(32768))
+        before = plc.session.stats.completed
+        await plc.write_array("D0", array("H", [9] * 600), allow_split=True)
+        assert plc.session.stats.completed - before == 3  # ceil(600 / 267)
+        assert memory(sim).memory.read_words(DM, 0, 601) == [9] * 600 + [600]
+
+
+async def test_write_array_writes_the_words_and_leaves_the_array_as_it_was(
+    sim: Simulator, url: str
+) -> None:
+    words = array("H", [0, 1, 0x1234, 0xFFFF] * 500)  # 2,000 words: three frames
+    async with connect(url, timeout=2) as plc:
+        with pytest.raises(CommandError, match="not atomic"):
+            await plc.write_array("D100", words)
+        assert memory(sim).memory.read_words(DM, 100, 4) == [0, 0, 0, 0]  # nothing sent
+        seen: list[tuple[int, int]] = []
+        await plc.write_array(
+            "D100", words, allow_split=True, progress=lambda d, t: seen.append((d, t))
+        )
+        assert seen == [(997, 2000), (1994, 2000), (2000, 2000)]  # 997 words per 0102
+        assert words.tolist() == [0, 1, 0x1234, 0xFFFF] * 500  # swapped in copies only
+        assert memory(sim).memory.read_words(DM, 100, 2000) == words.tolist()
+        assert (await plc.memory_area_read("D102", 1)).data == b"\x12\x34"
+        await plc.write_array("D0", array("H"))  # nothing: the normal empty write
+        assert len(await plc.read_array("D0", 0)) == 0
+
+
+async def test_typed_arrays_in_the_clients_and_the_specs_word_order(
+    sim: Simulator, url: str
+) -> None:
+    async with connect(url, timeout=2) as plc:
+        await plc.write_values("D200", [-2.5, 0.75, 1e6], "float32")
+        floats = await plc.read_array("D200", 3, "float32")
+        assert floats.typecode == "f" and floats.tolist() == [-2.5, 0.75, 1e6]
+        assert memory(sim).memory.read_words(DM, 200, 2) == [0x0000, 0xC020]  # CDAB
+        await plc.write_array("D300", array("i", [-1, 70000]), "int32:ABCD")
+        assert memory(sim).memory.read_words(DM, 300, 4) == [0xFFFF, 0xFFFF, 0x0001, 0x1170]
+        assert await plc.read_values("D300", "int32:ABCD", 2) == [-1, 70000]
+        assert (await plc.read_array("D300", 2, "int32:ABCD")).tolist() == [-1, 70000]
+        await plc.write_array("D400", [1.5, -1.0], "float64")
+        assert await plc.read_values("D400", "float64", 2) == [1.5, -1.0]
+    async with connect(url, timeout=2, word_order="ABCD") as plc:
+        assert (await plc.read_array("D300", 2, "int32")).tolist() == [-1, 70000]
+        assert (await plc.read_array("D200", 1, "float32:CDAB")).tolist() == [-2.5]
+
+
+async def test_progress_counts_words_as_the_replies_come(url: str) -> None:
+    async with connect(url, timeout=2) as plc:
+        seen: list[tuple[int, int]] = []
+        words = await plc.read_array(
+            "D0", 1000, "float32", progress=lambda d, t: seen.append((d, t))
+        )
+        assert len(words) == 1000
+        assert sorted(seen) == [(999, 2000), (1998, 2000), (2000, 2000)]
+        seen.clear()
+        await plc.read_array("D0", 10, progress=lambda d, t: seen.append((d, t)))
+        assert seen == [(10, 10)]
+
+
+async def test_what_read_array_cannot_take_is_refused_before_sending(url: str) -> None:
+    async with connect(url, timeout=2) as plc:
+        stats = plc.session.stats
+        sent = (stats.completed, stats.end_code_errors, stats.timeouts)
+        with pytest.raises(CommandError, match="a bit address"):
+            await plc.read_array("CIO 0.01", 4)
+        with pytest.raises(CommandError, match="no array form"):
+            await plc.read_array("D0", 4, "bcd16")
+        with pytest.raises(AddressError):
+            await plc.read_array("D32767", 2)  # past the end of DM
+        with pytest.raises(CommandError, match="count"):
+            await plc.read_array("D0", -1)
+        with pytest.raises(CommandError, match="sequence of numbers, got bytes"):
+            await plc.write_array("D0", b"\x00\x01")
+        with pytest.raises(CommandError, match="70000"):
+            await plc.write_array("D0", [70000])
+        assert (stats.completed, stats.end_code_errors, stats.timeouts) == sent
