@@ -123,3 +123,24 @@ async def test_what_read_array_cannot_take_is_refused_before_sending(url: str) -
         with pytest.raises(CommandError, match="70000"):
             await plc.write_array("D0", [70000])
         assert (stats.completed, stats.end_code_errors, stats.timeouts) == sent
+
+
+async def test_arrays_keep_to_each_destinations_route() -> None:
+    """The route map of the plant's example: Ethernet-sized frames to the gateway itself,
+    SYSMAC LINK-sized (269 words read, 267 written) to the press two networks away."""
+    from .test_routes import largest_on, plant_client
+
+    async with plant_client() as (plant, plc):
+        assert (await plc.read_array("D0", 2, dest="3.5.0")).tolist() == [1234, 5678]
+        plant.trace.clear()
+        assert len(await plc.read_array("D0", 999, dest="3.5.0")) == 999
+        replies = [h for h in plant.trace if h.network == 3 and h.frame[0] & 0x40]
+        assert len(replies) == 4  # ceil(999 / 269)
+        assert largest_on(plant, 3) == 538
+        plant.trace.clear()
+        assert len(await plc.read_array("D0", 999)) == 999  # one frame to the gateway
+        assert largest_on(plant, 1) == 1998
+        with pytest.raises(CommandError, match="267"):
+            await plc.write_array("D0", array("H", [1] * 268), dest="3.5.0")
+        await plc.write_array("D10", array("H", [7, 8, 9]), dest="3.5.0")
+        assert plant.station("press").plc.read("D10", 3) == [7, 8, 9]
