@@ -108,7 +108,8 @@ url = "udp://127.0.0.1:{free_port()}"
             assert sub.on("fins/press1/status") == [
                 {"state": "online", "plc": "press1", "gateway": "gw"}
             ]
-            assert sub.on("fins/_gateway/gw") == [{"state": "online"}]
+            instance = gateway.link.instance  # host:pid:random, to tell two instances apart
+            assert sub.on("fins/_gateway/gw") == [{"state": "online", "instance": instance}]
             assert gateway.plc_status["gone"].state is PlcState.OFFLINE
             # Health and metrics over HTTP.
             async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{gateway.http_port}") as http:
@@ -130,7 +131,7 @@ url = "udp://127.0.0.1:{free_port()}"
         async with subscribe(broker.port, "fins/_gateway/#") as late:
             await late.wait_for(lambda: late.messages)
             assert late.messages[0].retain
-            assert late.on("fins/_gateway/gw") == [{"state": "offline"}]
+            assert late.on("fins/_gateway/gw") == [{"state": "offline", "instance": instance}]
 
 
 async def test_changes_only_publishes_the_tags_that_changed(broker: Broker) -> None:

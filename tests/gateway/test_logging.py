@@ -49,6 +49,19 @@ class Daemon:
                     raise AssertionError(f"the daemon ended: {self.lines}") from None
         raise AssertionError(f"no such line in {self.lines} {self._buffer!r}")
 
+    async def stop_exited(self) -> list[str]:
+        """Every line of a process that ended on its own."""
+        assert self.process.stderr is not None
+        with anyio.fail_after(30):
+            try:
+                while True:
+                    self._buffer += await self.process.stderr.receive()
+            except (anyio.EndOfStream, anyio.ClosedResourceError):
+                pass
+        self.lines += [line.decode() for line in self._buffer.split(b"\n") if line]
+        self._buffer = b""
+        return self.lines
+
     async def stop(self) -> list[str]:
         """SIGTERM, then the rest of its stderr; every line it wrote."""
         assert self.process.stderr is not None

@@ -33,7 +33,7 @@ BIG = [bytes([i]) * 512_000 for i in range(12)]
 
 @dataclass
 class Peer:
-    """A minimal MQTT 3.1.1 broker for one client: CONNACK, PUBACK, PINGRESP; records the
+    """A minimal MQTT 3.1.1 broker for one client: CONNACK, SUBACK, PUBACK, PINGRESP; records the
     PUBLISH packets of each connection; reads only while :attr:`reading` is set."""
 
     port: int
@@ -94,6 +94,8 @@ class Peer:
                         self._note()
                         if topic != "s":  # after the link's "online": wait to be let read
                             await self.reading.wait()
+                    elif kind == 8:  # SUBSCRIBE (one topic): SUBACK granting QoS 1
+                        await stream.send(b"\x90\x03" + body[:2] + b"\x01")
                     elif kind == 12:  # PINGREQ
                         await stream.send(b"\xd0\x00")
                     elif kind == 14:  # DISCONNECT

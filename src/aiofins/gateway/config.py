@@ -82,6 +82,10 @@ class HttpConfig:
     enabled: bool = True
     host: str = "127.0.0.1"
     port: int = 9108
+    #: Connections served at once (the rest wait in the listen queue, unaccepted).
+    max_connections: int = 64
+    #: Seconds a connection may take in all (an idle one is closed).
+    idle_timeout: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -344,6 +348,12 @@ class _Reader:
             enabled=self.take(t, "http", "enabled", bool, d.enabled),
             host=self.take(t, "http", "host", str, d.host),
             port=self.take(t, "http", "port", int, d.port, check=_port_or_zero),
+            max_connections=self.take(
+                t, "http", "max_connections", int, d.max_connections, check=_positive
+            ),
+            idle_timeout=float(
+                self.take(t, "http", "idle_timeout", (int, float), d.idle_timeout, check=_positive)
+            ),
         )
         self.unknown(t, "http", set(HttpConfig.__dataclass_fields__))
         return config

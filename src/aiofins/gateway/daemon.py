@@ -134,7 +134,13 @@ class Gateway:
         self.metrics = GatewayMetrics(self)
         self.link = MqttLink(
             mqtt,
-            client_id=mqtt.client_id or f"aiofins-gateway-{self.name}",
+            client_id=(
+                f"aiofins-gateway-{self.name}"
+                if mqtt.client_id is None
+                else f"{mqtt.client_id}-{self.shard.index}"
+                if sharded
+                else mqtt.client_id
+            ),
             status_topic=render(mqtt.gateway_topic, gateway=self.name),
             on_message=self._on_message,
             on_connected=self._on_connected,
@@ -173,6 +179,8 @@ class Gateway:
                 config.http.host,
                 config.http.port,
                 {"/healthz": self._healthz, "/readyz": self._readyz, "/metrics": self._metrics},
+                max_connections=config.http.max_connections,
+                idle_timeout=config.http.idle_timeout,
             )
         self._tg: TaskGroup | None = None
         self._closed = anyio.Event()

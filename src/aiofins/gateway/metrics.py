@@ -165,6 +165,23 @@ class _Collector(Collector):
             "Replies to set requests on no writable tag dropped (every pooled outbox busy)",
             value=gw.reply_pool.dropped,
         )
+        http = gw.http
+        if http is not None:
+            yield GaugeMetricFamily(
+                "aiofins_gateway_http_connections",
+                "HTTP connections being served",
+                value=http.connections,
+            )
+            yield CounterMetricFamily(
+                "aiofins_gateway_http_accept_errors",
+                "HTTP accepts that failed (too many open files, ...)",
+                value=http.accept_errors,
+            )
+            yield CounterMetricFamily(
+                "aiofins_gateway_http_timeouts",
+                "HTTP connections closed for taking longer than idle_timeout",
+                value=http.timeouts,
+            )
         writes = CounterMetricFamily(
             "aiofins_gateway_writes", "Set requests by outcome", labels=["outcome"]
         )

@@ -24,9 +24,12 @@ gateway itself when it stops).
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import random
+import secrets
+import socket
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -54,8 +57,6 @@ PUMP_BATCH = 256
 #: Received messages waiting for the gateway, at most (more are discarded by aiomqtt,
 #: with a warning): a flood of set requests cannot grow memory.
 MAX_INCOMING = 10_000
-#: MQTT 5 reason code of a DISCONNECT that says another client took our client id.
-SESSION_TAKEN_OVER = 0x8E
 #: Takeovers of the client id within :data:`TAKEOVER_WINDOW` seconds that stop the gateway
 #: (another gateway runs with the same shard: flapping helps no one).
 TAKEOVER_LIMIT = 3
@@ -145,7 +146,9 @@ class MqttLink:
         self.connects = 0
         self.connect_failures = 0
         self.disconnects = 0
-        #: Times the broker said another client took our client id (MQTT 5).
+        #: This process's instance on the status topic: host, pid and a random part.
+        self.instance = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
+        #: Times another instance of us (same status topic) went online while we were.
         self.takeovers = 0
         self._takeover_times: deque[float] = deque(maxlen=TAKEOVER_LIMIT)
         #: Why the link gave up for good (a duplicate client id), or None.
@@ -288,8 +291,6 @@ class MqttLink:
                     backoff = self.config.backoff_min
                     why = await self._serve(client)
                 self.disconnects += 1
-                if why.startswith(_TAKEN_OVER):
-                    self._taken_over()
             except aiomqtt.MqttError as exc:
                 self.connect_failures += 1
                 why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
@@ -305,26 +306,47 @@ class MqttLink:
                 await self._closing.wait()
         self._enter(LinkState.CLOSED)
 
-    def _taken_over(self) -> None:
-        """The broker dropped us for another client with our id: an error each time, and
-        after :data:`TAKEOVER_LIMIT` within :data:`TAKEOVER_WINDOW` the link stops for good
-        (:attr:`fatal`)."""
+    def _status_seen(self, payload: bytes) -> None:
+        """A message on our own status topic from another instance: its "online" live, or
+        its retained will found on (re)connecting, means a second gateway with our name and
+        shard took the connection from us (or we from it). One such event is a restart (the
+        old process's will); :data:`TAKEOVER_LIMIT` of them in :data:`TAKEOVER_WINDOW` are
+        two processes taking turns."""
+        try:
+            status = json.loads(payload)
+        except ValueError:
+            return
+        other = status.get("instance") if isinstance(status, dict) else None
+        if other is None or other == self.instance:
+            return
+        self._taken_over(str(other))
+
+    def _taken_over(self, other: str) -> None:
+        """Another instance of us took the connection: an error each time, and after
+        :data:`TAKEOVER_LIMIT` within :data:`TAKEOVER_WINDOW` the link of the instance whose
+        name sorts first stops for good (:attr:`fatal`); the other goes on."""
         self.takeovers += 1
         now = anyio.current_time()
         self._takeover_times.append(now)
         log.error(
-            "MQTT client id %r was taken over by another client (%d times so far): is another "
-            "%s running?",
+            "MQTT client id %r was taken over by another client, instance %s (%d times so "
+            "far): is another %s running?",
             self.client_id,
+            _cut(other),
             self.takeovers,
             self.owner,
         )
         times = self._takeover_times
-        if len(times) == TAKEOVER_LIMIT and now - times[0] <= TAKEOVER_WINDOW:
+        # Of two instances, the one with the lower instance name gives up: one stays.
+        if (
+            len(times) == TAKEOVER_LIMIT
+            and now - times[0] <= TAKEOVER_WINDOW
+            and (self.instance < other)
+        ):
             self.fatal = DuplicateClient(
                 f"another client took MQTT client id {self.client_id!r} {TAKEOVER_LIMIT} times "
-                f"within {TAKEOVER_WINDOW:.0f} s: a second {self.owner} is running; stop one "
-                "of them (each shard runs once)"
+                f"within {TAKEOVER_WINDOW:.0f} s: a second {self.owner} is running "
+                f"(instance {_cut(other)}); stop one of them (each shard runs once)"
             )
             log.error("%s", self.fatal)
             self._closing.set()
@@ -352,7 +374,12 @@ class MqttLink:
             identifier=self.client_id,
             username=os.environ.get(c.username_env) or None,
             password=os.environ.get(c.password_env) or None,
-            will=aiomqtt.Will(self.status_topic, status_message("offline"), qos=1, retain=True),
+            will=aiomqtt.Will(
+                self.status_topic,
+                status_message("offline", instance=self.instance),
+                qos=1,
+                retain=True,
+            ),
             keepalive=c.keepalive,
             timeout=c.timeout,
             tls_params=tls,
@@ -372,13 +399,19 @@ class MqttLink:
 
             def lost(why: str) -> None:
                 self._paho = self._lost = None  # nothing more is handed to this connection
-                if ended == ["closed"] or why.startswith(_TAKEN_OVER):
+                if ended == ["closed"]:
                     ended[0] = why
                 tg.cancel_scope.cancel()
 
             try:
+                # Our own status topic first: its retained message, if another instance's
+                # "online", is a second gateway with our name and shard.
+                await client.subscribe(self.status_topic, qos=1)
                 await client.publish(
-                    self.status_topic, status_message("online"), qos=1, retain=True
+                    self.status_topic,
+                    status_message("online", instance=self.instance),
+                    qos=1,
+                    retain=True,
                 )
                 for topic in self.subscriptions:
                     await client.subscribe(topic, qos=1)
@@ -398,7 +431,10 @@ class MqttLink:
             with anyio.move_on_after(self.config.timeout, shield=True):
                 with contextlib.suppress(aiomqtt.MqttError):
                     await client.publish(
-                        self.status_topic, status_message("offline"), qos=1, retain=True
+                        self.status_topic,
+                        status_message("offline", instance=self.instance),
+                        qos=1,
+                        retain=True,
                     )
             self._paho = self._lost = None
             tg.cancel_scope.cancel()
@@ -408,10 +444,16 @@ class MqttLink:
         import aiomqtt
 
         on_message = self.on_message
+        status_topic = self.status_topic
         try:
             async for message in client.messages:
                 payload = message.payload
-                if on_message is None or not isinstance(payload, (bytes, bytearray)):
+                if not isinstance(payload, (bytes, bytearray)):
+                    continue
+                if message.topic.value == status_topic:
+                    self._status_seen(bytes(payload))
+                    continue
+                if on_message is None:
                     continue
                 expiry = getattr(message.properties, "MessageExpiryInterval", None)
                 try:
@@ -424,12 +466,7 @@ class MqttLink:
                 except Exception:  # nothing a peer sends raises out of the receiver
                     log.exception("a message on %s could not be handled", message.topic)
         except aiomqtt.MqttError as exc:
-            cause = exc.__cause__
-            code = getattr(cause, "rc", None)
-            if getattr(code, "value", code) == SESSION_TAKEN_OVER:
-                lost(f"{_TAKEN_OVER}: {cause}")
-            else:
-                lost(f"connection lost: {exc}")
+            lost(f"connection lost: {exc}")
 
     async def _pump(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
         """Send the QoS 0 outboxes' backlogs, one message per outbox in turn."""
@@ -511,7 +548,8 @@ class MqttLink:
         self._closing.set()
 
 
-_TAKEN_OVER = "session taken over by another client"
+def _cut(text: str, limit: int = 100) -> str:
+    return text if len(text) <= limit else f"{text[:limit]}..."
 
 
 def _paho_client(client: aiomqtt.Client) -> paho_mqtt.Client | None:
