@@ -43,7 +43,13 @@ from .protocol.arrays import (
 from .protocol.commands import Request, operation_for
 from .protocol.commands.memory import MemoryAreaWrite
 from .protocol.endcodes import EndCode
-from .protocol.errors import CommandError, ConnectionLost, DecodeError, EndCodeError
+from .protocol.errors import (
+    CommandError,
+    ConnectionLost,
+    DecodeError,
+    EndCodeError,
+    FinsTimeout,
+)
 from .protocol.guard import changes, check_read_only
 from .protocol.header import FinsAddress
 from .protocol.inputs import seconds, shown, whole_number
@@ -460,6 +466,9 @@ class Client(CommandMethods):
         except EndCodeError as exc:
             self._add_addressing_hint(exc, target)
             raise
+        except FinsTimeout as exc:
+            add_route_hint(exc, target, self.session.source)
+            raise
         self.last_end_code = response.end_code
         return response
 
@@ -515,6 +524,9 @@ class Client(CommandMethods):
             )
         except EndCodeError as exc:
             self._add_addressing_hint(exc, target)
+            raise
+        except FinsTimeout as exc:
+            add_route_hint(exc, target, self.session.source)
             raise
         if responses:
             self.last_end_code = responses[-1].end_code
@@ -597,6 +609,9 @@ class Client(CommandMethods):
                 )  # fmt: skip
             except EndCodeError as exc:
                 self._add_addressing_hint(exc, target)
+                raise
+            except FinsTimeout as exc:
+                add_route_hint(exc, target, self.session.source)
                 raise
             self.last_end_code = response.end_code
             if progress is not None:
@@ -986,6 +1001,17 @@ class Client(CommandMethods):
                 "(compile_tags)"
             )
         plan.cache["fits"] = limits
+
+
+def add_route_hint(exc: FinsTimeout, target: FinsAddress, source: FinsAddress) -> None:
+    """A routed request (DNA not 0) sent with source network 0 gets no reply through a
+    gateway: the destination answers onto its own network. Its timeout says so."""
+    if target.network and not source.network:
+        exc.args = (
+            f"{exc}. The request went to network {target.network} with source network 0: "
+            "the PLC answers onto its own network, where we are not; give our network "
+            "(connect(..., source_network=N), ?source_network=N or src=N.NODE.0)",
+        )
 
 
 def add_addressing_hint(exc: EndCodeError, target: FinsAddress, source: FinsAddress) -> None:

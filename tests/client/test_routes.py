@@ -80,11 +80,15 @@ async def test_a_client_for_a_plc_behind_two_gateways() -> None:
 
 
 async def test_without_a_source_network_a_routed_reply_is_lost() -> None:
-    async with plant_client(f"routes={ROUTES}") as (plant, plc):
-        with pytest.raises(FinsTimeout):
+    async with plant_client(f"routes={ROUTES}", breaker_threshold=0) as (plant, plc):
+        with pytest.raises(FinsTimeout, match=r"source network 0.*source_network=N"):
             await plc.read("D0", dest="3.5.0")
-        assert plant.station("press").plc.frames_handled == 1
-        assert plant.counts["dropped:0205"] == 1
+        with pytest.raises(FinsTimeout, match="source_network=N"):
+            await plc.read("D0", 300, dest="3.5.0")  # two frames
+        with pytest.raises(FinsTimeout, match="source_network=N"):
+            await plc.cpu_unit_status_read(dest="3.5.0")
+        assert plant.station("press").plc.frames_handled == 4
+        assert plant.counts["dropped:0205"] == 4
         assert await plc.read("D0", 1) == [100]  # unrouted needs none
 
 

@@ -250,3 +250,44 @@ def test_tshark_decodes_every_hop(tmp_path: Path) -> None:
         assert int(row["omron.command"], 16) == (hop.frame[10] << 8) | hop.frame[11]
         assert row["_ws.malformed"] == "" and not _warnings(row), row["_ws.expert.message"]
     assert [h.frame[2] for h in hops[:3]] == [2, 1, 0]
+
+
+@pytest.mark.parametrize(
+    ("kind", "carried"),
+    [
+        (NetworkType.ETHERNET, 2000),
+        (NetworkType.CONTROLLER_LINK, 2000),
+        (NetworkType.SYSMAC_LINK, 540),
+        (NetworkType.DEVICENET, 540),
+        (NetworkType.HOST_LINK, 540),
+    ],
+)
+def test_oversize_frames_per_network_type(kind: NetworkType, carried: int) -> None:
+    """A gateway puts on the next network a command of up to its parameter bytes and refuses
+    one byte more (ours: 1001 + bit 15, the gateway named); a response longer than the
+    network carries is answered 110B by the destination."""
+    gateway = Station(
+        "G",
+        VirtualPLC(network=1, node=10, mode=Mode.RUN),
+        [Unit(0x10, 1, 10, host="127.0.0.10"), Unit(0x11, 2, 1)],
+        RoutingTables({0x10: 1, 0x11: 2}),
+    )
+    far = Station("F", VirtualPLC(network=2, node=2, mode=Mode.RUN), [Unit(0x10, 2, 2)],
+                  RoutingTables({0x10: 2}, {1: (2, 1)}))  # fmt: skip
+    plant = Plant([Network(1, NetworkType.ETHERNET), Network(2, kind)], [gateway, far])
+    unit = gateway.units[0]
+
+    def write(size: int) -> ResponseFrame:
+        words = (size - 6) // 2  # 0102: 6 bytes of address and count, then the words
+        params = bytes.fromhex("820000 00") + words.to_bytes(2, "big") + bytes(2 * words)
+        head = Header(FinsAddress(2, 2, 0), FinsAddress(1, 254, 0), sid=1).encode()
+        (out,) = plant.receive(unit, head + b"\x01\x02" + params, *CLIENT)
+        return ResponseFrame.decode(out.frame)
+
+    assert write(carried).end_code == EndCode(0)
+    refused = write(carried + 2)
+    assert (refused.end_code.raw, refused.relay) == (0x9001, (1, 10))
+    words = carried // 2 - 1  # the most a response of this network holds
+    assert len(send(plant, read_d0("2.2.0", words), "G").data) == 2 * words
+    if carried == 540:  # (a CPU refuses more than 999 words itself)
+        assert send(plant, read_d0("2.2.0", words + 1), "G").end_code.raw == 0x110B
