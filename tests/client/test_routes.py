@@ -3,6 +3,7 @@ network, relay errors, against the plant of examples/plant.toml served on UDP.""
 
 from __future__ import annotations
 
+import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -21,9 +22,11 @@ from aiofins.bulk import (
 from aiofins.protocol.errors import CommandError, FinsTimeout, RelayError
 from aiofins.protocol.files import Disk
 from aiofins.protocol.limits import NetworkType, limits_for, parse_routes
-from aiofins.simulator.plant import Plant, StationState
+from aiofins.simulator.ethernet import AddressConversion
+from aiofins.simulator.plant import Network, Plant, Station, StationState, Unit
 from aiofins.simulator.plantfile import load_plant
 from aiofins.simulator.plantserver import serve_plant
+from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.state import Mode
 
 pytestmark = pytest.mark.anyio
@@ -212,3 +215,38 @@ def test_route_maps_are_checked() -> None:
         aiofins.endpoint.parse_endpoint("udp://h?routes=3")
     key = aiofins.endpoint.parse_endpoint("udp://h?routes=3:SYSMAC_LINK,2:controller_link").key
     assert key == "udp://h:9600?routes=2:controller_link,3:sysmac_link"
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+async def test_local_port_for_a_plc_with_an_ip_address_table() -> None:
+    """The PLC answers node 1 (us, from 127.0.0.1) at the table's address and the FINS port
+    only: a client gets its replies when it binds that port, on connect(), in the URL and in
+    a Pool; without it, none."""
+    fins_port = free_udp_port()  # stands for 9600, which a test may not take on loopback
+    unit = Unit(
+        0x10, 1, 10, host="127.0.0.10", port=0, conversion=AddressConversion.IP_ADDRESS_TABLE,
+        ip_table={1: "127.0.0.1"}, fins_port=fins_port,
+    )  # fmt: skip
+    plc = VirtualPLC(network=1, node=10, mode=Mode.RUN)
+    plc.write("D0", [42])
+    plant = Plant([Network(1, NetworkType.ETHERNET)], [Station("table", plc, [unit])])
+    async with serve_plant(plant) as server:
+        url = f"udp://127.0.0.10:{server.port_of(unit)}?timeout=0.3&src=0.1.0"
+        async with aiofins.connect(url, local_port=fins_port) as client:
+            assert client.session.transport.local_address[1] == fins_port  # type: ignore[attr-defined]
+            assert await client.read("D0") == [42]
+        async with aiofins.connect(f"{url}&local_port={fins_port}") as client:
+            assert await client.read("D0") == [42]
+        async with aiofins.Pool(local_port=fins_port) as pool, pool.client(url) as client:
+            assert await client.read("D0") == [42]
+        async with aiofins.connect(url, retries=0) as client:
+            with pytest.raises(FinsTimeout):
+                await client.read("D0")  # the reply went to the FINS port
+        with pytest.raises(CommandError, match="max_sid_spaces must be 1"):
+            async with aiofins.connect(url, local_port=fins_port, max_sid_spaces=2):
+                pass

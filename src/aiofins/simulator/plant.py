@@ -116,6 +116,9 @@ class Unit:
     conversion: AddressConversion = AddressConversion.AUTOMATIC_DYNAMIC
     #: The IP address table (node -> IP address), for the table and combined methods.
     ip_table: dict[int, str] = field(default_factory=dict)
+    #: The FINS UDP port that static conversion and the IP address table send to (9600 in a
+    #: plant; tests on loopback pick a free one).
+    fins_port: int = FINS_PORT
     #: The address conversion of a unit served on UDP (``None`` without ``host``).
     ethernet: EthernetUnit | None = field(default=None, init=False)
 
@@ -131,6 +134,7 @@ class Unit:
                     self.host,
                     conversion=self.conversion,
                     ip_table=self.ip_table,
+                    fins_port=self.fins_port,
                     node=self.node,
                 )
             except ValueError as exc:
