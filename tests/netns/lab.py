@@ -174,6 +174,26 @@ class Lab:
             if line.startswith(ready):
                 return proc
 
+    def capture(self, ns: str, dev: str, path: Path) -> subprocess.Popen[str]:
+        """dumpcap on ``dev`` in ``ns`` writing FINS/UDP (port 9600) to ``path``, once it
+        says it captures; stop it with :meth:`stop`."""
+        proc = subprocess.Popen(
+            ["ip", "netns", "exec", ns, "dumpcap", "-i", dev, "-f", "udp port 9600", "-w",
+             str(path)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        self.processes.append(proc)
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            if line.startswith("Capturing on"):
+                return proc
+        raise RuntimeError(f"dumpcap did not start in {ns}: {proc.communicate(timeout=TIMEOUT)}")
+
+    @staticmethod
+    def stop(proc: subprocess.Popen[str]) -> None:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=TIMEOUT)
+
     def close(self) -> None:
         for proc in self.processes:
             if proc.poll() is None:

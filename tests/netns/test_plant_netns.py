@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from ..protocol.test_tshark import TSHARK, _warnings, run_tshark
 from .lab import REPO, Lab, impairment, unavailable
 
 REASON = unavailable()
@@ -93,7 +94,16 @@ def test_udp_plcs_by_ip_address_with_netem_faults(lab: Lab, tmp_path: Path, back
     serve(lab, lab.host("line", 10), gateway)
     for octet in (3, 4, 10):
         check_route(lab, client, octet)
+    capture = tmp_path / "client.pcapng"
+    dumpcap = lab.capture(client, lab.device(100), capture) if TSHARK else None
     result = workload(lab, client, backend, "udp_plant")
+    if dumpcap is not None:  # Wireshark's dissector reads every frame on the client's link
+        lab.stop(dumpcap)
+        rows = run_tshark(capture, "udp.port==9600,omron")
+        assert len(rows) >= 600, len(rows)  # 300 reads and their replies, at least
+        for row in rows:
+            assert row["omron.command"] == "0x0101", row  # MEMORY AREA READ
+            assert row["_ws.malformed"] == "" and not _warnings(row), row
     for name in ("dynamic", "ip_table", "routed"):
         assert_counted(result[name], 100, errors={"FinsTimeout"})
         assert result[name]["ok"] >= 50, result  # 3 retries: almost every call succeeds
