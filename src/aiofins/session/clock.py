@@ -16,8 +16,9 @@ assertion is exact. A driver without an event loop passes its own (``Session(clo
   would read 0 or 1 ms. It is the same ``CLOCK_MONOTONIC``, read fresh; the watcher's timer
   is then set by the difference (:attr:`Clocks.direct` is false);
 - any other asyncio loop (a virtual-time loop, e.g. looptime's): its ``loop.time``;
-- trio: :func:`trio.current_time` (three times cheaper than ``anyio.current_time``, the same
-  clock: ``MockClock`` under tests);
+- trio: the run's clock (``trio.lowlevel.current_clock().current_time``: what
+  :func:`trio.current_time` reads, at half its cost and a seventh of
+  ``anyio.current_time``'s; ``MockClock`` under tests);
 - any other backend: :func:`anyio.current_time`.
 
 Round trips (the adaptive retransmission timeout, latency statistics and hooks) are
@@ -72,7 +73,9 @@ def backend_clocks(clock: Clock | None = None) -> Clocks:
         return Clocks(clock, timer, clock is timer or (own and clock is monotonic))
     trio = sys.modules.get("trio")
     if trio is not None and trio.lowlevel.in_trio_run():
-        timer = trio.current_time
+        # The run's clock itself (MockClock's under tests): what trio.current_time reads,
+        # without the look-up of the run on every reading.
+        timer = trio.lowlevel.current_clock().current_time
     else:  # pragma: no cover - anyio's other backends, if any
         timer = anyio.current_time
     if clock is None:
