@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from aiofins.protocol.endcodes import EndCode
 from aiofins.protocol.errors import CommandError
@@ -291,3 +293,17 @@ def test_oversize_frames_per_network_type(kind: NetworkType, carried: int) -> No
     assert len(send(plant, read_d0("2.2.0", words), "G").data) == 2 * words
     if carried == 540:  # (a CPU refuses more than 999 words itself)
         assert send(plant, read_d0("2.2.0", words + 1), "G").end_code.raw == 0x110B
+
+
+@given(st.binary(max_size=64), st.integers(0, 255), st.integers(0, 7), st.integers(0, 2))
+def test_any_datagram_is_routed_or_counted_never_raised(
+    tail: bytes, dna: int, dest_node: int, gct: int
+) -> None:
+    """Whatever reaches a unit: answered, relayed, refused or dropped and counted."""
+    plant = three_networks()
+    head = bytes((0x80, 0, gct, dna, (10, 0, 1, 2, 3, 5, 9, 255)[dest_node], 0, 1, 254, 0, 7))
+    for frame in (tail, head + tail, head + b"\x01\x01" + tail):
+        out = plant.receive(plant.station("A").units[0], frame, *CLIENT)
+        for datagram in out:
+            assert datagram.frame[0] & 0x40  # only responses leave the plant here
+    assert sum(plant.counts.values()) >= 1

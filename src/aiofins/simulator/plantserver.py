@@ -35,7 +35,13 @@ class PlantServer:
                 data, address = await sock.receive()
             except OSError:
                 continue  # an ICMP error surfaced on the socket
-            for out in self.plant.receive(unit, data, str(address[0]), int(address[1])):
+            try:
+                sends = self.plant.receive(unit, data, str(address[0]), int(address[1]))
+            except Exception:  # a bug, not the peer's doing: counted and logged, served on
+                self.plant.counts["dropped:internal-error"] += 1
+                _logger.exception("plant: a datagram from %s could not be routed", address)
+                continue
+            for out in sends:
                 try:
                     await self._sockets[id(out.unit)].sendto(out.frame, out.host, out.port)
                 except OSError as exc:
