@@ -23,6 +23,9 @@ from .faults import (
     FrameHandler,
     FrameLog,
 )
+from .plant import Network, Plant, RoutingTables, Station, StationState, Unit
+from .plantfile import load_plant
+from .plantserver import PlantServer, serve_plant
 from .plc import VirtualPLC
 from .runner import Simulator, run_simulator
 from .serial import SerialServer, SerialSettings
@@ -43,11 +46,20 @@ __all__ = [
     "FrameHandler",
     "FrameLog",
     "Mode",
+    "Network",
+    "Plant",
+    "PlantServer",
+    "RoutingTables",
     "SerialServer",
     "SerialSettings",
     "Simulator",
+    "Station",
+    "StationState",
     "TcpServer",
     "UdpServer",
+    "Unit",
     "VirtualPLC",
+    "load_plant",
     "run_simulator",
+    "serve_plant",
 ]
