@@ -16,6 +16,7 @@ from aiofins.protocol.areas import (
     check_span,
 )
 from aiofins.protocol.errors import AddressError
+from aiofins.protocol.header import FinsAddress, build_command
 from aiofins.simulator.memory import (
     AREAS,
     FILL_AREAS,
@@ -140,3 +141,50 @@ def test_span_refused_exactly_where_the_plc_answers_1104(span: tuple[int, int, i
     end_code = accepts(memory, code, word, bit, count)
     assert end_code in (0, 0x1104)
     assert refused == (end_code or None)
+
+
+# -- an NJ/NX CPU: FINS reaches only AT-mapped memory ------------------------------------------
+
+
+def _nj() -> VirtualPLC:
+    return VirtualPLC(model="NJ501-1300", at_mapped=[("D100", 10), ("E3_0", 4), ("W0", 1)])
+
+
+def _answer(plc: VirtualPLC, mrc: int, src: int, params: bytes) -> int:
+    frame = build_command(FinsAddress(0, 1, 0), FinsAddress(0, 2, 0), 1, mrc, src, params)
+    reply = plc.handle_frame(frame)
+    assert reply is not None
+    return int.from_bytes(reply[12:14], "big")
+
+
+@pytest.mark.parametrize(
+    ("params", "end_code"),
+    [
+        ("82006400000a", 0x0000),  # D100..D109: mapped
+        ("82006d000001", 0x0000),  # D109
+        ("82006d000002", 0x1101),  # D109..D110: runs past the mapping
+        ("820063000001", 0x1101),  # D99
+        ("a30000000004", 0x0000),  # E3_0..E3_3
+        ("a20000000001", 0x1101),  # E2_0: another bank
+        ("b10000000001", 0x0000),  # W0
+        ("3100000f0001", 0x0000),  # W0.15, a bit of a mapped word
+        ("310001000001", 0x1101),  # W1.00
+        ("b00000000001", 0x1101),  # CIO 0
+    ],
+)
+def test_an_nj_answers_unmapped_memory_with_1101(params: str, end_code: int) -> None:
+    assert _answer(_nj(), 0x01, 0x01, bytes.fromhex(params)) == end_code
+
+
+def test_an_nj_refuses_writes_and_transfers_touching_unmapped_memory() -> None:
+    plc = _nj()
+    assert _answer(plc, 0x01, 0x02, bytes.fromhex("820064000001BEEF")) == 0
+    assert plc.read("D100") == [0xBEEF]
+    assert _answer(plc, 0x01, 0x02, bytes.fromhex("820000000001BEEF")) == 0x1101
+    assert plc.read("D0") == [0]
+    # 0104 with one unmapped item, 0105 into unmapped memory
+    assert _answer(plc, 0x01, 0x04, bytes.fromhex("8200640082000000")) == 0x1101
+    assert _answer(plc, 0x01, 0x05, bytes.fromhex("82006400820000000001")) == 0x1101
+    assert _answer(plc, 0x01, 0x04, bytes.fromhex("82006400b1000000")) == 0
+    # a CS/CJ (no at_mapped) reads all of it
+    assert _answer(VirtualPLC(), 0x01, 0x01, bytes.fromhex("820000000001")) == 0

@@ -49,6 +49,29 @@ def endpoint(text: str) -> tuple[str, int]:
     return host, number
 
 
+def at_span(text: str) -> tuple[str, int]:
+    """``ADDRESS:WORDS`` (``D0:100``): memory AT-mapped to variables, checked as the PLC's
+    areas are (:func:`aiofins.protocol.addresses.parse_span`)."""
+    from ..protocol.addresses import parse_span
+    from ..protocol.errors import FinsError
+
+    address, sep, words = text.rpartition(":")
+    if not sep or not words.isdigit() or int(words) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not ADDRESS:WORDS (D0:100)")
+    try:
+        parse_span(address, int(words))
+    except FinsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return address, int(words)
+
+
+def model_name(text: str) -> str:
+    """A CPU model as CPU UNIT DATA READ carries it: 20 ASCII characters at most."""
+    if not text.isascii() or not text.isprintable() or not 0 < len(text) <= 20:
+        raise argparse.ArgumentTypeError(f"model {text!r}: 1..20 printable ASCII characters")
+    return text
+
+
 def probability(text: str) -> float:
     try:
         value = float(text)
@@ -169,6 +192,22 @@ def register(subparsers: SubParsers) -> None:
         "--network", type=integer_in(0, 127), default=0, help="FINS network (0-127, default 0)"
     )
     plc.add_argument("--mode", choices=MODES, default="run", help="operating mode")
+    plc.add_argument(
+        "--model",
+        type=model_name,
+        default="CJ2M-CPU33",
+        help="CPU model CPU UNIT DATA READ (0501) answers (default CJ2M-CPU33); an NJ/NX "
+        "model (NJ501-1300) answers FINS only for its AT-mapped memory (--at), else end "
+        "code 1101",
+    )
+    plc.add_argument(
+        "--at",
+        type=at_span,
+        action="append",
+        metavar="ADDRESS:WORDS",
+        help="memory AT-mapped to variables (NJ/NX; repeatable): D0:100 is D0..D99; "
+        "with --at any model answers only there",
+    )
 
     f = p.add_argument_group("faults (probabilities 0..1 per request)")
     f.add_argument("--drop", type=probability, default=0.0, metavar="P", help="drop requests")
@@ -377,7 +416,14 @@ async def _serve(args: argparse.Namespace, plan: FaultPlan) -> None:
     from ..simulator.state import Mode
 
     udp, tcp = endpoints(args)
-    plc = VirtualPLC(network=args.network, node=args.node, mode=Mode[args.mode.upper()])
+    nj = args.model.strip().upper()[:2] in ("NJ", "NX")
+    plc = VirtualPLC(
+        network=args.network,
+        node=args.node,
+        mode=Mode[args.mode.upper()],
+        model=args.model,
+        at_mapped=args.at if args.at is not None else [] if nj else None,
+    )
     settings = SerialSettings(args.baudrate, args.bytesize, args.parity, args.stopbits)
     async with run_simulator(
         plc,

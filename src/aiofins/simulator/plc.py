@@ -16,8 +16,16 @@ from datetime import datetime
 from typing import Any
 
 from ..protocol.addresses import parse_span
+from ..protocol.areas import MemoryAddress, find_spec
 from ..protocol.commands import Request, operation_for
 from ..protocol.commands.access import AccessRightAcquire
+from ..protocol.commands.memory import (
+    MemoryAreaFill,
+    MemoryAreaRead,
+    MemoryAreaTransfer,
+    MemoryAreaWrite,
+    MultipleMemoryAreaRead,
+)
 from ..protocol.commands.parameter import PARAMETER_AREA_WORDS, ParameterArea, ParameterAreaRead
 from ..protocol.commands.status import FatalError, NonFatalError
 from ..protocol.endcodes import (
@@ -37,6 +45,7 @@ from .memory import IOMemory
 from .state import (
     ACCESS_RIGHT_HELD,
     ADDRESS_RANGE_EXCEEDED,
+    AREA_MISSING,
     COMMAND_TOO_SHORT,
     LOG_CAPACITY,
     NO_ROUTE,
@@ -62,6 +71,25 @@ _HANDLER_DECIDES = frozenset(
 _ACCESS_RIGHT_ACQUIRE = AccessRightAcquire.command_code()
 #: The whole parameter area, code 8000 (manual 5-3-7).
 PARAMETER_WORDS = PARAMETER_AREA_WORDS[ParameterArea.ALL]
+#: What an NJ/NX CPU model answers for I/O memory no variable is AT-mapped to: area
+#: missing (1101), the CJ-series memory is not there for FINS.
+NOT_AT_MAPPED = AREA_MISSING
+
+#: (area, EM bank) -> the wire words of one AT-mapped span, first and last.
+_Span = tuple[tuple[str, int | None], int, int]
+
+
+def _span_of(address: MemoryAddress, elements: int) -> _Span | None:
+    """The area and wire words ``elements`` elements from ``address`` touch; ``None`` for an
+    address outside every area."""
+    spec = find_spec(address.area_code, address.word)
+    if spec is None:
+        return None
+    if address.is_bit:
+        last = address.word + (address.bit + max(elements, 1) - 1) // 16
+    else:
+        last = address.word + max(elements, 1) * max(address.element_size // 2, 1) - 1
+    return (spec.area, spec.bank), address.word, last
 
 
 #: Error code ranges → (fatal?, bit of the 0601 fatal / non-fatal error word), per the
@@ -140,6 +168,7 @@ class VirtualPLC:
         em_file_memory: bool = True,
         clock: Callable[[], float] = time.time,
         gateway: GatewayHandler = default_gateway,
+        at_mapped: Iterable[tuple[str, int]] | None = None,
     ) -> None:
         if not 1 <= node <= 254:
             raise CommandError(f"node {node} out of range 1..254 (a PLC's FINS node number)")
@@ -184,6 +213,18 @@ class VirtualPLC:
         self.frames_handled = 0
         self.frames_ignored = 0
         self.commands: Counter[int] = Counter()
+        #: An NJ/NX CPU's FINS view of I/O memory: only the spans variables are AT-mapped
+        #: to, ``(address, words)`` (``("D0", 100)``: D0..D99); anything else is answered
+        #: with :data:`NOT_AT_MAPPED`. ``None`` (a CS/CJ CPU): all of it.
+        self.at_mapped: list[_Span] | None = None
+        if at_mapped is not None:
+            spans = []
+            for text, words in at_mapped:
+                span = _span_of(parse_span(text, words), words)
+                if span is None:  # pragma: no cover - parse_span checked the area
+                    raise CommandError(f"AT mapping {text!r}: no such area")
+                spans.append(span)
+            self.at_mapped = spans
 
     @property
     def mode(self) -> Mode:
@@ -383,6 +424,29 @@ class VirtualPLC:
             network_write_refused=refused,
         )
 
+    def _mapped(self, request: Request[Any]) -> bool:
+        """Whether every I/O memory word ``request`` touches is AT-mapped (NJ/NX)."""
+        touched: list[tuple[MemoryAddress, int]]
+        if isinstance(request, MemoryAreaRead | MemoryAreaFill):
+            touched = [(request.address, request.count)]
+        elif isinstance(request, MemoryAreaWrite):
+            touched = [(request.address, len(request.data) // request.address.element_size)]
+        elif isinstance(request, MultipleMemoryAreaRead):
+            touched = [(address, 1) for address in request.addresses]
+        elif isinstance(request, MemoryAreaTransfer):
+            touched = [(request.source, request.count), (request.destination, request.count)]
+        else:
+            return True
+        mapped = self.at_mapped or []
+        for address, elements in touched:
+            span = _span_of(address, elements)
+            if span is None or not any(
+                key == span[0] and first <= span[1] and span[2] <= last
+                for key, first, last in mapped
+            ):
+                return False
+        return True
+
     def execute(self, command: CommandFrame, *, from_network: bool = True) -> tuple[int, bytes]:
         """Run one command: (end code, response data)."""
         code, params, source = command.command_code, command.params, command.header.source
@@ -401,6 +465,8 @@ class VirtualPLC:
         except DecodeError as exc:
             if (code, exc.end_code) not in _HANDLER_DECIDES:
                 return exc.end_code or COMMAND_TOO_SHORT, b""
+        if self.at_mapped is not None and request is not None and not self._mapped(request):
+            return NOT_AT_MAPPED, b""
         row = restrictions.restriction_for(code, params)
         if restrictions.is_write_row(row):
             # manual 5-3-30: the log keeps every FINS write access, whatever the setting
