@@ -90,6 +90,9 @@ def test_each_document_matches_its_schema(
     (info,) = check("info", "--json")
     assert info["model_data"]["model"] == "CJ2M-CPU33"
     check("clock", "--json")
+    (doctor,) = check("doctor", "--json")
+    assert doctor["exit_code"] == 0 and doctor["reachable"] is True
+    assert {f["check"] for f in doctor["findings"]} >= {"udp", "node", "cpu", "rtt"}
     (ping,) = check("ping", "--count", "2", "--json")
     assert ping["count"] == 2
     scans = check(

@@ -25,7 +25,16 @@ from .examples import EXAMPLES, MAIN_EXAMPLES, HelpFormatter, epilog
 from .text import escape
 
 #: Subcommand modules (relative to this package), in the order ``--help`` lists them.
-SUBCOMMANDS: tuple[str, ...] = ("plc", "poll", "watch", "bulk", "simulate", "demo", "gateway")
+SUBCOMMANDS: tuple[str, ...] = (
+    "plc",
+    "poll",
+    "watch",
+    "doctor",
+    "bulk",
+    "simulate",
+    "demo",
+    "gateway",
+)
 
 Handler = Callable[[argparse.Namespace], int]
 

@@ -80,6 +80,13 @@ EXAMPLES: dict[str, str] = {
   # a longer trend, one scan a second, the tags of a symbol table
   aiofins watch udp://192.168.250.1 --tags symbols.csv --interval 1 --history 60
 """,
+    "doctor": """
+  # what is wrong with a connection, and the fix (exit code 0: nothing)
+  aiofins doctor udp://192.168.250.1
+  aiofins doctor tcp://192.168.250.1 --json
+  # also see whether writes are refused (writes D100's own value back)
+  aiofins doctor udp://192.168.250.1 --write-test --address D100
+""",
     "backup": """
   # the program area (raw bytes), the parameter areas (JSON)
   aiofins backup udp://192.168.250.1 program.bin
