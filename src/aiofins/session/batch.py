@@ -447,12 +447,23 @@ async def _concurrent(
     width: int,
     on_response: OnResponse | None,
 ) -> list[Response]:
-    """The portable path: ``width`` loops of :meth:`Session.request`; the first error wins."""
+    """The portable path: ``width`` loops of :meth:`Session.request`; the first error wins.
+
+    The commands are one call: :meth:`Session.request_many` asked the circuit breaker for it
+    (it may be the probe) and tells it how the call ended, so the commands do neither (a
+    probe's own commands turned away by its probe kept the breaker from ever closing)."""
     results: list[Response | None] = [None] * len(commands)
     if width == 1:
         for i, (mrc, src, params) in enumerate(commands):
             response = results[i] = await session.request(
-                mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent, retries=retries
+                mrc,
+                src,
+                params,
+                dest=dest,
+                timeout=timeout,
+                idempotent=idempotent,
+                retries=retries,
+                _in_call=True,
             )
             if on_response is not None:
                 on_response(i, response)
@@ -472,6 +483,7 @@ async def _concurrent(
                     timeout=timeout,
                     idempotent=idempotent,
                     retries=retries,
+                    _in_call=True,
                 )
                 if on_response is not None and not errors:  # none after the first error
                     on_response(i, response)

@@ -703,11 +703,15 @@ class Session:
         idempotent: bool = False,
         retries: int | None = None,
         attempt_timeout: float | None = None,
+        _in_call: bool = False,
     ) -> Response:
         """Send one command and return its normal-completion response.
 
         ``timeout`` bounds the whole call (link, slot, SID, every transmission, reply);
-        ``attempt_timeout`` caps each transmission's wait. Raises the
+        ``attempt_timeout`` caps each transmission's wait. (``_in_call``, internal: this
+        request is one command of a call that passed the circuit breaker itself and tells
+        it how it ended, :meth:`request_many`'s portable path; the breaker is not asked,
+        so the call's own probe cannot turn its commands away.) Raises the
         :class:`EndCodeError` subclass for the end code (:class:`RelayError` for bit 15),
         :class:`FinsTimeout` when no reply came in time (saying after how many attempts),
         :class:`ConnectionLost` when the link failed or the session closed,
@@ -732,7 +736,7 @@ class Session:
         clock = self.clock
         end = (now := clock()) + timeout  # (now: read again after any wait below)
         self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
-        if self._breaker.failures:  # (none: the breaker is closed)
+        if self._breaker.failures and not _in_call:  # (none: the breaker is closed)
             await admit_call(self._breaker, self.stats, dest, self.transport.description, now)
             now = clock()
         p: Pending | None = None
@@ -795,22 +799,30 @@ class Session:
                 busy += 1
                 now = clock()
         except BaseException as exc:
-            await self._call_failed(exc, p, dest, timeout)
+            await self._call_failed(exc, p, dest, timeout, _in_call)
 
     async def _call_failed(
-        self, exc: BaseException, p: Pending | None, dest: FinsAddress, timeout: float
+        self,
+        exc: BaseException,
+        p: Pending | None,
+        dest: FinsAddress,
+        timeout: float,
+        in_call: bool = False,
     ) -> NoReturn:
         """A call of :meth:`request` ends with ``exc`` (``p``: its latest request): the
-        breaker learns it; a request given up after its deadline is raised as a
-        :class:`FinsTimeout` saying after how many attempts; a lost link after a turn of the
-        event loop (see :func:`raise_after_a_turn`)."""
+        breaker learns it (unless ``in_call``: the enclosing call tells it); a request given
+        up after its deadline is raised as a :class:`FinsTimeout` saying after how many
+        attempts; a lost link after a turn of the event loop (see
+        :func:`raise_after_a_turn`)."""
         where = self.transport.description
         if isinstance(exc, Expired):
             assert p is not None
             error = no_response(self, dest, p.mrc, p.src, timeout, p.attempts)
-            call_ended(self._breaker, error, timeout, where, self.clock())
+            if not in_call:
+                call_ended(self._breaker, error, timeout, where, self.clock())
             raise error from None
-        call_ended(self._breaker, exc, timeout, where, self.clock())
+        if not in_call:
+            call_ended(self._breaker, exc, timeout, where, self.clock())
         if isinstance(exc, ConnectionLost):
             await raise_after_a_turn(exc)
         raise exc
