@@ -209,6 +209,7 @@ class EndpointStats:
     duplicates: int = 0
     unsolicited: int = 0
     mismatched: int = 0
+    misdirected: int = 0
     malformed: int = 0
     retries: int = 0
     sid_exhausted: int = 0

@@ -406,10 +406,16 @@ def test_arbitrary_frames_never_raise_and_only_matching_ones_are_delivered(
         session.frame_received(frame)
     stats = session.stats
     counted = (
-        stats.malformed + stats.mismatched + stats.unsolicited + stats.duplicates + len(p.woken)
+        stats.malformed
+        + stats.mismatched
+        + stats.misdirected
+        + stats.unsolicited
+        + stats.duplicates
+        + len(p.woken)
     )
     assert counted == len(frames)
-    for frame in p.woken:  # delivered: right SID, MRC/SRC, a response ICF, an end code
+    for frame in p.woken:  # delivered: to us, right SID, MRC/SRC, a response ICF, an end code
+        assert frame[4:6] == b"\x02\x00"  # DA1 DA2: our node (any network: ours is 0)
         assert frame[9] == 0x07 and frame[7] == 1 and frame[10:12] == b"\x01\x01"
         assert frame[0] & 0x7E == 0x40 and len(frame) >= 14
     assert len(p.woken) <= 1  # the first match completes the request; later ones are dups
@@ -530,3 +536,31 @@ async def test_waiting_for_a_free_sid_is_bounded_by_the_requests_timeout() -> No
             with pytest.raises(SlotTimeout, match=r"no free SID for 0\.1\.0 within 0\.2 s"):
                 await call
             assert 0.15 < monotonic() - start < 1.5
+
+
+@pytest.mark.anyio
+async def test_a_late_relay_error_never_reaches_a_request_to_another_destination() -> None:
+    """A relay error (bit 15) comes from the relay point, with the relay's address, and is
+    matched by SID and command code. Issue #22, defect 3: one that came after its request
+    to 2.5.0 timed out was raised to the next request to 3.6.0, which had taken the same
+    SID (quarantined for 2.5.0 only), and that request's own reply was then counted as a
+    duplicate. The SID now stays quarantined for every destination on another network."""
+    given_up: list[bytes] = []
+
+    def relay(cmd: bytes) -> list[Reply]:
+        if cmd[3] == 2:  # network 2: the relay answers late (after the request timed out)
+            given_up.append(cmd)
+            return []
+        late = reply(given_up[0], 0x8205, trailer=b"\x01\x09")  # 0205 at relay 1.9
+        late = late[:6] + bytes((1, 9, 0)) + late[9:]  # from the relay point
+        return [(0.0, late), (0.0, reply(cmd, 0, word_data(cmd)))]
+
+    async with udp_responder(relay) as peer, session_for(peer, timeout=0.1) as session:
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(1), dest=FinsAddress(2, 5, 0))
+        response = await session.request(0x01, 0x01, read_params(1), dest=FinsAddress(3, 6, 0))
+        assert response.data == word_data(peer.received[1])
+        assert peer.received[1][9] != given_up[0][9]  # another SID
+        stats = session.stats
+        assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 0, 0)
+        assert (stats.completed, stats.end_code_errors) == (1, 0)

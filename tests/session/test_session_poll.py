@@ -22,6 +22,7 @@ import pytest
 from anyio.abc import SocketAttribute
 
 from aiofins.protocol.errors import ConnectionLost, FinsTcpError, FinsTimeout
+from aiofins.protocol.header import FinsAddress
 from aiofins.protocol.tcp import encode_message
 from aiofins.session import Session
 from aiofins.transport import TcpTransport
@@ -74,9 +75,9 @@ def counting_deliveries(session: Session) -> list[int]:
     return counts
 
 
-def placed_reply(sid: int, data: bytes) -> bytes:
-    """A 0101 reply from PLC to SOURCE with ``sid``."""
-    dna, da1, da2 = SOURCE.network, SOURCE.node, SOURCE.unit
+def placed_reply(sid: int, data: bytes, to: FinsAddress = SOURCE) -> bytes:
+    """A 0101 reply from PLC to ``to`` (the session's source) with ``sid``."""
+    dna, da1, da2 = to.network, to.node, to.unit
     sna, sa1, sa2 = PLC.network, PLC.node, PLC.unit
     return bytes((0xC0, 0, 2, dna, da1, da2, sna, sa1, sa2, sid, 1, 1, 0, 0)) + data
 
@@ -214,9 +215,10 @@ def test_trio_placed_replies_are_delivered_by_the_read_after_send() -> None:
     anyio.run(main, backend="trio")
 
 
-def tcp_placed(sid: int, data: bytes) -> bytes:
-    """:func:`placed_reply` in its FINS/TCP envelope."""
-    return encode_message(2, placed_reply(sid, data))
+def tcp_placed(sid: int, data: bytes, to: FinsAddress) -> bytes:
+    """:func:`placed_reply` to ``to`` (the node the server assigned us) in its FINS/TCP
+    envelope."""
+    return encode_message(2, placed_reply(sid, data, to))
 
 
 async def first_tcp_sid(peer: TcpPeer, session: Session) -> tuple[int, socket.socket]:
@@ -239,7 +241,7 @@ def test_tcp_placed_reply_completes_without_a_loop_pass(options: dict[str, Any])
             async with counting_loop_passes() as passes:
                 for i in range(1, 101):
                     value = (0x5000 + i).to_bytes(2, "big")
-                    raw.send(tcp_placed((sid + i) & 0xFF, value))
+                    raw.send(tcp_placed((sid + i) & 0xFF, value, session.source))
                     response = await session.request(0x01, 0x01, read_params(i))
                     assert response.data == value
             assert 3 <= passes.count <= 15, passes.count  # as over UDP: a turn per 33
@@ -260,7 +262,9 @@ def test_tcp_message_split_between_the_read_after_send_and_the_transport(
         async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
             sid, raw = await first_tcp_sid(peer, session)
             for i in range(1, 21):
-                message = tcp_placed((sid + i) & 0xFF, (0x6000 + i).to_bytes(2, "big"))
+                message = tcp_placed(
+                    (sid + i) & 0xFF, (0x6000 + i).to_bytes(2, "big"), session.source
+                )
                 cut = 4 + i  # inside the envelope, then inside the FINS header
                 raw.send(message[:cut])
 
@@ -289,7 +293,7 @@ def test_tcp_read_after_send_leaves_the_end_of_stream_to_the_transport(
     async def main() -> None:
         async with tcp_server(TcpPeer()) as peer, tcp_session(peer) as session:
             sid, raw = await first_tcp_sid(peer, session)
-            raw.send(tcp_placed((sid + 1) & 0xFF, b"\x12\x34"))
+            raw.send(tcp_placed((sid + 1) & 0xFF, b"\x12\x34", session.source))
             raw.shutdown(socket.SHUT_WR)
             response = await session.request(0x01, 0x01, read_params(1))
             assert response.data == b"\x12\x34"
@@ -318,7 +322,7 @@ def test_trio_tcp_placed_replies_are_delivered_by_the_read_after_send() -> None:
             counts = counting_deliveries(session)
             for i in range(1, 101):
                 value = (0x5000 + i).to_bytes(2, "big")
-                raw.send(tcp_placed((sid + i) & 0xFF, value))
+                raw.send(tcp_placed((sid + i) & 0xFF, value, session.source))
                 response = await session.request(0x01, 0x01, read_params(i))
                 assert response.data == value
             assert counts[1] >= 98, counts

@@ -42,10 +42,13 @@ pack_head = struct.Struct("9sBBB").pack
 
 _unpack_key = struct.Struct(">I").unpack_from
 
-#: ``(ICF, key, MRC, SRC, end code)`` of a reply, the key as :func:`reply_key` gives it, in
-#: one call (``struct.error`` when the frame is shorter than :data:`MIN_REPLY_SIZE`): what
-#: the session matches each reply by.
-unpack_reply_head = struct.Struct(">B5xIBBH").unpack_from
+#: ``(ICF, to, key, MRC, SRC, end code)`` of a reply in one call (``struct.error`` when the
+#: frame is shorter than :data:`MIN_REPLY_SIZE`): what the session matches each reply by.
+#: ``to & 0xFFFFFF`` is the reply's ``DNA DA1 DA2`` as :func:`address_bits` gives an address
+#: (the byte above it is GCT); the key is as :func:`reply_key` gives it.
+unpack_reply_head = struct.Struct(">BxIIBBH").unpack_from
+#: The ``DNA DA1 DA2`` bits of :func:`unpack_reply_head`'s ``to``.
+ADDRESS_MASK = 0xFFFFFF
 #: The ICF values of a response (bit 6 set, bits 1-5 clear; bit 0 and bit 7 either way:
 #: some servers set bit 0).
 RESPONSE_ICFS = frozenset({0x40, 0x41, 0xC0, 0xC1})
@@ -62,6 +65,17 @@ def reply_key(frame: bytes) -> int:
 def command_key(frame: bytes) -> int:
     """``DNA DA1 DA2 SID`` of a command as one integer (what its reply's :func:`reply_key` is)."""
     return (frame[DNA] << 24) | (frame[DNA + 1] << 16) | (frame[DNA + 2] << 8) | frame[SID]
+
+
+def address_bits(network: int, node: int, unit: int) -> int:
+    """``network node unit`` as one 24-bit integer, the ``DNA DA1 DA2`` of a reply to it."""
+    return (network << 16) | (node << 8) | unit
+
+
+def same_address(a: int, b: int) -> bool:
+    """Whether two :func:`address_bits` name the same node and unit, network 0 (the local
+    network) matching any network number (a node may fill in its real one)."""
+    return a == b or ((a ^ b) & 0xFFFF == 0 and not (a >> 16 and b >> 16))
 
 
 def key_address(key: int) -> tuple[int, int, int]:

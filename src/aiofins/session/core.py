@@ -37,16 +37,19 @@ from ..protocol.errors import (
     FinsTimeout,
 )
 from ..protocol.frames import (
+    ADDRESS_MASK,
     BUSY_CODES,
     ERROR_BITS,
     MIN_RELAY_REPLY_SIZE,
     RELAY_ERROR_BIT,
     RESPONSE_ICFS,
+    address_bits,
     check_command,
     end_code_error,
     header_prefix,
     key_address,
     pack_head,
+    same_address,
     unpack_reply_head,
 )
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
@@ -200,6 +203,7 @@ class Session:
         self._shared_slots = limit == 1
         #: The SIDs and the requests in flight of the transport (see :mod:`.sids`).
         self.sids = SidSpace(min_linger, self.clock)
+        self.sids.ours = address_bits(source.network, source.node, source.unit)
         # The space's tables under the names the receive path and tests use.
         self._pending = self.sids.pending
         self._quarantine = self.sids.quarantine
@@ -361,6 +365,7 @@ class Session:
                     "not a node number (1..254)"
                 )
             self.source = FinsAddress(self.source.network, node, self.source.unit)
+            self.sids.ours = address_bits(self.source.network, self.source.node, self.source.unit)
             for state in self._dests.values():
                 state.prefix = self._prefix(state.address)
         self._spaces.primary_opened(self.source.node)
@@ -378,11 +383,13 @@ class Session:
         if self._log_frames:
             log_frame(self.transport.description, "received", frame)
         try:
-            icf, key, mrc, src, raw = unpack_reply_head(frame)
+            icf, to, key, mrc, src, raw = unpack_reply_head(frame)
         except StructError:  # shorter than a reply's header, command code and end code
             self.stats.malformed += 1
             return
         sids = self.sids if space is None else space.sids
+        if to & ADDRESS_MASK != sids.ours and self._misdirected(frame, to, sids):
+            return
         pending = sids.pending
         p = pending.pop(key, None)  # (put back below if the reply is not its)
         if p is None:
@@ -390,7 +397,7 @@ class Session:
             if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
                 p = match_relay_error(pending, frame)
             if p is None:
-                log_unmatched(self, key, sids)
+                log_unmatched(self, key, sids, raw >= RELAY_ERROR_BIT)
                 return
             key = p.key
             del pending[key]
@@ -452,6 +459,38 @@ class Session:
                 self._deadlines.prune(len(pending))
         if self._heap:
             self._deadlines.prune(len(pending))
+
+    def _misdirected(self, frame: bytes, to: int, sids: SidSpace) -> bool:
+        """Whether a reply received on SID space ``sids`` is for another of our addresses
+        (its ``DNA DA1 DA2``, in ``to``, is not the space's source): it never matches this
+        space's requests. Counted (``stats.misdirected``) and handed to our space that
+        owns the address, if any (an Ethernet unit with an IP address table or static
+        conversion sends every reply to one port, whichever socket the command came from),
+        else dropped. False (the space's own) for network 0 against a network number, and
+        while the space's address is not known."""
+        to &= ADDRESS_MASK
+        if sids.ours < 0 or same_address(to, sids.ours):
+            return False
+        self.stats.misdirected += 1
+        owner: ExtraSpace | None = None
+        if same_address(to, self.sids.ours):
+            found = True
+        else:
+            owner = next((s for s in self._spaces.extra if same_address(to, s.sids.ours)), None)
+            found = owner is not None
+        if logger.isEnabledFor(_DEBUG):
+            where = self.transport.description
+            logger.debug(
+                "%s: a reply to %s came to the socket of %s: %s",
+                where,
+                FinsAddress(*key_address(to << 8)),
+                FinsAddress(*key_address(sids.ours << 8)),
+                "handed to its SID space" if found else "none of ours, dropped",
+                extra={"endpoint": where},
+            )
+        if found:
+            self.frame_received(frame, None, owner)
+        return True
 
     def log_frames_now(self) -> None:
         """Ask logging whether the frames sent and received are logged (DEBUG) from now
@@ -957,7 +996,9 @@ class Session:
         spaces = self._spaces
         got = spaces.take(state, now) or spaces.allocate(state)
         if got is None and spaces.may_open(now):
-            spaces.open_soon(self.source, self._nodes_in_use())
+            # (from the deadline watcher's task: a batch runs in receive callbacks, where
+            # no task can be started)
+            self._watcher.from_task(lambda: spaces.open_soon(self.source, self._nodes_in_use()))
         return got
 
     def requests_in_flight(self) -> list[Pending]:

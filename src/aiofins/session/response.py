@@ -99,6 +99,7 @@ class SessionStats:
         "end_code_errors",
         "late_replies",
         "malformed",
+        "misdirected",
         "mismatched",
         "retries",
         "sid_exhausted",
@@ -117,6 +118,9 @@ class SessionStats:
         self.duplicates = 0
         self.unsolicited = 0
         self.mismatched = 0
+        #: Replies addressed (DNA DA1 DA2) to another of our addresses than the socket's
+        #: that got them (handed to that SID space) or to none of ours (dropped).
+        self.misdirected = 0
         self.malformed = 0
         self.retries = 0  # retransmissions (same frame and SID)
         self.background_errors = 0  # background tasks (transport reader...) that raised

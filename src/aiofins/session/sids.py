@@ -19,6 +19,7 @@ or connections would own one per socket.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from time import monotonic
@@ -35,6 +36,9 @@ LINGER_FACTOR = 2.0
 MAX_LINGER = 5.0
 #: Longest pause between two looks for a free SID while all 256 are taken.
 SID_WAIT = 0.01
+#: Seconds without a SID shortage after which the next one is a new episode (logged again):
+#: at a high rate SIDs come free and run short many times a second within one shortage.
+SHORTAGE_EPISODE = 60.0
 
 
 class SidSpace:
@@ -49,11 +53,12 @@ class SidSpace:
         "linger",
         "linger_resent",
         "lingering",
+        "ours",
         "pending",
         "quarantine",
         "recent",
         "routed",
-        "short",
+        "short_at",
     )
 
     def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
@@ -75,8 +80,14 @@ class SidSpace:
         #: Requests go to more than one destination: a SID is then kept unique across them,
         #: as a relay error (from the relay point, not the destination) is matched by SID.
         self.routed = False
-        #: All SIDs of a destination were taken (logged once until one is free again).
-        self.short = False
+        #: When a request last found every SID of a destination taken (``-inf``: never);
+        #: a shortage within :data:`SHORTAGE_EPISODE` of the last is the same episode,
+        #: logged once.
+        self.short_at = -math.inf
+        #: Our address on this space's socket or connection (its source: ``DNA DA1 DA2``
+        #: of a reply to it, see :func:`~aiofins.protocol.frames.address_bits`; -1 while
+        #: not known). A reply addressed elsewhere never matches this space's requests.
+        self.ours = -1
 
     # -- taking a SID ---------------------------------------------------------------------
 
@@ -98,9 +109,22 @@ class SidSpace:
         return key
 
     def sid_taken(self, key: int) -> bool:
-        """Whether ``key``'s SID is in flight to another destination."""
+        """Whether ``key``'s SID is in flight to another destination, or, for a request to
+        another network, may still get a late relay error (see :meth:`relay_taken`)."""
         sid = key & 0xFF
-        return any(k & 0xFF == sid for k in self.pending)
+        return any(k & 0xFF == sid for k in self.pending) or (
+            key >> 24 != 0 and sid in self.relay_taken(self.clock())
+        )
+
+    def relay_taken(self, now: float) -> set[int]:
+        """The SIDs a request to another network may not take now: those quarantined for
+        any destination on another network. A relay error comes from the relay point,
+        not the destination, and is matched by SID and command code alone
+        (:func:`~.matching.match_relay_error`); a late one for a request given up on must
+        not find a newer request to another destination (routed through that relay,
+        perhaps) under the same SID. (Requests to network 0, the local network, are
+        relayed nowhere: they neither take a relay error nor keep a SID from others.)"""
+        return {k & 0xFF for k, until in self.quarantine.items() if k >> 24 and until > now}
 
     def is_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
         """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
@@ -121,7 +145,11 @@ class SidSpace:
         a scan of up to 256 keys."""
         base, sid = state.base, state.cursor
         now = self.clock()
-        taken: AbstractSet[int] = {k & 0xFF for k in self.pending} if self.routed else _NONE
+        taken: AbstractSet[int] = _NONE
+        if self.routed:
+            taken = {k & 0xFF for k in self.pending}
+            if base >> 24:  # to another network: not a SID a late relay error may still use
+                taken |= self.relay_taken(now)
         for _ in range(256):
             key = base | sid
             sid = (sid + 1) & 0xFF
@@ -179,14 +207,16 @@ class SidSpace:
         twice the time the call took, and the linger the link has shown necessary."""
         return max(self.linger, self.linger_resent, rto_max, LINGER_FACTOR * (now - p.sent_at))
 
-    def unmatched(self, stats: SessionStats, key: int) -> tuple[str, float]:
+    def unmatched(
+        self, stats: SessionStats, key: int, relay_error: bool = False
+    ) -> tuple[str, float]:
         """A reply no request waits for: counted (late, duplicate or unsolicited). A late
         reply ends its SID's quarantine; a duplicate teaches the linger (SIDs then wait
         twice its lateness after a reply). Returns which (``"late"``, ``"duplicate"`` or
         ``"unsolicited"``), and for a duplicate of a reply
         the network repeated that made :attr:`linger` grow, how late it came (else 0.0)."""
         now = self.clock()
-        kind = count_unmatched(stats, self.quarantine, self.recent, key, now)
+        kind = count_unmatched(stats, self.quarantine, self.recent, key, now, relay_error)
         if kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission

@@ -31,13 +31,14 @@ import anyio
 
 from ..hooks import EventHooks, SidSpaceChanged
 from ..protocol.errors import ConnectionLost
+from ..protocol.frames import address_bits
 from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .background import Background
 from .clock import Clock
 from .messages import no_free_sid
 from .nodes import SOURCE_NODES
-from .sids import SID_WAIT, SidSpace
+from .sids import SHORTAGE_EPISODE, SID_WAIT, SidSpace
 from .slots import DestState, Pending
 
 if TYPE_CHECKING:
@@ -99,6 +100,12 @@ class ExtraSpace:
         self.last_used = owner.clock()
         self.opened = anyio.Event()
         self.background: Background | None = None
+
+    def set_source(self, source: FinsAddress) -> None:
+        """Our address on this space: the source of its commands, the destination of the
+        replies it may match."""
+        self.source = source
+        self.sids.ours = address_bits(source.network, source.node, source.unit)
 
     # -- the transport's sink --------------------------------------------------------------
 
@@ -291,7 +298,7 @@ class SidSpaces:
                 self._failed(space, ConnectionLost("no free FINS source node for another socket"))
                 return None
             space.claimed = (peer, node)
-            space.source = FinsAddress(source.network, node, source.unit)
+            space.set_source(FinsAddress(source.network, node, source.unit))
         self.extra.append(space)
         self._emit(space, None)
         self.background.start_soon(self._run, space, source)
@@ -309,7 +316,7 @@ class SidSpaces:
                 node = transport.local_node
                 if node is None or not 1 <= node <= 254:
                     raise ConnectionLost(f"{transport.description} assigned us FINS node {node}")
-                space.source = FinsAddress(source.network, node, source.unit)
+                space.set_source(FinsAddress(source.network, node, source.unit))
         except Exception as exc:
             with anyio.CancelScope(shield=True):
                 await self._close(space)
@@ -318,6 +325,7 @@ class SidSpaces:
         if space.state is not SpaceState.OPENING:  # the session closed meanwhile
             return
         self.stats.sid_spaces_opened += 1
+        assert space.source is not None
         where = transport.description
         logger.info(
             "%s: SIDs short: opened SID space %d (%s, source node %d; %d of at most %d)",
@@ -443,12 +451,13 @@ class SidSpaces:
 
     # -- running short ---------------------------------------------------------------------
 
-    def short(self, dest: FinsAddress) -> None:
+    def short(self, dest: FinsAddress, new_episode: bool) -> None:
         """Every SID of every space is taken and no other may be opened: logged once per
-        episode (the caller counts it)."""
-        if self._capped:
-            return
+        episode (``new_episode``: the first shortage after :data:`SHORTAGE_EPISODE` without
+        one; the caller counts every one)."""
         self._capped = True
+        if not new_episode:
+            return
         where = self.transport.description
         logger.warning(
             "%s: all SIDs of %s in all %d SID spaces are taken (at most %d: max_sid_spaces): "
@@ -461,7 +470,8 @@ class SidSpaces:
         )
 
     def enough(self) -> None:
-        """A SID was found again: the next shortage is logged again."""
+        """A SID was found again: spaces may close when idle (the shortage's warning is
+        not repeated before :data:`SHORTAGE_EPISODE` has passed without one)."""
         self._capped = False
 
 
@@ -477,9 +487,7 @@ async def sid_anywhere(
     sids, spaces, clock = session.sids, session._spaces, session.clock
     key = sids.allocate(state)
     if key is not None:
-        if sids.short:
-            sids.short = False
-            spaces.enough()
+        spaces.enough()
         return key, None
     got = spaces.allocate(state)
     while got is None and spaces.may_open(clock()):
@@ -487,26 +495,25 @@ async def sid_anywhere(
             break
         got = spaces.allocate(state)
     if got is not None:
-        if sids.short:
-            sids.short = False
-            spaces.enough()
+        spaces.enough()
         return got
     session.stats.sid_exhausted += 1
-    if not sids.short:
-        sids.short = True
-        if spaces.limit > 1:
-            spaces.short(state.address)
-        else:
-            logger.warning(
-                "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
-                "%d lingering): requests wait for one; lower the rate or the linger",
-                session.transport.description,
-                state.address,
-                len(sids.pending),
-                len(sids.quarantine),
-                len(sids.lingering),
-                extra={"endpoint": session.transport.description, "dest": str(state.address)},
-            )
+    now = clock()
+    new_episode = now - sids.short_at >= SHORTAGE_EPISODE
+    sids.short_at = now
+    if spaces.limit > 1:
+        spaces.short(state.address, new_episode)
+    elif new_episode:
+        logger.warning(
+            "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
+            "%d lingering): requests wait for one; lower the rate or the linger",
+            session.transport.description,
+            state.address,
+            len(sids.pending),
+            len(sids.quarantine),
+            len(sids.lingering),
+            extra={"endpoint": session.transport.description, "dest": str(state.address)},
+        )
     # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
     # behind it, first come first served.
     lock = state.sid_lock

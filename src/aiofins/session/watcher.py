@@ -68,6 +68,25 @@ class DeadlineWatcher:
         self.direct = True
         self.background: Background | None = None
         self._fire = self.fire  # (bound once: arm() passes it to every timer)
+        #: Work a receive callback asked to be done from a task (see :meth:`from_task`).
+        self.chores: list[Callable[[], None]] = []
+
+    def from_task(self, chore: Callable[[], None]) -> None:
+        """Run ``chore`` from the watcher's task at its next wake-up, which this causes:
+        for work a receive callback cannot do itself, such as starting a task (anyio
+        starts one only from a task; a batch finding no free SID runs in a callback)."""
+        self.chores.append(chore)
+        waiter = self.waiter
+        if waiter is not None:
+            if not waiter.done():
+                waiter.set_result(None)
+        elif self.scope is not None:
+            self.scope.cancel()
+
+    def _run_chores(self) -> None:
+        chores, self.chores = self.chores, []
+        for chore in chores:
+            chore()
 
     def fire(self) -> None:
         """The asyncio timer's callback. Wakes the watcher only if a request is due: when
@@ -96,11 +115,15 @@ class DeadlineWatcher:
         loop = self.loop
         while True:
             try:
+                if self.chores:
+                    self._run_chores()
                 self.expire(self.clock())
             except Exception as exc:  # a bug: fail what is in flight, keep the timer alive
                 where = self.session.transport.description
                 logger.exception("%s: deadline watcher failed", where, extra={"endpoint": where})
                 self.session.fail_all(ConnectionLost(f"session error: {exc!r}"))
+            if self.chores:  # (asked for while expiring)
+                continue
             at = self.deadlines.earliest()
             self.at = at
             if loop is not None:
