@@ -18,18 +18,13 @@ def match_wildcard(pending: dict[int, Pending], key: int) -> Pending | None:
 def match_relay_error(pending: dict[int, Pending], frame: bytes) -> Pending | None:
     """A relay error comes from the relay point, not from the destination we asked.
 
-    Match it on SID and command code alone, among requests to another network (one to
-    network 0 is relayed nowhere), when exactly one request fits (preferring the one
-    whose destination network the reply names); never guess between several. A SID that
-    may still get a late relay error is not given to another such request (see
-    :meth:`SidSpace.relay_taken <aiofins.session.sids.SidSpace.relay_taken>`).
+    Match it on SID and command code alone when exactly one request fits (preferring the
+    one whose destination network the reply names); never guess between several. A SID
+    that may still get a late relay error is given to no request to another destination
+    (see :meth:`SidSpace.relay_taken <aiofins.session.sids.SidSpace.relay_taken>`).
     """
     sid, mrc, src = frame[9], frame[10], frame[11]
-    fits = [
-        p
-        for k, p in pending.items()
-        if k & 0xFF == sid and k >> 24 and p.mrc == mrc and p.src == src
-    ]
+    fits = [p for k, p in pending.items() if k & 0xFF == sid and p.mrc == mrc and p.src == src]
     if len(fits) > 1:
         fits = [p for p in fits if p.key >> 24 == frame[6]]
     return fits[0] if len(fits) == 1 else None
@@ -52,13 +47,13 @@ def count_unmatched(
 
     A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE` from
     ``now``, the session's time): the reply the quarantine waited for has come. A relay
-    error (``relay_error``: its key names the relay point) is late for a SID quarantined
-    for a destination on another network. Returns which: ``"late"``, ``"duplicate"`` or
+    error (``relay_error``: its key names the relay point) is late for any SID
+    quarantined under its SID number. Returns which: ``"late"``, ``"duplicate"`` or
     ``"unsolicited"``.
     """
     if relay_error:
         sid = key & 0xFF
-        mine = [k for k in quarantine if k & 0xFF == sid and k >> 24]
+        mine = [k for k in quarantine if k & 0xFF == sid]
         if mine:
             stats.late_replies += 1
             end = now + LATE_REPLY_GRACE

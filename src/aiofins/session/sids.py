@@ -109,22 +109,19 @@ class SidSpace:
         return key
 
     def sid_taken(self, key: int) -> bool:
-        """Whether ``key``'s SID is in flight to another destination, or, for a request to
-        another network, may still get a late relay error (see :meth:`relay_taken`)."""
+        """Whether ``key``'s SID is in flight to another destination, or may still get a
+        late relay error (see :meth:`relay_taken`)."""
         sid = key & 0xFF
-        return any(k & 0xFF == sid for k in self.pending) or (
-            key >> 24 != 0 and sid in self.relay_taken(self.clock())
-        )
+        return any(k & 0xFF == sid for k in self.pending) or sid in self.relay_taken(self.clock())
 
     def relay_taken(self, now: float) -> set[int]:
-        """The SIDs a request to another network may not take now: those quarantined for
-        any destination on another network. A relay error comes from the relay point,
-        not the destination, and is matched by SID and command code alone
-        (:func:`~.matching.match_relay_error`); a late one for a request given up on must
-        not find a newer request to another destination (routed through that relay,
-        perhaps) under the same SID. (Requests to network 0, the local network, are
-        relayed nowhere: they neither take a relay error nor keep a SID from others.)"""
-        return {k & 0xFF for k, until in self.quarantine.items() if k >> 24 and until > now}
+        """The SIDs quarantined now for any destination, which a request to another may
+        not take while the session addresses several (:attr:`routed`). A relay error comes
+        from the relay point, not the destination, and is matched by SID and command code
+        alone (:func:`~.matching.match_relay_error`); a late one for a request given up on
+        must not find a newer request to another destination (routed through that relay,
+        perhaps: the session does not know the routes) under the same SID."""
+        return {k & 0xFF for k, until in self.quarantine.items() if until > now}
 
     def is_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
         """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
@@ -147,9 +144,7 @@ class SidSpace:
         now = self.clock()
         taken: AbstractSet[int] = _NONE
         if self.routed:
-            taken = {k & 0xFF for k in self.pending}
-            if base >> 24:  # to another network: not a SID a late relay error may still use
-                taken |= self.relay_taken(now)
+            taken = {k & 0xFF for k in self.pending} | self.relay_taken(now)
         for _ in range(256):
             key = base | sid
             sid = (sid + 1) & 0xFF
