@@ -162,6 +162,8 @@ async def test_every_chunked_command_keeps_to_its_destinations_route() -> None:
             await plc.program_area_read(0, 992, dest="3.5.0")
         with pytest.raises(CommandError, match="parameter bytes"):
             await plc.execute(0x01, 0x02, bytes(600), dest="3.5.0")
+        with pytest.raises(CommandError, match="548 data bytes; this route carries 538"):
+            await plc.single_file_read("card", "A.TXT", 0, 538, dest="3.5.0")
 
 
 async def test_bulk_transfers_to_a_plc_behind_two_gateways() -> None:

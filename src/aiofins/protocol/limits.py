@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields, replace
 from enum import Enum
 
 from . import hostlink
+from .commands.file import FILE_READ_OVERHEAD
 from .commands.memory import MAX_MULTIPLE_READ_ELEMENTS, MAX_READ_ELEMENTS, MAX_WRITE_ELEMENTS
 from .commands.parameter import MAX_PARAMETER_WORDS
 from .commands.program import MAX_PROGRAM_READ_BYTES, MAX_PROGRAM_WRITE_BYTES
@@ -259,16 +260,33 @@ _COMMAND_SIZES: dict[int, tuple[str, Callable[[bytes], int], str]] = {
 }
 
 
+#: Per command code: the response data bytes its parameters ask for (2202: the file bytes
+#: after 10 bytes of capacity, position and length).
+_RESPONSE_SIZES: dict[int, Callable[[bytes], int]] = {
+    0x2202: lambda p: FILE_READ_OVERHEAD + int.from_bytes(p[18:20], "big"),
+}
+
+
 def check_command(limits: RouteLimits, mrc: int, src: int, params: bytes) -> None:
     """Refuse a command that the route does not carry, with :class:`CommandError` naming
-    the limit (before anything is sent): its parameter bytes, and per command its words,
-    elements or bytes (0101, 0102, 0104, 0201, 0202, 0306, 0307)."""
+    the limit (before anything is sent): its parameter bytes, per command its words,
+    elements or bytes (0101, 0102, 0104, 0201, 0202, 0306, 0307), and the response a
+    2202 SINGLE FILE READ asks for."""
+    code = (mrc << 8) | src
+    response = _RESPONSE_SIZES.get(code)
+    if response is not None and len(params) >= 20:
+        asked = response(params)
+        if asked > limits.max_response_data_bytes:
+            raise CommandError(
+                f"command {code:04X} asks for a response of {asked} data bytes; this route "
+                f"carries {limits.max_response_data_bytes} (max_response_data_bytes)"
+            )
     if len(params) > limits.max_parameter_bytes:
         raise CommandError(
             f"command {mrc:02X}{src:02X} carries {len(params)} parameter bytes; this route "
             f"carries {limits.max_parameter_bytes}"
         )
-    size = _COMMAND_SIZES.get((mrc << 8) | src)
+    size = _COMMAND_SIZES.get(code)
     if size is None:
         return
     name, measure, unit = size
