@@ -227,3 +227,23 @@ def test_default_endpoints() -> None:
     assert endpoints(parse()) == (default, default)
     assert endpoints(parse("--tcp", "0.0.0.0:9601")) == (None, ("0.0.0.0", 9601))
     assert endpoints(parse("--serial", "/dev/ttyUSB0")) == (None, None)
+
+
+def test_an_nj_model_answers_only_its_at_mapped_memory(
+    process_factory: list[SimulatorProcess], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--model NJ501-1300 --at D100:10``: D100..D109 read, D0 answers 1101 (area
+    missing), and ``aiofins doctor`` names the AT mapping (exit 3)."""
+    sim = start(
+        process_factory, "--udp", "127.0.0.1:0", "--node", "10", "--model", "NJ501-1300",
+        "--at", "D100:10", endpoints=1,
+    )  # fmt: skip
+    reply = udp_exchange(sim.urls["udp"], READ_D100)  # D100, 10 words
+    assert reply[12:14] == b"\x00\x00" and len(reply) == 14 + 20
+    read_d0 = READ_D100[:-6] + bytes.fromhex("82 0000 00 000A")
+    assert udp_exchange(sim.urls["udp"], read_d0) == reply[:12] + b"\x11\x01"
+    host, port = sim.urls["udp"]
+    assert main(["doctor", f"udp://{host}:{port}?node=10", "--timeout", "2"]) == 3
+    assert "NJ501-1300 answers D0 with end code 1101" in capsys.readouterr().out
+    code, _ = sim.stop(signal.SIGTERM)
+    assert code == 0
