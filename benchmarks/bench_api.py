@@ -37,9 +37,11 @@ import asyncio
 import os
 import resource
 import statistics
+import struct
 import subprocess
 import sys
 import time
+from array import array
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -173,9 +175,10 @@ def task_rows(port: int, seconds: float, cpu: int | None, place: str, target: bo
 # -- big reads -----------------------------------------------------------------------------
 
 
-async def full_dm(url: str, cap: int, rounds: int) -> dict[str, float]:
+async def full_dm(url: str, cap: int, rounds: int, reader: str = "read") -> dict[str, float]:
     """``read("D0", 32768)`` with and without ``progress=``, and sequential ``read("D100", 1)``
     of the same client, interleaved (so the three see the same machine); checks every word.
+    ``reader="read_array"``: the big reads by ``read_array`` (an ``array('H')``) instead.
 
     Medians in seconds: ``plain``, ``reported`` (with a callback), ``trip`` (one 1-word
     round trip, timed after five untimed ones: the first after a big read are slower, which
@@ -184,8 +187,9 @@ async def full_dm(url: str, cap: int, rounds: int) -> dict[str, float]:
     read's.
     """
     async with aiofins.connect(url, max_in_flight=cap, timeout=2.0) as plc:
-        expected = list(range(32768))
-        assert await plc.read("D0", 32768) == expected
+        big = getattr(plc, reader)
+        expected: Any = list(range(32768)) if reader == "read" else array("H", range(32768))
+        assert await big("D0", 32768) == expected
         for _ in range(200):
             await plc.read("D100", 1)
         stats = plc.session.stats
@@ -196,7 +200,7 @@ async def full_dm(url: str, cap: int, rounds: int) -> dict[str, float]:
                 report = (lambda done, total: None) if name == "reported" else None
                 before = stats.completed
                 t0 = time.perf_counter()
-                words = await plc.read("D0", 32768, progress=report)
+                words = await big("D0", 32768, progress=report)
                 times[name].append(time.perf_counter() - t0)
                 frames += stats.completed - before
                 if words != expected:
@@ -404,6 +408,98 @@ async def paced_bare_protocol(ports: list[int], interval: float, seconds: float)
     return used / max(count, 1)
 
 
+#: The hand-written daemon's read: D0..D25, the words of :data:`TAGS` (one 0101 frame).
+DAEMON_WORDS = 26
+#: Its one decode: the reply's 26 words, big-endian, from the data after the end code.
+DAEMON_DECODE = struct.Struct(f">{DAEMON_WORDS}H")
+
+
+async def hand_written_daemon(
+    ports: list[int], interval: float, seconds: float, await_reply: bool = True
+) -> float:
+    """CPU seconds per scan of the daemon issue #25 compares the Poller with, written as a
+    user would without a library: one datagram endpoint and one task per PLC, a prebuilt
+    0101 frame (the 20 tags' 26 words) per SID, a SID check, one ``struct`` decode of the
+    reply's words, ``asyncio.sleep`` pacing.
+
+    ``await_reply`` (the baseline): the task sends, awaits a future that
+    ``datagram_received`` sets after the SID check (given up at the next scan's time: a
+    lost reply is a missed scan, no retry), decodes, sleeps. ``await_reply=False``: the
+    reply is checked and decoded in ``datagram_received`` and the task only sends and
+    sleeps (the cheapest daemon: no task wake-up per reply, no timeout)."""
+    loop = asyncio.get_running_loop()
+    frames = [
+        bytes((0x80, 0, 2, 0, 1, 0, 0, 2, 0, sid, 0x01, 0x01, 0x82, 0, 0, 0, 0, DAEMON_WORDS))
+        for sid in range(256)
+    ]
+    unpack_from = DAEMON_DECODE.unpack_from
+    scans = [0]
+    latest: dict[int, tuple[int, ...]] = {}
+
+    class Plc(asyncio.DatagramProtocol):
+        def __init__(self, index: int) -> None:
+            self.index = index
+            self.sid = -1
+            self.reply: asyncio.Future[bytes] | None = None
+
+        def datagram_received(self, data: bytes, addr: Any) -> None:
+            if data[9] != self.sid or data[12:14] != b"\0\0":
+                return
+            self.sid = -1
+            reply = self.reply
+            if reply is None:
+                latest[self.index] = unpack_from(data, 14)
+                scans[0] += 1
+            elif not reply.done():
+                reply.set_result(data)
+
+    def give_up(reply: asyncio.Future[bytes]) -> None:
+        if not reply.done():
+            reply.set_exception(TimeoutError())
+
+    async def poll_one(index: int, port: int, start: float) -> None:
+        transport, proto = await loop.create_datagram_endpoint(
+            lambda: Plc(index), remote_addr=("127.0.0.1", port)
+        )
+        try:
+            sid, at = 0, start
+            while True:
+                proto.sid = sid
+                at += interval
+                if await_reply:
+                    reply = proto.reply = loop.create_future()
+                    expiry = loop.call_at(at, give_up, reply)
+                    transport.sendto(frames[sid])
+                    try:
+                        data = await reply
+                    except TimeoutError:
+                        continue  # no reply by the next scan's time: a missed scan
+                    expiry.cancel()
+                    latest[index] = unpack_from(data, 14)
+                    scans[0] += 1
+                else:
+                    transport.sendto(frames[sid])
+                sid = (sid + 1) & 0xFF
+                await asyncio.sleep(at - loop.time())
+        finally:
+            transport.close()
+
+    start = loop.time()
+    tasks = [loop.create_task(poll_one(i, port, start)) for i, port in enumerate(ports)]
+    try:
+        await asyncio.sleep(max(1.0, 4 * interval))
+        before, count = cpu(), scans[0]
+        await asyncio.sleep(seconds)
+        used, count = cpu() - before, scans[0] - count
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+    if len(latest) != len(ports) or latest[0][:2] != (0, 1):  # the C responder: word i is i
+        raise AssertionError("the hand-written daemon read wrong words")
+    return used / max(count, 1)
+
+
 async def paced_session_request(ports: list[int], interval: float, seconds: float) -> float:
     """CPU seconds per ``Session.request`` (prebuilt parameters) when one task per responder
     sends one every ``interval``, as a hand-written polling loop would: the same request, at
@@ -474,6 +570,7 @@ def poller_rows(seconds: float, loop: str, skip: set[str]) -> None:
         print(f"Poller, {loop}")
         with responders(100) as ports:
             per_request = anyio.run(bare_request_cpu, ports[0], backend_options=opts)
+            daemon = anyio.run(hand_written_daemon, ports, 0.05, seconds, backend_options=opts)
             paced = anyio.run(paced_session_request, ports, 0.05, seconds, backend_options=opts)
             floor = anyio.run(paced_bare_protocol, ports, 0.05, seconds, backend_options=opts)
             done, missed, used = anyio.run(poll, ports, 0.05, seconds, backend_options=opts)
@@ -494,6 +591,10 @@ def poller_rows(seconds: float, loop: str, skip: set[str]) -> None:
             per_scan / paced, "≤ 2 x paced request", per_scan / paced <= 2)  # fmt: skip
         row("  CPU per scan, against the paced bare protocol", per_scan * 1e6, "µs",
             per_scan / floor, "(the socket floor)", None)  # fmt: skip
+        row("  hand-written daemon CPU per scan (#25's baseline)", daemon * 1e6, "µs", None,
+            "", None)  # fmt: skip
+        row("  CPU per scan, against the hand-written daemon", per_scan * 1e6, "µs",
+            per_scan / daemon, "≤ 1.0 x daemon", per_scan / daemon <= 1.0)  # fmt: skip
         row("  CPU, % of one core", 100 * used / seconds, "%", None, "", None)
     if "poll1000" not in skip:
         with responders(1000) as ports:

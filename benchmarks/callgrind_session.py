@@ -14,6 +14,11 @@ of interpreter start-up and imports. Cases:
   ``session.request`` in a loop, per request;
 - ``reads``: the same 50 tasks calling ``plc.read("D100", 1)`` of a
   :class:`~aiofins.client.Client` over that session (the public API), per read;
+- ``dm``: ``plc.read("D0", 32768)`` (a full DM area, 33 frames of up to 999 words, pipelined
+  with ``max_in_flight=50``), per frame, 5 and 25 reads;
+- ``dmarray``: the same through ``plc.read_array("D0", 32768)`` (an ``array('H')``), per frame;
+- ``dmframes``: the same 33 frames through ``session.request_many`` with prebuilt parameters,
+  their data left alone (the session's share of a big read), per frame;
 - ``paced``: sequential requests 5 ms apart (a poller's pace: each answered long before its
   retransmission timeout), with the default ``rto_bounds``, 100 and 600 requests; also
   prints how often the deadline watcher woke (its task ran) in the larger run.
@@ -47,9 +52,12 @@ SMALL, LARGE = 2_000, 12_000
 BATCH = 100
 TASKS = 50
 PACED_SMALL, PACED_LARGE, PACE = 100, 600, 0.005
+#: Full DM reads per run of the ``dm`` cases, and frames per read.
+DM_SMALL, DM_LARGE, DM_FRAMES = 5, 25, 33
 
 
 def _workload(case: str, n: int, adaptive: bool) -> None:
+    from aiofins._callplan import read_frames
     from aiofins.client import Client
     from aiofins.protocol.header import FinsAddress
     from aiofins.session import Session
@@ -80,6 +88,21 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
                 head = b"\xc0\x00\x02" + frame[6:9] + frame[3:6] + frame[9:12]
                 reply = head + b"\x00\x00\x00\x2a"
                 call_soon(received, reply)
+
+            data: dict[bytes, bytes] = {}
+
+            def send_words(frame: bytes) -> None:
+                # A 0101 reply with as many words as asked (bytes 16-17: the count).
+                head = b"\xc0\x00\x02" + frame[6:9] + frame[3:6] + frame[9:12] + b"\x00\x00"
+                count = frame[16:18]
+                words = data.get(count)
+                if words is None:
+                    n = int.from_bytes(count, "big")
+                    words = data[count] = bytes(range(256)) * (n // 128) + bytes(2 * n % 256)
+                call_soon(received, head + words)
+
+            if case.startswith("dm"):
+                send = send_words
 
             self.fast_send = send
 
@@ -121,6 +144,17 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
                             await read("D100", 1)
 
                 await asyncio.gather(*(caller(n // TASKS) for _ in range(TASKS)))
+            elif case in ("dm", "dmarray", "dmframes"):
+                plc = Client(session)
+                big: Any = plc.read_array if case == "dmarray" else plc.read
+                assert len(await big("D0", 32768)) == 32768
+                if case == "dmframes":
+                    commands = list(read_frames("D0", 32768, 999).commands)
+                    for _ in range(n):
+                        await session.request_many(commands, idempotent=True)
+                else:
+                    for _ in range(n):
+                        await big("D0", 32768)
             elif case == "paced":
                 watcher: Any = session._watcher  # counts its task's wake-ups
                 wakes = 0
@@ -182,12 +216,17 @@ def main() -> None:
         _workload(args.inner[0], int(args.inner[1]), args.adaptive)
         return
     for case in args.cases.split(","):
-        low, high = (PACED_SMALL, PACED_LARGE) if case == "paced" else (SMALL, LARGE)
+        low, high, unit = (SMALL, LARGE, 1)
+        if case == "paced":
+            low, high = PACED_SMALL, PACED_LARGE
+        elif case.startswith("dm"):
+            low, high, unit = DM_SMALL, DM_LARGE, DM_FRAMES
         small, _ = _instructions(case, low, args.src, args.adaptive)
         large, said = _instructions(case, high, args.src, args.adaptive)
-        per = (large - small) / (high - low)
+        per = (large - small) / (high - low) / unit
         extra = f" ({said} in {high} requests)" if said else ""
-        print(f"{case:8s} {per / 1000:8.1f}k instructions per request{extra}", flush=True)
+        what = "frame" if unit > 1 else "request"
+        print(f"{case:8s} {per / 1000:8.1f}k instructions per {what}{extra}", flush=True)
 
 
 if __name__ == "__main__":

@@ -29,6 +29,8 @@ from .protocol.wordcodec import numeric_codec, pack_elements, unpack_elements
 PLAN_CACHE_SIZE = 1024
 
 _SWAP = sys.byteorder == "little"
+#: One zero word, repeated to size an array in one allocation.
+_ZERO = (0,)
 #: ``struct`` codes of unsigned elements by size in bytes.
 _ELEMENT_CODES = {1: "B", 2: "H", 4: "I"}
 
@@ -92,13 +94,17 @@ class ReadFrames:
 
     def words_array(self, data: Sequence[bytes]) -> WordArray:
         """The words of the replies' data as an ``array('H')`` in the host's byte order
-        (each reply checked for its size first): one copy per frame and one byte swap, no
-        Python object per word. The plan must be of words (element size 2)."""
-        words = array("H")
+        (each reply checked for its size first): each frame's data copied once into its
+        place, one byte swap, no Python object per word. The plan must be of words."""
+        words = array("H", _ZERO) * (sum(self.sizes) >> 1)  # sized once: no regrowth
+        into = memoryview(words).cast("B")
+        at = 0
         for request, size, part in zip(self.requests, self.sizes, data, strict=True):
             if len(part) != size:
                 request.decode_response(part)  # raises DecodeError saying what is wrong
-            words.frombytes(part)
+            into[at : at + size] = part
+            at += size
+        into.release()  # the caller may grow the array: no buffer left exported
         if _SWAP:
             words.byteswap()
         return words

@@ -35,6 +35,7 @@ async def test_a_full_dm_read_is_an_array_of_the_plcs_words_in_33_frames(
         assert plc.session.stats.completed - before == 33  # ceil(32768 / 999), as read()
         assert words.typecode == "H" and len(words) == 32768
         assert words.tolist() == data
+        words.append(1)  # an array of its own: no buffer of it left exported
         # The bytes: what the PLC sent (big-endian words) is word_bytes() of the array.
         raw = (await plc.memory_area_read("D1000", 999)).data
         assert word_bytes(words[1000:1999]) == raw
