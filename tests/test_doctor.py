@@ -235,3 +235,60 @@ def test_only_network_urls_are_diagnosed() -> None:
             await diagnose("serial:///dev/ttyUSB0")
 
     run_on_virtual_time(main, "asyncio")
+
+
+# -- the operating system's sockets (loopback) ---------------------------------------------
+
+
+@pytest.mark.anyio
+async def test_on_loopback_sockets(anyio_backend: object) -> None:
+    """The probes on real sockets, under every event loop: a healthy PLC, then a port
+    nobody listens on (the kernel's ICMP port unreachable)."""
+    import socket
+
+    async with run_simulator(VirtualPLC(mode=Mode.RUN), udp=("127.0.0.1", 0)) as sim:
+        d = await diagnose(f"udp://127.0.0.1:{sim.udp_port}", rounds=2)
+    assert d.exit_code == EXIT_OK, d.findings
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    d = await diagnose(f"udp://127.0.0.1:{port}", timeout=5)
+    assert d.exit_code == EXIT_UNREACHABLE and d.findings[0].details["refused"] is True
+    assert "connection refused" in d.findings[1].summary  # trio: in anyio's attempts
+
+
+@pytest.mark.anyio
+async def test_static_conversion_on_loopback_sockets(anyio_backend: object) -> None:
+    """A unit at 127.0.0.2 with static conversion replies to 127.0.0.1 (our node 1) at its
+    own FINS port: found on the second socket, and the CPU checks then run bound to it."""
+    port = _port_free_on("127.0.0.2", "127.0.0.1")
+    unit = EthernetUnit("127.0.0.2", conversion=AddressConversion.AUTOMATIC_STATIC, fins_port=port)
+    plc = VirtualPLC(node=2, mode=Mode.RUN)
+    async with run_simulator(plc, udp=("127.0.0.2", port), ethernet=unit):
+        d = await diagnose(f"udp://127.0.0.2:{port}", rounds=2, timeout=5)
+    assert len(d.problems) == 1, d.findings
+    (problem,) = d.problems
+    assert problem.check == "reply_port" and problem.details == {"fixed": True, "port": port}
+    assert d.suggested_url == f"udp://127.0.0.2:{port}?local_port={port}&max_sid_spaces=1"
+    assert [f.severity for f in d.findings if f.check in ("cpu", "memory", "rtt")] == [
+        Severity.OK
+    ] * 3
+
+
+def _port_free_on(*hosts: str) -> int:
+    """A UDP port no socket holds on any of ``hosts`` (other programs on this machine bind
+    ports of 127.0.0.1 too: the reply port must be ours alone)."""
+    import socket
+
+    for _ in range(50):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as first:
+            first.bind((hosts[0], 0))
+            port = int(first.getsockname()[1])
+            try:
+                for host in hosts[1:]:
+                    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+                        other.bind((host, port))
+            except OSError:
+                continue
+            return port
+    raise AssertionError(f"no UDP port free on all of {hosts}")

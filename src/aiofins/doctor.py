@@ -288,7 +288,7 @@ class _UdpProbe:
                                 return
                             try:
                                 reply = ResponseFrame.decode(data)
-                            except FinsError:
+                            except (FinsError, ValueError):  # not a FINS response
                                 continue
                             if reply.header.sid == sid and reply.command_code == 0x0601:
                                 found.append(_Reply(which, reply))
@@ -397,6 +397,11 @@ async def diagnose(
         raise CommandError(f"timeout must be positive seconds, got {timeout!r}")
     if not 1 <= rounds <= 100:
         raise CommandError(f"rounds must be 1..100, got {rounds!r}")
+    if ":" in endpoint.host:
+        raise CommandError(
+            "aiofins doctor diagnoses IPv4 addresses (FINS nodes come from them); "
+            f"got {endpoint.host}"
+        )
     findings: list[Finding] = []
     ip = await _resolve(endpoint.host, endpoint.port, network)
     port = endpoint.port
@@ -604,7 +609,10 @@ async def diagnose(
         transport: UdpTransport | TcpTransport = UdpTransport(
             ip,
             port,
-            local_host=local_ip,
+            # bound to the fixed port: on our address towards the PLC, where the probe's
+            # second socket got the reply (not every address, which a PLC program on
+            # another address of this computer may hold)
+            local_host=local_ip if local_ip is not None or not plan.fixed_port else our_ip,
             local_port=port if plan.fixed_port else 0,
             network=network,
         )
@@ -674,14 +682,25 @@ async def _tcp_probe(
             else f"no connection or handshake within {timeout:g} s"
         )
     except (FinsError, OSError) as exc:
-        cause = exc.__cause__ or exc
         result.why = (
-            "connection refused (nothing listens on that TCP port)"
-            if isinstance(cause, ConnectionRefusedError)
-            else str(exc)
+            "connection refused (nothing listens on that TCP port)" if _refused(exc) else str(exc)
         )
     del url_node
     return result
+
+
+def _refused(exc: BaseException) -> bool:
+    """Whether a connection refusal is behind ``exc`` (its causes, or the attempts anyio
+    made to each address of the host)."""
+    seen: list[BaseException] = [exc]
+    for error in seen:
+        if isinstance(error, ConnectionRefusedError):
+            return True
+        if len(seen) < 16:
+            seen.extend(e for e in (error.__cause__, error.__context__) if e is not None)
+            group = getattr(error, "exceptions", ())  # an exception group (Python 3.10 too)
+            seen.extend(e for e in group if isinstance(e, BaseException))
+    return False
 
 
 async def _cpu_checks(
@@ -799,10 +818,11 @@ async def _cpu_checks(
         )
     out.append(await _writes(plc, address, word, write_test, mode, endpoint))
     times: list[float] = []
+    clock = plc.session.clock  # the session's one clock: the loop's (monotonic under uvloop)
     for _ in range(rounds):
-        start = anyio.current_time()
+        start = clock()
         await plc.cpu_unit_status_read()
-        times.append(anyio.current_time() - start)
+        times.append(clock() - start)
     median = statistics.median(times) * 1000
     out.append(
         Finding(
