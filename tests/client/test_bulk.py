@@ -158,20 +158,26 @@ class LyingPLC:
         self.command = command
         self.lie = lie
         self.invent = invent
-        #: Frames of ``command`` received.
-        self.asked = 0
+        #: The distinct frames of ``command`` received: a UDP retransmission (same frame,
+        #: same SID, sent again when a reply is late, as on a loaded machine) is one request.
+        self.frames: set[bytes] = set()
+
+    @property
+    def asked(self) -> int:
+        """How many requests of ``command`` the PLC received (retransmissions not counted)."""
+        return len(self.frames)
 
     def handle_frame(self, frame: bytes, *, from_network: bool = True) -> bytes | None:
         cmd = CommandFrame.decode(frame)
         mine = (cmd.mrc, cmd.src) == (self.command.MRC, self.command.SRC)
+        if mine:
+            self.frames.add(bytes(frame))
         if mine and self.invent:
-            self.asked += 1
             result = self.lie(self.command.decode(cmd.params), None)
             return ResponseFrame.reply_to(cmd, 0, result.encode()).encode()
         reply = self.plc.handle_frame(frame, from_network=from_network)
         if not mine or reply is None:
             return reply
-        self.asked += 1
         request = self.command.decode(cmd.params)
         response = ResponseFrame.decode(reply)
         if response.end_code.code:  # an error answer: nothing to lie about
