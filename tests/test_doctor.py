@@ -122,6 +122,14 @@ def test_replies_to_the_fixed_port_name_local_port_and_one_sid_space(
     assert problem.fix is not None and "?local_port=9600&max_sid_spaces=1" in problem.fix
     assert d.suggested_url == "udp://10.0.0.5:9600?local_port=9600&max_sid_spaces=1"
     assert severities(d)["cpu"] == ["ok"] and severities(d)["rtt"] == ["ok"]
+    # the URL with the fix applied: all good
+    d, _ = run(backend, ethernet=unit, url=str(d.suggested_url))
+    assert d.exit_code == EXIT_OK and severities(d)["reply_port"] == ["ok"]
+    d, _ = run(backend, ethernet=unit, url=f"{URL}?local_port=9600")
+    assert [f.fix for f in d.problems] == [
+        "add ?max_sid_spaces=1: a second socket could not bind the same port, and the unit "
+        "sends all replies to it"
+    ]
 
 
 @backends

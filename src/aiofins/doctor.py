@@ -541,7 +541,19 @@ async def diagnose(
                     details={"node": udp_node},
                 )
             )
-        if plan.fixed_port:
+        bound = endpoint.option("local_port") == str(port)
+        one_space = endpoint.option("max_sid_spaces") == "1"
+        if plan.fixed_port and bound and one_space:
+            findings.append(
+                Finding(
+                    "reply_port",
+                    Severity.OK,
+                    f"replies come to port {port} here (static address conversion or an IP "
+                    f"address table), which the URL binds with one socket",
+                    details={"fixed": True, "port": port},
+                )
+            )
+        elif plan.fixed_port:
             findings.append(
                 Finding(
                     "reply_port",
@@ -550,7 +562,10 @@ async def diagnose(
                     "from: the Ethernet Unit uses static address conversion or an IP address "
                     "table (it sends every reply to the FINS port)",
                     f"bind that port with one socket: ?local_port={port}&max_sid_spaces=1 "
-                    "(or set the unit to automatic dynamic conversion)",
+                    "(or set the unit to automatic dynamic conversion)"
+                    if not bound
+                    else "add ?max_sid_spaces=1: a second socket could not bind the same port, "
+                    "and the unit sends all replies to it",
                     details={"fixed": True, "port": port},
                 )
             )

@@ -80,5 +80,5 @@ def print_text(diagnosis: Diagnosis) -> None:
         4: "the PLC did not answer",
     }
     print(summary[diagnosis.exit_code])
-    if diagnosis.suggested_url is not None and diagnosis.suggested_url != diagnosis.url:
+    if diagnosis.problems and diagnosis.suggested_url not in (None, diagnosis.url):
         print(f"try: {escape(diagnosis.suggested_url)}")
