@@ -437,7 +437,7 @@ async def diagnose(
         if udp_reply is not None:
             revealed = udp_reply.frame.header.source.node
             udp_node = revealed
-    tcp = await _tcp_probe(ip, port, url_node, timeout, network, local_ip)
+    tcp = await _tcp_probe(ip, port, timeout, network, local_ip)
 
     # Findings of the transports.
     where = f"{ip}:{port}"
@@ -673,7 +673,6 @@ class _TcpResult:
 async def _tcp_probe(
     ip: str,
     port: int,
-    url_node: int | None,
     timeout: float,
     network: MemoryNetwork | None,
     local_ip: str | None,
@@ -700,7 +699,6 @@ async def _tcp_probe(
         result.why = (
             "connection refused (nothing listens on that TCP port)" if _refused(exc) else str(exc)
         )
-    del url_node
     return result
 
 
