@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
 
+import anyio
 import looptime
 import trio
 import trio.testing
@@ -21,8 +22,10 @@ def run_on_virtual_time(main: Callable[[], Awaitable[None]], backend: str = "tri
     if backend == "trio":
         trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
         return
-    loop = looptime.new_event_loop(start=0.0)
-    try:
-        loop.run_until_complete(main())
-    finally:
-        loop.close()
+    # Through anyio's runner, so that a protocol callback outside any task (a real socket's
+    # datagram_received starting a task) still finds anyio's asyncio backend.
+    anyio.run(
+        main,
+        backend="asyncio",
+        backend_options={"loop_factory": lambda: looptime.new_event_loop(start=0.0)},
+    )

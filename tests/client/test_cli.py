@@ -6,7 +6,6 @@ import json
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -312,9 +311,9 @@ def test_timeout_bounds_the_fins_tcp_handshake(capsys: pytest.CaptureFixture[str
         silent.bind(("127.0.0.1", 0))
         silent.listen(8)
         url = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
-        started = time.monotonic()
         code, out, err = run(capsys, "read", url, "D0", "--timeout", "0.3")
-        elapsed = time.monotonic() - started
     assert code != 0 and out == ""
+    # --timeout bounded the handshake, not the default connect timeout (5 s): the message
+    # names the bound that applied. How long the attempt takes is asserted on virtual time
+    # (test_endpoint.py::test_tcp_connect_timeout_bounds_a_handshake_that_never_comes).
     assert "no FINS/TCP connection or node address reply" in err and "within 0.3 s" in err
-    assert elapsed < 3  # the default connect timeout (5 s) did not apply

@@ -35,6 +35,7 @@ from aiofins.simulator.runner import Simulator, run_simulator
 from tests.conftest import PTY_8N1
 
 from ..session.test_session_tcp import TcpPeer, tcp_server
+from ..virtual_time import VIRTUAL_BACKENDS, run_on_virtual_time
 
 pytestmark = pytest.mark.anyio
 
@@ -246,42 +247,64 @@ async def test_a_session_whose_first_use_failed_is_released(anyio_backend: objec
                     pass
 
 
-async def test_health_checks_run_side_by_side_each_within_its_timeout(
-    anyio_backend: object,
-) -> None:
+# On virtual time (trio's MockClock, asyncio on looptime's loop; uvloop's clock cannot be made
+# virtual): the times below are the loop's, exact whatever the machine's load.
+
+
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_health_checks_run_side_by_side_each_within_its_timeout(backend: str) -> None:
     """They ran one after another, each up to timeout x attempts: with the defaults every
     dead endpoint held the maintenance loop ~6 s."""
-    plcs: list[Simulator] = []
-    async with (
-        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s1,
-        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s2,
-        run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s3,
-    ):
-        plcs = [s1, s2, s3]
-        urls = [f"udp://127.0.0.1:{s.udp_port}" for s in plcs]
-        async with Pool(timeout=0.4, retries=2, health_interval=0.05, idle_timeout=60) as pool:
-            for url in urls:
-                async with pool.client(url) as plc:
-                    assert await plc.read("D0") == [0]
-            for s in plcs:
-                s.plan.rule = FaultRule(drop_request=1.0)  # all three go silent
-            started = anyio.current_time()
-            await _until(lambda: all(pool.stats(u)[u].sessions == 0 for u in urls))
-            assert anyio.current_time() - started < 1.0  # one by one: 3 x 3 x 0.4 s
-            assert [pool.stats(u)[u].health_failures for u in urls] == [1, 1, 1]
+    out: list[object] = []
+
+    async def main() -> None:
+        async with (
+            run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s1,
+            run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s2,
+            run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as s3,
+        ):
+            plcs = [s1, s2, s3]
+            urls = [f"udp://127.0.0.1:{s.udp_port}" for s in plcs]
+            async with Pool(timeout=0.4, retries=2, health_interval=0.05, idle_timeout=60) as pool:
+                for url in urls:
+                    async with pool.client(url) as plc:
+                        assert await plc.read("D0") == [0]
+                for s in plcs:
+                    s.plan.rule = FaultRule(drop_request=1.0)  # all three go silent
+                started = anyio.current_time()
+                await _until(lambda: all(pool.stats(u)[u].sessions == 0 for u in urls))
+                out.append(anyio.current_time() - started)
+                out.append([pool.stats(u)[u].health_failures for u in urls])
+
+    run_on_virtual_time(main, backend)
+    elapsed, failures = out
+    # Side by side: the next pass (50 ms) plus one check's timeout, seen within the 10 ms
+    # poll; one by one it took 3 x 0.4 s.
+    assert 0.4 <= elapsed <= 0.4 + 0.05 + 0.01 + 1e-6, elapsed  # type: ignore[operator]
+    assert failures == [1, 1, 1]
 
 
-async def test_idle_sessions_close_while_a_health_check_waits(sim: Simulator) -> None:
-    with _silent_udp() as dead:
-        good = f"udp://127.0.0.1:{sim.udp_port}"
-        async with Pool(timeout=3, health_interval=0.05, idle_timeout=0.3) as pool:
-            async with pool.client(dead):  # lent, unused: its health check waits 3 s
-                pass
-            async with pool.client(good) as plc:
-                assert await plc.read("D0") == [0]
-            started = anyio.current_time()
-            await _until(lambda: pool.stats(good)[good].sessions == 0)
-            assert anyio.current_time() - started < 1.5  # the dead one's check takes 3 s
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_idle_sessions_close_while_a_health_check_waits(backend: str) -> None:
+    out: list[float] = []
+
+    async def main() -> None:
+        with _silent_udp() as dead:
+            async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as sim:
+                good = f"udp://127.0.0.1:{sim.udp_port}"
+                async with Pool(timeout=3, health_interval=0.05, idle_timeout=0.3) as pool:
+                    async with pool.client(dead):  # lent, unused: its health check waits 3 s
+                        pass
+                    async with pool.client(good) as plc:
+                        assert await plc.read("D0") == [0]
+                    started = anyio.current_time()
+                    await _until(lambda: pool.stats(good)[good].sessions == 0)
+                    out.append(anyio.current_time() - started)
+
+    run_on_virtual_time(main, backend)
+    # Closed once idle (0.3 s, seen at the next 50 ms pass and the 10 ms poll), not after
+    # the dead one's 3 s check.
+    assert 0.3 <= out[0] <= 0.3 + 0.05 + 0.01 + 1e-6, out
 
 
 # -- the entry state machine ---------------------------------------------------------------
@@ -393,19 +416,27 @@ async def test_a_url_that_is_not_text_is_refused_as_connect_refuses_it(
             pool.client(url)
 
 
-async def test_closing_the_pool_during_a_health_check_ends_it_at_once(
-    sim: Simulator, caplog: pytest.LogCaptureFixture
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_closing_the_pool_during_a_health_check_ends_it_at_once(
+    backend: str, caplog: pytest.LogCaptureFixture
 ) -> None:
-    url = f"udp://127.0.0.1:{sim.udp_port}"
-    async with Pool(timeout=5, retries=0, health_interval=0.05, idle_timeout=60) as pool:
-        async with pool.client(url) as plc:
-            assert await plc.read("D0") == [0]
-        sim.plan.rule = FaultRule(drop_request=1.0)  # the check waits its 5 s
-        (entry,) = pool._entries[parse_endpoint(url).key]
-        await _until(lambda: entry.state is EntryState.CHECKING)
-        started = anyio.current_time()
-    assert anyio.current_time() - started < 1
-    assert entry.state is EntryState.CLOSED
+    """On virtual time: closing takes no time at all, not the check's 5 s."""
+    out: list[object] = []
+
+    async def main() -> None:
+        async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as sim:
+            url = f"udp://127.0.0.1:{sim.udp_port}"
+            async with Pool(timeout=5, retries=0, health_interval=0.05, idle_timeout=60) as pool:
+                async with pool.client(url) as plc:
+                    assert await plc.read("D0") == [0]
+                sim.plan.rule = FaultRule(drop_request=1.0)  # the check waits its 5 s
+                (entry,) = pool._entries[parse_endpoint(url).key]
+                await _until(lambda: entry.state is EntryState.CHECKING)
+                started = anyio.current_time()
+            out.extend([anyio.current_time() - started, entry.state])
+
+    run_on_virtual_time(main, backend)
+    assert out == [0.0, EntryState.CLOSED]
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR]
 
 
