@@ -188,6 +188,15 @@ def test_fins_tcp_only(backend: str) -> None:
 
 
 @backends
+def test_a_wrong_node_on_fins_tcp_is_the_handshake_s(backend: str) -> None:
+    d, _ = run(backend, udp=False, url=f"tcp://{PLC_IP}?node=9")
+    (problem,) = d.problems
+    assert problem.check == "node" and problem.details == {"node": 5, "url_node": 9}
+    assert problem.fix == "leave ?node= out on tcp:// (the handshake names it) or set ?node=5"
+    assert d.suggested_url == "tcp://10.0.0.5:9600?node=5"
+
+
+@backends
 def test_an_nj_answers_only_at_mapped_memory(backend: str) -> None:
     nj = VirtualPLC(node=5, mode=Mode.RUN, model="NJ501-1300", at_mapped=[("D100", 10)])
     d, _ = run(backend, nj)

@@ -503,109 +503,16 @@ async def diagnose(
     elif tcp.answered:
         plan = _Plan("tcp")
 
-    # Node finding.
     if plan is not None and plan.scheme == "udp":
-        assert udp_node is not None and udp_reply is not None
-        if url_node is not None and udp_node != url_node:
-            plan.node = udp_node
-            findings.append(
-                Finding(
-                    "node",
-                    Severity.PROBLEM,
-                    f"node {url_node} (the URL's) is silent; node {udp_node} answers",
-                    f"set ?node={udp_node} (the PLC's FINS node, its unit number setting)",
-                    details={"node": udp_node, "url_node": url_node},
-                )
-            )
-        elif revealed is not None:
-            plan.node = revealed
-            findings.append(
-                Finding(
-                    "node",
-                    Severity.PROBLEM,
-                    f"node {', '.join(map(str, silent))} is silent; addressed as node 0 (the "
-                    f"local PLC) it answers as node {revealed}",
-                    f"set ?node={revealed}, or set the Ethernet Unit's node to the IP "
-                    "address's last octet (automatic address conversion expects that)",
-                    details={"node": revealed, "nodes_tried": silent},
-                )
-            )
-        else:
-            findings.append(
-                Finding(
-                    "node",
-                    Severity.OK,
-                    f"destination node {udp_node} ("
-                    + ("the URL's" if url_node is not None else "the IP address's last octet")
-                    + ")",
-                    details={"node": udp_node},
-                )
-            )
-        bound = endpoint.option("local_port") == str(port)
-        one_space = endpoint.option("max_sid_spaces") == "1"
-        if plan.fixed_port and bound and one_space:
-            findings.append(
-                Finding(
-                    "reply_port",
-                    Severity.OK,
-                    f"replies come to port {port} here (static address conversion or an IP "
-                    f"address table), which the URL binds with one socket",
-                    details={"fixed": True, "port": port},
-                )
-            )
-        elif plan.fixed_port:
-            findings.append(
-                Finding(
-                    "reply_port",
-                    Severity.PROBLEM,
-                    f"replies come to port {port} here, not to the port the command left "
-                    "from: the Ethernet Unit uses static address conversion or an IP address "
-                    "table (it sends every reply to the FINS port)",
-                    f"bind that port with one socket: ?local_port={port}&max_sid_spaces=1 "
-                    "(or set the unit to automatic dynamic conversion)"
-                    if not bound
-                    else "add ?max_sid_spaces=1: a second socket could not bind the same port, "
-                    "and the unit sends all replies to it",
-                    details={"fixed": True, "port": port},
-                )
-            )
-        else:
-            findings.append(
-                Finding(
-                    "reply_port",
-                    Severity.OK,
-                    "replies come back to the port the command left from (dynamic address "
-                    "conversion)",
-                    details={"fixed": False},
-                )
-            )
+        assert udp_node is not None
+        findings.extend(_udp_findings(endpoint, plan, udp_node, url_node, revealed, silent))
     elif plan is not None and tcp.server_node is not None:
-        if url_node is not None and url_node != tcp.server_node:
-            plan.node = tcp.server_node
-            findings.append(
-                Finding(
-                    "node",
-                    Severity.PROBLEM,
-                    f"the URL names node {url_node}; the FINS/TCP server is node {tcp.server_node}",
-                    f"leave ?node= out on tcp:// (the handshake names it) or set "
-                    f"?node={tcp.server_node}",
-                    details={"node": tcp.server_node, "url_node": url_node},
-                )
-            )
-        else:
-            findings.append(
-                Finding(
-                    "node",
-                    Severity.OK,
-                    f"destination node {tcp.server_node} (from the FINS/TCP handshake)",
-                    details={"node": tcp.server_node},
-                )
-            )
-    if probe.fixed_port_busy is not None and (plan is None or not plan.fixed_port):
+        findings.append(_tcp_node_finding(plan, tcp.server_node, url_node))
+    if probe.fixed_port_busy is not None and udp_reply is None:
         findings.append(
             Finding(
                 "reply_port",
-                Severity.WARNING if plan is not None else Severity.PROBLEM,
+                Severity.WARNING,
                 f"port {port} could not be listened on here ({probe.fixed_port_busy}): "
                 "replies a PLC sends to it (static address conversion) go to the program "
                 "holding it",
@@ -660,6 +567,112 @@ async def diagnose(
             )
         )
     return Diagnosis(url, tuple(findings), True, _suggest(endpoint, plan))
+
+
+def _udp_findings(
+    endpoint: Endpoint,
+    plan: _Plan,
+    udp_node: int,
+    url_node: int | None,
+    revealed: int | None,
+    silent: list[int],
+) -> list[Finding]:
+    """The destination node and reply port findings of a PLC that answers FINS/UDP (the
+    node to name goes into ``plan``)."""
+    out: list[Finding] = []
+    port = endpoint.port
+    if url_node is not None and udp_node != url_node:
+        plan.node = udp_node
+        out.append(
+            Finding(
+                "node",
+                Severity.PROBLEM,
+                f"node {url_node} (the URL's) is silent; node {udp_node} answers",
+                f"set ?node={udp_node} (the PLC's FINS node, its unit number setting)",
+                details={"node": udp_node, "url_node": url_node},
+            )
+        )
+    elif revealed is not None:
+        plan.node = revealed
+        out.append(
+            Finding(
+                "node",
+                Severity.PROBLEM,
+                f"node {', '.join(map(str, silent))} is silent; addressed as node 0 (the "
+                f"local PLC) it answers as node {revealed}",
+                f"set ?node={revealed}, or set the Ethernet Unit's node to the IP "
+                "address's last octet (automatic address conversion expects that)",
+                details={"node": revealed, "nodes_tried": silent},
+            )
+        )
+    else:
+        out.append(
+            Finding(
+                "node",
+                Severity.OK,
+                f"destination node {udp_node} ("
+                + ("the URL's" if url_node is not None else "the IP address's last octet")
+                + ")",
+                details={"node": udp_node},
+            )
+        )
+    bound = endpoint.option("local_port") == str(port)
+    one_space = endpoint.option("max_sid_spaces") == "1"
+    if plan.fixed_port and bound and one_space:
+        out.append(
+            Finding(
+                "reply_port",
+                Severity.OK,
+                f"replies come to port {port} here (static address conversion or an IP "
+                f"address table), which the URL binds with one socket",
+                details={"fixed": True, "port": port},
+            )
+        )
+    elif plan.fixed_port:
+        out.append(
+            Finding(
+                "reply_port",
+                Severity.PROBLEM,
+                f"replies come to port {port} here, not to the port the command left "
+                "from: the Ethernet Unit uses static address conversion or an IP address "
+                "table (it sends every reply to the FINS port)",
+                f"bind that port with one socket: ?local_port={port}&max_sid_spaces=1 "
+                "(or set the unit to automatic dynamic conversion)"
+                if not bound
+                else "add ?max_sid_spaces=1: a second socket could not bind the same port, "
+                "and the unit sends all replies to it",
+                details={"fixed": True, "port": port},
+            )
+        )
+    else:
+        out.append(
+            Finding(
+                "reply_port",
+                Severity.OK,
+                "replies come back to the port the command left from (dynamic address conversion)",
+                details={"fixed": False},
+            )
+        )
+    return out
+
+
+def _tcp_node_finding(plan: _Plan, server_node: int, url_node: int | None) -> Finding:
+    """The destination node finding over FINS/TCP (the handshake names the server's)."""
+    if url_node is None or url_node == server_node:
+        return Finding(
+            "node",
+            Severity.OK,
+            f"destination node {server_node} (from the FINS/TCP handshake)",
+            details={"node": server_node},
+        )
+    plan.node = server_node
+    return Finding(
+        "node",
+        Severity.PROBLEM,
+        f"the URL names node {url_node}; the FINS/TCP server is node {server_node}",
+        f"leave ?node= out on tcp:// (the handshake names it) or set ?node={server_node}",
+        details={"node": server_node, "url_node": url_node},
+    )
 
 
 @dataclass
