@@ -39,9 +39,18 @@ TICKS = os.sysconf("SC_CLK_TCK")
 
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A port free for TCP and for UDP (a responder binds both: a port only TCP-free made
+    one of ~250 responders fail on a machine busy with UDP tests)."""
+    while True:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = int(s.getsockname()[1])
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as u:
+                try:
+                    u.bind(("127.0.0.1", port))
+                except OSError:
+                    continue
+            return port
 
 
 def wait_port(port: int, proc: subprocess.Popen[bytes], what: str) -> None:
@@ -97,7 +106,9 @@ def run_case(
     for i in range(shards):
         path = tmp / f"gateway{i}.toml"
         path.write_text(re.sub(r"\[http\]\nport = \d+", f"[http]\nport = {http_ports[i]}", text))
-        args = [sys.executable, "-m", "aiofins.cli", "gateway", str(path), "--log-level", "WARNING"]
+        # ERROR: what "--log-level WARNING" gave before the CLI's one logging set-up (a
+        # WARNING per missed scan is formatted now; the benchmark measures the gateway).
+        args = [sys.executable, "-m", "aiofins.cli", "gateway", str(path), "--log-level", "ERROR"]
         if shards > 1:
             args += ["--shard", f"{i}/{shards}"]
         procs.append(subprocess.Popen(args, stdout=subprocess.DEVNULL))
