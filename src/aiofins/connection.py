@@ -198,6 +198,24 @@ async def default_addresses(
     return d, s
 
 
+#: (local port, PLC link) of every open session bound to a fixed port: the sockets to
+#: several PLCs share the port (each connected to its PLC), but two to one PLC would share
+#: its replies.
+_FIXED_PORTS: set[tuple[int, str]] = set()
+
+
+def _claim_fixed_port(port: int, link: str) -> tuple[int, str]:
+    key = (port, link)
+    if key in _FIXED_PORTS:
+        raise CommandError(
+            f"local_port={port} towards {link} is bound by another session of this process: "
+            "the PLC's replies would reach only one of them; share that session (a Pool) "
+            "instead"
+        )
+    _FIXED_PORTS.add(key)
+    return key
+
+
 #: Keyword options of :func:`connect` beyond its named parameters: serial settings, the
 #: client node asked for in the FINS/TCP handshake, the bound on a FINS/TCP connection
 #: attempt (connect and handshake), and whether FINS/TCP gathers writes.
@@ -502,7 +520,10 @@ async def _connect(
         source_network = int(option_value("source_network", endpoint.option("source_network")))
     if source_network and s.network == 0:
         s = FinsAddress(source_network, s.node, s.unit)
+    bound: tuple[int, str] | None = None  # our fixed local port and its peer, in _FIXED_PORTS
     try:
+        if local_port and endpoint is not None:
+            bound = _claim_fixed_port(local_port, await peer_link(endpoint))
         serial = endpoint is not None and endpoint.scheme == "serial"
         route = limits or limits_for(*(networks or ((NetworkType.HOST_LINK,) if serial else ())))
         session = Session(
@@ -546,6 +567,8 @@ async def _connect(
     finally:
         if held is not None:
             SOURCE_NODES.release(*held)
+        if bound is not None:
+            _FIXED_PORTS.discard(bound)
 
 
 #: Every keyword option :func:`connect` takes (what :class:`Pool` passes on to it).

@@ -252,3 +252,37 @@ async def test_local_port_for_a_plc_with_an_ip_address_table() -> None:
         with pytest.raises(CommandError, match="max_sid_spaces must be 1"):
             async with aiofins.connect(url, local_port=fins_port, max_sid_spaces=2):
                 pass
+
+
+async def test_one_fixed_port_for_several_plcs_with_ip_address_tables() -> None:
+    """Two PLCs answering to our FINS port: one client each, both bound to that port; each
+    reply reaches the socket connected to the PLC that sent it."""
+    fins_port = free_udp_port()
+    units, stations = [], []
+    for octet in (11, 12):
+        unit = Unit(
+            0x10, 1, octet, host=f"127.0.0.{octet}", port=0, ip_table={1: "127.0.0.1"},
+            conversion=AddressConversion.IP_ADDRESS_TABLE, fins_port=fins_port,
+        )  # fmt: skip
+        plc = VirtualPLC(network=1, node=octet, mode=Mode.RUN)
+        plc.write("D0", [octet])
+        units.append(unit)
+        stations.append(Station(f"plc{octet}", plc, [unit]))
+    plant = Plant([Network(1, NetworkType.ETHERNET)], stations)
+    async with serve_plant(plant) as server:
+        urls = [
+            f"udp://{u.host}:{server.port_of(u)}?timeout=0.5&src=0.1.0&local_port={fins_port}"
+            for u in units
+        ]
+        async with aiofins.connect(urls[0]) as first, aiofins.connect(urls[1]) as second:
+            for _ in range(20):
+                assert await first.read("D0") == [11]
+                assert await second.read("D0") == [12]
+            with pytest.raises(CommandError, match="bound by another session"):
+                async with aiofins.connect(urls[0].replace("&src=0.1.0", "")):
+                    pass  # a second socket to one PLC would share its replies
+        async with aiofins.Pool() as pool:
+            for _ in range(5):
+                for url, value in zip(urls, (11, 12), strict=True):
+                    async with pool.client(url) as client:
+                        assert await client.read("D0") == [value]

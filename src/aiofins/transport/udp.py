@@ -326,6 +326,11 @@ class UdpTransport(Transport):
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.rcvbuf)
             local = self.local_host or ("::" if family == socket.AF_INET6 else "0.0.0.0")
+            if self.local_port:
+                # A fixed port (the FINS port, for PLCs that answer to it) is shared by the
+                # sockets to several PLCs: each is connected to its PLC, and the kernel
+                # hands a datagram to the socket connected to its sender.
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.bind((local, self.local_port))
             sock.connect(remote)
         except BaseException:
