@@ -530,10 +530,13 @@ async def paced_session_request(ports: list[int], interval: float, seconds: floa
     return used / max(count, 1)
 
 
-async def poll(ports: list[int], interval: float, seconds: float) -> tuple[int, int, float]:
-    """(scans, missed, CPU seconds) over ``seconds`` once every group has scanned 3 times."""
+async def poll(
+    ports: list[int], interval: float, seconds: float, timeout: float = 1.0
+) -> tuple[int, int, float]:
+    """(scans, missed, CPU seconds) over ``seconds`` once every group has scanned 3 times
+    (``timeout``: the pool's, for a borrow and a request)."""
     async with (
-        Pool(timeout=1.0, max_sessions=len(ports) + 16) as pool,
+        Pool(timeout=timeout, max_sessions=len(ports) + 16) as pool,
         Poller(pool, buffer=4096) as poller,
     ):
         for port in ports:

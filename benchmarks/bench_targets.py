@@ -202,16 +202,26 @@ def main() -> None:
         for proc in (near, far):
             proc.terminate()
             proc.wait()
-    if "poll1000" not in skip:
-        print(f"Poller over 1,000 PLCs at 100 ms, once (load {load()})", flush=True)
-        with responders(1000) as thousand:
-            done, missed, used = anyio.run(poll, thousand, 0.1, 3.0, backend_options=UVLOOP)
-        sample("Poller 1,000 at 100 ms: missed scans (1 run)", missed, "= 0", lambda m: m == 0)
-        sample("Poller 1,000 at 100 ms: % of one core (1 run)", 100 * used / 3.0, "≤ 50",
-               lambda p: p <= 50)  # fmt: skip
-        sample("Poller 1,000 at 100 ms: CPU per scan µs (1 run)", used / max(done, 1) * 1e6)
-    print(f"load average at the end: {load()}")
+    print(f"load average at the end of the rounds: {load()}")
     show(args.rounds)
+    if "poll1000" not in skip:
+        SAMPLES.clear()
+        print(f"\nPoller over 1,000 PLCs at 100 ms, once (load {load()})", flush=True)
+        with responders(1000) as thousand:
+            try:
+                # the pool's timeout at 5 s: opening 1,000 sessions on a loaded machine
+                done, missed, used = anyio.run(
+                    poll, thousand, 0.1, 3.0, 5.0, backend_options=UVLOOP
+                )
+            except BaseException as exc:  # a failed scan (poll raises it): the row's result
+                print(f"the Poller's 1,000-PLC run failed: {exc!r}")
+                return
+        sample("Poller 1,000 at 100 ms: missed scans", missed, "= 0", lambda m: m == 0)
+        sample("Poller 1,000 at 100 ms: % of one core", 100 * used / 3.0, "≤ 50",
+               lambda p: p <= 50)  # fmt: skip
+        sample("Poller 1,000 at 100 ms: CPU per scan (µs)", used / max(done, 1) * 1e6)
+        print(f"load average at the end: {load()}")
+        show(1)
 
 
 if __name__ == "__main__":

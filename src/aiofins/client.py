@@ -650,11 +650,11 @@ class Client(CommandMethods):
         """The reply data of every frame of ``plan``, in order (pipelined, reported to
         ``progress`` frame by frame as the replies come in)."""
         commands = plan.commands
-        count = sum(plan.counts)
         if progress is None:
             responses = await self._execute_many(commands, dest, timeout, retries, None)
             return [response.data for response in responses]
         counts = plan.counts
+        count = sum(counts)
         done = 0
 
         def report(index: int, _response: Response) -> None:
@@ -801,7 +801,7 @@ class Client(CommandMethods):
         """
         if type(count) is not int or count < 0:
             count = whole_number("count", count, 0)
-        t = array_type(vtype, self.word_order)
+        t = array_type(self._type(vtype))  # the spec parsed once per client word order
         words = t.words * count
         if not cacheable(address):
             start_address(address, words)  # says what is wrong with the address
@@ -832,7 +832,7 @@ class Client(CommandMethods):
         values, stored as :func:`~aiofins.array_to_words` says. Frames, ``allow_split`` and
         ``progress`` (words written so far) are :meth:`write`'s.
         """
-        t = array_type(vtype, self.word_order)
+        t = array_type(self._type(vtype))
         if t.kind == "uint16" and isinstance(values, array) and values.typecode == "H":
             words = values  # sent as it is (each frame's share is swapped in a copy)
         else:

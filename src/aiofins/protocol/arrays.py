@@ -51,6 +51,8 @@ else:  # array is generic at run time from Python 3.12 only: hints stay evaluabl
 
 #: The value kinds with an array form, and their ``array`` type codes.
 ARRAY_KINDS = dict(NUMBER_CODES)
+#: Words per element of each type code on this platform.
+_WORDS = {code: array(code).itemsize // 2 for code in ARRAY_KINDS.values()}
 #: The host's byte order as a ``struct`` prefix.
 _NATIVE = "<" if sys.byteorder == "little" else ">"
 
@@ -66,6 +68,8 @@ def array_type(
         else parse_value_type(spec, default_word_order=WordOrder.parse(word_order))
     )
     code = ARRAY_KINDS.get(vtype.kind)
+    if code is not None and vtype.words == _WORDS[code]:
+        return vtype
     if code is None:
         raise CommandError(
             f"{vtype.kind} values have no array form (arrays hold 16/32/64-bit integers and "
