@@ -41,15 +41,15 @@ from bench_session import free_port, read_params, start_responder
 
 #: (small, large) operations per case, and operations counted per unit.
 COUNTS: dict[str, tuple[int, int, int]] = {
-    "bare": (2_000, 12_000, 1),
-    "bare-stock": (2_000, 12_000, 1),
-    "read": (2_000, 12_000, 1),
-    "read-stock": (2_000, 12_000, 1),
-    "fins": (2_000, 12_000, 1),
-    "sync": (1_000, 6_000, 1),
-    "tasks": (2_000, 12_000, 1),
-    "dm": (5, 25, 33),
-    "dmarray": (5, 25, 33),
+    "bare": (500, 3_000, 1),
+    "bare-stock": (500, 3_000, 1),
+    "read": (500, 3_000, 1),
+    "read-stock": (500, 3_000, 1),
+    "fins": (500, 3_000, 1),
+    "sync": (300, 1_800, 1),
+    "tasks": (1_000, 4_000, 1),
+    "dm": (3, 13, 33),
+    "dmarray": (3, 13, 33),
 }
 
 
