@@ -13,6 +13,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
 from aiofins.gateway import Gateway
+from aiofins.gateway.config import parse_config
 from aiofins.gateway.writes import REPLY_POOL
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.simulator.faults import Delay, FaultRule
@@ -112,11 +113,20 @@ async def test_retained_sets_are_refused_on_start_and_not_again_on_reconnect(
                     (reply,) = sub.on(f"{SET}/sp/reply")
                     assert reply["id"] == "old" and reply["ok"] is False
                     assert "retained set message is not written" in reply["error"]
+                    # Published retained while the gateway listens: refused too (MQTT 5
+                    # keeps the flag: the subscription asks for retain-as-published).
+                    async with publisher(broker.port) as pub:
+                        await pub.publish(
+                            f"{SET}/sp", '{"value": 7, "id": "live"}', qos=1, retain=True
+                        )
+                    await sub.wait_for(lambda: len(sub.messages) == 2)
+                    live = sub.on(f"{SET}/sp/reply")[1]
+                    assert live["id"] == "live" and live["ok"] is False
                 await anyio.to_thread.run_sync(broker.stop)
                 await anyio.to_thread.run_sync(broker.start)
                 async with subscribe(broker.port, f"{SET}/sp/reply") as sub:
                     with anyio.fail_after(20):
-                        while gateway.write_counts.get("retained", 0) < 2:
+                        while gateway.write_counts.get("retained", 0) < 3:
                             await anyio.sleep(0.02)  # polling the counter, not a timing
                     # The retained one came again and was not answered again: a request
                     # after it is the next reply on the topic (replies keep their order).
@@ -125,7 +135,7 @@ async def test_retained_sets_are_refused_on_start_and_not_again_on_reconnect(
                     await sub.wait_for(lambda: sub.messages)
                     assert [r["id"] for r in sub.on(f"{SET}/sp/reply")] == ["new"]
                 assert gateway.link.connects == 2
-                assert gateway.write_counts == {"retained": 2, "written": 1}
+                assert gateway.write_counts == {"retained": 3, "written": 1}
             assert plc.read_value("D120", "int16") == 6
     finally:
         broker.stop()
@@ -253,3 +263,38 @@ async def test_an_mqtt5_message_expiry_shortens_the_age(broker: Broker) -> None:
             assert "expired" in short["error"]
             assert plc.read_value("D120", "int16") == 1
             assert gateway.write_counts == {"written": 1, "expired": 1}
+
+
+async def test_mqtt_3_1_1_still_publishes_and_writes(broker: Broker) -> None:
+    """``protocol = "3.1.1"`` for brokers without MQTT 5: no expiry, no maximum packet size,
+    and a retained set published while the gateway listens arrives without its flag (3.1.1
+    clears it), so only its replays are refused (docs/gateway.md)."""
+    plc = VirtualPLC()
+    async with run_simulator(plc, udp=("127.0.0.1", 0)) as sim:
+        cfg = parse_config(
+            f"""
+[gateway]
+name = "gw"
+[mqtt]
+port = {broker.port}
+protocol = "3.1.1"
+[http]
+enabled = false
+"""
+            + group(sim.udp_port),
+            "t.toml",
+        )
+        async with (
+            subscribe(broker.port, "fins/p1/w", f"{SET}/sp/reply") as sub,
+            Gateway(cfg) as gateway,
+            publisher(broker.port) as pub,
+        ):
+            await gateway.link.connected.wait()
+            await pub.publish(f"{SET}/sp", '{"value": 9, "id": "a"}', qos=1)
+            await pub.publish(f"{SET}/sp", "[[[1]]]", qos=1)
+            await sub.wait_for(lambda: len(sub.on(f"{SET}/sp/reply")) == 2 and sub.on("fins/p1/w"))
+            ok, nested = sub.on(f"{SET}/sp/reply")
+            assert ok["id"] == "a" and ok["ok"] is True
+            assert "nests deeper" in nested["error"]
+            assert plc.read_value("D120", "int16") == 9
+            assert gateway.write_counts == {"written": 1, "invalid": 1}

@@ -414,7 +414,13 @@ class MqttLink:
                     retain=True,
                 )
                 for topic in self.subscriptions:
-                    await client.subscribe(topic, qos=1)
+                    if self.config.protocol == "5":  # a live retained message keeps its flag
+                        from paho.mqtt.subscribeoptions import SubscribeOptions
+
+                        options = SubscribeOptions(qos=1, retainAsPublished=True)
+                        await client.subscribe(topic, options=options)
+                    else:  # 3.1.1 clears it on live messages: only replays show as retained
+                        await client.subscribe(topic, qos=1)
             except aiomqtt.MqttError as exc:
                 return f"lost during setup: {exc}"
             self._client = client
