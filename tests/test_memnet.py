@@ -13,6 +13,8 @@ import trio.testing
 
 from aiofins.memnet import MemoryNetwork, MemoryStream, Packet
 
+from .virtual_time import VIRTUAL_BACKENDS, run_on_virtual_time
+
 pytestmark = pytest.mark.anyio
 
 A, B = ("10.0.0.1", 5000), ("10.0.0.2", 9600)
@@ -33,6 +35,14 @@ async def test_a_datagram_arrives_with_its_sender_s_address(anyio_backend: objec
         await b.send_to(b"reply", *A)
         assert await a.receive() == (b"reply", B)
         assert net.stats.sent == net.stats.delivered == 2
+
+
+def test_a_network_that_is_not_running_refuses_sockets() -> None:
+    net = MemoryNetwork()
+    with pytest.raises(RuntimeError, match="async with MemoryNetwork"):
+        net.datagram_socket()
+    with pytest.raises(RuntimeError, match="async with MemoryNetwork"):
+        net.listen("10.0.0.1", 1)
 
 
 async def test_ephemeral_ports_come_in_order_and_an_address_is_bound_once(
@@ -67,26 +77,35 @@ async def test_a_connected_socket_takes_only_its_peer_s_datagrams_and_hears_of_a
         assert client.getpeername() == B
 
 
-async def test_the_fault_hook_drops_duplicates_and_reorders(anyio_backend: object) -> None:
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_the_fault_hook_drops_duplicates_and_reorders(backend: str) -> None:
+    """(On virtual time: on the wall clock, time passing between two sends under load would
+    decide the order of delays this short.)"""
     seen: list[Packet] = []
+    got: list[tuple[float, bytes]] = []
 
     def fate(packet: Packet) -> Sequence[float]:
         seen.append(packet)
         return {b"drop": [], b"twice": [0.0, 0.002], b"late": [0.004]}.get(packet.data, [0.0])
 
-    async with MemoryNetwork(fate=fate) as net:
-        a, b = net.datagram_socket(*A), net.datagram_socket(*B)
-        for data in (b"drop", b"late", b"twice", b"plain"):
-            a.sendto(data, B)
-        got = [(await b.receive())[0] for _ in range(4)]
-        assert got == [b"twice", b"plain", b"twice", b"late"]
-        assert [(p.kind, p.source, p.dest, p.data, p.number) for p in seen] == [
-            ("datagram", A, B, b"drop", 1),
-            ("datagram", A, B, b"late", 2),
-            ("datagram", A, B, b"twice", 3),
-            ("datagram", A, B, b"plain", 4),
-        ]
-        assert (net.stats.dropped, net.stats.duplicated, net.stats.delivered) == (1, 1, 4)
+    async def main() -> None:
+        async with MemoryNetwork(fate=fate) as net:
+            a, b = net.datagram_socket(*A), net.datagram_socket(*B)
+            for data in (b"drop", b"late", b"twice", b"plain"):
+                a.sendto(data, B)
+            for _ in range(4):
+                data, _source = await b.receive()
+                got.append((round(anyio.current_time(), 6), data))
+            assert (net.stats.dropped, net.stats.duplicated, net.stats.delivered) == (1, 1, 4)
+
+    run_on_virtual_time(main, backend)
+    assert got == [(0.0, b"twice"), (0.0, b"plain"), (0.002, b"twice"), (0.004, b"late")]
+    assert [(p.kind, p.source, p.dest, p.data, p.number) for p in seen] == [
+        ("datagram", A, B, b"drop", 1),
+        ("datagram", A, B, b"late", 2),
+        ("datagram", A, B, b"twice", 3),
+        ("datagram", A, B, b"plain", 4),
+    ]
 
 
 def test_delays_are_exact_on_virtual_time() -> None:
@@ -124,19 +143,22 @@ async def test_nothing_raised_by_the_hook_or_a_callback_escapes_a_delivery(
         assert (net.stats.hook_errors, net.stats.dropped, net.stats.callback_errors) == (1, 1, 1)
 
 
-async def test_every_queue_is_bounded(anyio_backend: object) -> None:
-    async with MemoryNetwork(rcvbuf=3, max_queued=5, fate=lambda p: [1.0]) as net:
-        a, b = net.datagram_socket(*A), net.datagram_socket(*B)
-        for i in range(8):  # 5 on the wire, 3 beyond its bound
-            a.sendto(bytes([i]), B)
-        assert net.stats.overflows == 3
-        net.fate = None
-        got = [(await b.receive())[0] for _ in range(3)]  # 3 taken, 2 beyond the socket's
-        await anyio.wait_all_tasks_blocked()
-        assert got == [b"\x00", b"\x01", b"\x02"]
-        assert net.stats.overflows == 3 + 2
-        a.sendto(b"now", B)  # (the hook changed: no delay)
-        assert await b.receive() == (b"now", A)
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_every_queue_is_bounded(backend: str) -> None:
+    async def main() -> None:
+        async with MemoryNetwork(rcvbuf=3, max_queued=5, fate=lambda p: [1.0]) as net:
+            a, b = net.datagram_socket(*A), net.datagram_socket(*B)
+            for i in range(8):  # 5 on the wire, 3 beyond its bound
+                a.sendto(bytes([i]), B)
+            assert net.stats.overflows == 3
+            net.fate = None
+            got = [(await b.receive())[0] for _ in range(3)]  # 3 taken, 2 beyond the socket's
+            assert got == [b"\x00", b"\x01", b"\x02"]
+            assert net.stats.overflows == 3 + 2
+            a.sendto(b"now", B)  # (the hook changed: no delay)
+            assert await b.receive() == (b"now", A)
+
+    run_on_virtual_time(main, backend)
 
 
 # -- streams --------------------------------------------------------------------------------

@@ -533,6 +533,7 @@ class MemoryNetwork:
     ) -> DatagramSocket:
         """A datagram socket bound to ``(local_host, local_port)`` (port 0: an ephemeral
         one), connected to ``remote`` if given. An address in use raises ``OSError``."""
+        self._running()
         host = local_host or "0.0.0.0"
         port = local_port or self._ephemeral(host)
         if (host, port) in self._datagram:
@@ -540,6 +541,12 @@ class MemoryNetwork:
         sock = DatagramSocket(self, (host, port), remote)
         self._datagram[(host, port)] = sock
         return sock
+
+    def _running(self) -> None:
+        if self._tg is None:
+            raise RuntimeError(
+                "the network is not running: use 'async with MemoryNetwork() as net'"
+            )
 
     def _ephemeral(self, host: str) -> int:
         for _ in range(EPHEMERAL_PORTS[1] - EPHEMERAL_PORTS[0] + 1):
@@ -568,6 +575,7 @@ class MemoryNetwork:
 
     def listen(self, host: str, port: int = 0, *, backlog: int = 16) -> StreamListener:
         """A listener on ``(host, port)`` (port 0: an ephemeral one)."""
+        self._running()
         host = host or "0.0.0.0"
         port = port or self._ephemeral(host)
         if (host, port) in self._listeners:
@@ -585,6 +593,7 @@ class MemoryNetwork:
         there is none (or its backlog is full); waits as long as the fault hook delays the
         request (for ever if it loses it: bound it with the caller's timeout). A duplicate of
         the request, or one arriving after the caller gave up, makes no connection."""
+        self._running()
         local = (local_host or self.default_host, self._ephemeral(local_host or "0.0.0.0"))
         dest = (host, int(port))
         done = anyio.Event()

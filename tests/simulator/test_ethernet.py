@@ -4,8 +4,6 @@ and over the in-memory network; bytes and addresses asserted."""
 
 from __future__ import annotations
 
-import socket
-
 import anyio
 import pytest
 import trio
@@ -26,6 +24,8 @@ from aiofins.simulator import (
 )
 from aiofins.simulator.ethernet import node_of
 from aiofins.transport import UdpTransport
+
+from ..virtual_time import VIRTUAL_BACKENDS, run_on_virtual_time
 
 DYNAMIC = AddressConversion.AUTOMATIC_DYNAMIC
 STATIC = AddressConversion.AUTOMATIC_STATIC
@@ -112,33 +112,28 @@ def test_a_frame_shorter_than_a_header_teaches_nothing_and_goes_nowhere() -> Non
 # -- the UDP server over real sockets -------------------------------------------------------
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.2", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.mark.anyio
 async def test_a_static_unit_answers_only_a_client_bound_to_the_fins_port(
     anyio_backend: object,
 ) -> None:
-    """Unit 127.0.0.10 (node 10), static conversion, FINS port P: a client at 127.0.0.2 with
-    source node 2 bound to an ephemeral port times out; bound to port P it reads the word."""
-    port = free_udp_port()
+    """Unit 127.0.0.10 (node 10), static conversion, its FINS port P (the server's): a client
+    at 127.0.0.2 with source node 2 bound to an ephemeral port times out; bound to port P it
+    reads the word."""
     plc = VirtualPLC(node=10)
     plc.memory.write_words(0x82, 0, [0x4321])
-    unit = EthernetUnit(
-        "127.0.0.10", subnet_mask="255.255.255.0", conversion=STATIC, fins_port=port
-    )
-    async with run_simulator(plc, udp=("127.0.0.10", port), ethernet=unit):
+    unit = EthernetUnit("127.0.0.10", conversion=STATIC)
+    async with run_simulator(plc, udp=("127.0.0.10", 0), ethernet=unit) as sim:
+        port = unit.fins_port = sim.udp_port  # (the unit's setup: its FINS port)
+        unit.restart()
+        assert unit.address_of(2) == ("127.0.0.2", port)
         source, dest = FinsAddress(0, 2, 0), FinsAddress(0, 10, 0)
         ephemeral = UdpTransport("127.0.0.10", port, local_host="127.0.0.2")
         async with Session(ephemeral, source=source, dest=dest, timeout=0.3, retries=0) as s:
             with pytest.raises(FinsTimeout):
                 await s.request(0x01, 0x01, bytes.fromhex("820000000001"))
-        assert plc.memory.read_words(0x82, 0, 1) == [0x4321]  # (executed: a read)
+        assert unit.unaddressed == 0  # (sent to 127.0.0.2:P, where nobody listened)
         fixed = UdpTransport("127.0.0.10", port, local_host="127.0.0.2", local_port=port)
-        async with Session(fixed, source=source, dest=dest, timeout=2.0) as s:
+        async with Session(fixed, source=source, dest=dest, timeout=10.0) as s:
             r = await s.request(0x01, 0x01, bytes.fromhex("820000000001"))
             assert r.data == b"\x43\x21"
             assert r.frame[:10] == bytes.fromhex("C0 00 02 00 02 00 00 0A 00") + r.frame[9:10]
@@ -152,7 +147,7 @@ async def test_a_dynamic_unit_answers_the_port_a_command_came_from(anyio_backend
     async with run_simulator(plc, udp=("127.0.0.1", 0), ethernet=unit) as sim:
         transport = UdpTransport("127.0.0.1", sim.udp_port)
         source, dest = FinsAddress(0, 2, 0), FinsAddress(0, 1, 0)
-        async with Session(transport, source=source, dest=dest, timeout=2.0) as s:
+        async with Session(transport, source=source, dest=dest, timeout=10.0) as s:
             r = await s.request(0x01, 0x01, bytes.fromhex("820000000001"))
             assert r.data == b"\x0b\xad"
             assert unit.address_of(2) == transport.local_address
@@ -199,33 +194,38 @@ def test_on_the_network_a_write_without_a_reply_still_executes_and_times_out_exa
     assert out == [("timeout", 0.5), [7], ("ok", 0.0), [7], 1]
 
 
-@pytest.mark.anyio
-async def test_on_the_network_two_sockets_sharing_a_node_steal_each_other_s_replies(
-    anyio_backend: object,
+@pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)
+def test_on_the_network_two_sockets_sharing_a_node_steal_each_other_s_replies(
+    backend: str,
 ) -> None:
     """Replies 0.1 s late: the second socket's command (same source node) arrives before
-    the first one's reply is sent, so a dynamic unit sends both replies to the second."""
-    faults = FaultPlan(FaultRule(delay=Delay(0.1, 0.1)))
-    async with (
-        MemoryNetwork() as net,
-        run_simulator(
-            VirtualPLC(node=10),
-            udp=("10.0.0.10", 9600),
-            network=net,
-            ethernet=EthernetUnit("10.0.0.10"),
-            faults=faults,
-        ),
-    ):
-        first = net.datagram_socket("10.0.0.2", 50001)
-        second = net.datagram_socket("10.0.0.2", 50002)
-        first.sendto(command(2, sid=1), ("10.0.0.10", 9600))
-        second.sendto(command(2, sid=2), ("10.0.0.10", 9600))
-        with anyio.fail_after(10):
-            replies = sorted([await second.receive(), await second.receive()])
-        assert [source for _, source in replies] == [("10.0.0.10", 9600)] * 2
-        assert [data[:10] for data, _ in replies] == [
-            bytes.fromhex("C0 00 02 00 02 00 00 0A 00 01"),
-            bytes.fromhex("C0 00 02 00 02 00 00 0A 00 02"),
-        ]
-        with pytest.raises(BlockingIOError):
-            first.recv(100)
+    the first one's reply is sent, so a dynamic unit sends both replies to the second (at
+    exactly t = 0.1 s)."""
+    out: list[tuple[float, tuple[str, int], str]] = []
+
+    async def main() -> None:
+        async with (
+            MemoryNetwork() as net,
+            run_simulator(
+                VirtualPLC(node=10),
+                udp=("10.0.0.10", 9600),
+                network=net,
+                ethernet=EthernetUnit("10.0.0.10"),
+                faults=FaultPlan(FaultRule(delay=Delay(0.1, 0.1))),
+            ),
+        ):
+            first = net.datagram_socket("10.0.0.2", 50001)
+            second = net.datagram_socket("10.0.0.2", 50002)
+            first.sendto(command(2, sid=1), ("10.0.0.10", 9600))
+            second.sendto(command(2, sid=2), ("10.0.0.10", 9600))
+            for _ in range(2):
+                data, source = await second.receive()
+                out.append((anyio.current_time(), source, data[:10].hex()))
+            with pytest.raises(BlockingIOError):
+                first.recv(100)
+
+    run_on_virtual_time(main, backend)
+    assert [(round(t, 6), source, data) for t, source, data in sorted(out)] == [
+        (0.1, ("10.0.0.10", 9600), "c00002000200000a0001"),
+        (0.1, ("10.0.0.10", 9600), "c00002000200000a0002"),
+    ]
