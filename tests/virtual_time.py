@@ -6,10 +6,14 @@ cannot be made virtual: tests of time run under these two instead."""
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 import anyio
 import looptime
+import pytest
 import trio
 import trio.testing
 
@@ -29,3 +33,22 @@ def run_on_virtual_time(main: Callable[[], Awaitable[None]], backend: str = "tri
         backend="asyncio",
         backend_options={"loop_factory": lambda: looptime.new_event_loop(start=0.0)},
     )
+
+
+def on_virtual_time(test: Callable[..., Awaitable[None]]) -> Callable[..., None]:
+    """An async test run on virtual time under each of :data:`VIRTUAL_BACKENDS` (uvloop's
+    clock cannot be made virtual): a test whose assertions depend on how much time passes,
+    exact whatever the machine's load. Its fixtures must be synchronous ones (``caplog``,
+    ``tmp_path``); it gets them as before, and a ``backend`` parameter besides."""
+    signature = inspect.signature(test)
+
+    @functools.wraps(test)
+    def run(backend: str, **fixtures: Any) -> None:
+        run_on_virtual_time(lambda: test(**fixtures), backend)
+
+    backend = inspect.Parameter("backend", inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    run.__signature__ = signature.replace(  # type: ignore[attr-defined]
+        parameters=[backend, *signature.parameters.values()], return_annotation=None
+    )
+    marked: Callable[..., None] = pytest.mark.parametrize("backend", VIRTUAL_BACKENDS)(run)
+    return marked
