@@ -213,6 +213,7 @@ class EndpointStats:
     malformed: int = 0
     retries: int = 0
     sid_exhausted: int = 0
+    sid_probes: int = 0
     sid_spaces_opened: int = 0
     sid_space_failures: int = 0
     breaker_rejects: int = 0

@@ -154,7 +154,12 @@ async def test_sid_exhaustion_is_logged_once_and_counted(caplog: pytest.LogCaptu
         exhausted = [r for r in caplog.records if "all 256 SIDs" in r.getMessage()]
         assert len(exhausted) == 1 and exhausted[0].levelno == logging.WARNING
         assert session.stats.sid_exhausted == 2
-        assert len(peer.received) == 256
+        # each waiting request probed once under the SID given up on longest ago, with
+        # another command (0601): the PLC's silence quarantined that SID again
+        assert session.stats.sid_probes == 2 and len(peer.received) == 258
+        assert [f[10:12] for f in peer.received[256:]] == [b"\x06\x01"] * 2
+        assert peer.received[256][9] == peer.received[0][9]
+        assert len(session._quarantine) == 256
 
 
 async def _expect_timeout(session: Session) -> None:

@@ -414,6 +414,8 @@ class Session:
         now = self.clock()
         sids.recent[key] = now
         latency = now - p.sent_at
+        if sids.given_up:  # an outage's quarantines end now that the destination answers
+            sids.answered_after(key, p.sent_at, now)
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         n = stats._lat_count
         stats._lat_count = n + 1

@@ -103,6 +103,7 @@ class SessionStats:
         "mismatched",
         "retries",
         "sid_exhausted",
+        "sid_probes",
         "sid_space_failures",
         "sid_spaces_opened",
         "timeouts",
@@ -125,6 +126,8 @@ class SessionStats:
         self.retries = 0  # retransmissions (same frame and SID)
         self.background_errors = 0  # background tasks (transport reader...) that raised
         self.sid_exhausted = 0  # times a request found all SIDs of its destination taken
+        #: Evidence probes sent while every SID was taken (see spaces.evidence_probe).
+        self.sid_probes = 0
         self.sid_spaces_opened = 0  # extra SID spaces (sockets, connections) opened
         self.sid_space_failures = 0  # extra SID spaces that could not be opened
         self.breaker_rejects = 0  # calls failed at once by an open circuit breaker

@@ -25,7 +25,7 @@ from collections.abc import Set as AbstractSet
 from time import monotonic
 
 from .clock import Clock
-from .matching import count_unmatched
+from .matching import LATE_REPLY_GRACE, count_unmatched
 from .response import SessionStats
 from .slots import DestState, Pending
 
@@ -50,6 +50,7 @@ class SidSpace:
 
     __slots__ = (
         "clock",
+        "given_up",
         "linger",
         "linger_resent",
         "lingering",
@@ -68,6 +69,10 @@ class SidSpace:
         self.pending: dict[int, Pending] = {}
         #: SID key -> when it may be used again (requests given up on).
         self.quarantine: dict[int, float] = {}
+        #: Destination (its key's upper bytes) -> SID key -> when its request was given up
+        #: on and its command (MRC << 8 | SRC), until the destination answers a request
+        #: sent after that (see :meth:`answered_after`).
+        self.given_up: dict[int, dict[int, tuple[float, int]]] = {}
         #: SID key -> when it may be used again (answered: a duplicate may follow).
         self.lingering: dict[int, float] = {}
         #: SID key -> when its last request was answered (to count and time duplicates);
@@ -168,11 +173,42 @@ class SidSpace:
 
     def abandon(self, p: Pending, until: float) -> None:
         """Give up on ``p``: out of the table, its SID quarantined until ``until`` (unless
-        its late reply comes first)."""
+        its late reply comes first, or the destination answers a request sent after this
+        moment: see :meth:`answered_after`)."""
         p.done = True
         p.abandoned = True
         self.pending.pop(p.key, None)
-        self.quarantine[p.key] = until
+        key = p.key
+        self.quarantine[key] = until
+        mine = self.given_up.get(key & ~0xFF)
+        if mine is None:
+            mine = self.given_up[key & ~0xFF] = {}
+        mine[key] = (self.clock(), (p.mrc << 8) | p.src)
+
+    def answered_after(self, key: int, sent_at: float, now: float) -> None:
+        """The destination of ``key`` answered a request first sent at ``sent_at``: the
+        quarantine of each of its SIDs given up on before then ends
+        :data:`~.matching.LATE_REPLY_GRACE` from ``now``. The destination answers again,
+        and it took (and answered or lost) those older commands before the younger one:
+        a late reply to one of them could only be a reordered datagram, which the grace
+        covers. So an outage's quarantines end on the evidence that the PLC answers, not
+        ``min_quarantine`` (15 s) later. Called by the receive path while any SID given
+        up on has not seen such evidence (:attr:`given_up`)."""
+        dest = key & ~0xFF
+        mine = self.given_up.get(dest)
+        if mine is None:
+            return
+        end = now + LATE_REPLY_GRACE
+        quarantine = self.quarantine
+        for k, (at, _) in list(mine.items()):
+            if at > sent_at:
+                continue
+            del mine[k]
+            until = quarantine.get(k)
+            if until is not None and until > end:
+                quarantine[k] = end
+        if not mine:
+            del self.given_up[dest]
 
     def drain(self) -> list[Pending]:
         """Every request in flight, taken out of the table (the link failed)."""
@@ -193,6 +229,7 @@ class SidSpace:
     def forget(self) -> None:
         """A fresh socket or connection: no late reply can reach it, every SID is free."""
         self.quarantine.clear()
+        self.given_up.clear()
         self.lingering.clear()
 
     def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:

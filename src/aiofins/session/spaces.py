@@ -39,7 +39,7 @@ from .clock import Clock
 from .messages import no_free_sid
 from .nodes import SOURCE_NODES
 from .sids import SHORTAGE_EPISODE, SID_WAIT, SidSpace
-from .slots import DestState, Pending
+from .slots import DestState, EventPending, Pending
 
 if TYPE_CHECKING:
     from .core import Session
@@ -519,6 +519,7 @@ async def sid_anywhere(
     lock = state.sid_lock
     if lock is None:
         lock = state.sid_lock = anyio.Lock()
+    probe_at = clock()
     with anyio.move_on_after(max(end - clock(), 0.0)):
         async with lock:
             while True:
@@ -532,9 +533,65 @@ async def sid_anywhere(
                 if spaces.may_open(now):
                     await spaces.open(session.source, session._nodes_in_use(), end - now)
                     continue
+                if now >= probe_at and state.base in sids.given_up:
+                    probe_at = now + session.timeout
+                    await evidence_probe(session, state, min(end, probe_at))
+                    continue
                 wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
                 await anyio.sleep(wait)
     raise no_free_sid(session, state, timeout)
+
+
+#: The commands an evidence probe sends (a harmless read of the CPU Unit's status, or of
+#: its controller data when the request given up on was that status read).
+PROBES = ((0x06, 0x01), (0x05, 0x01))
+
+
+async def evidence_probe(session: Session, state: DestState, end: float) -> None:
+    """Every SID of ``state``'s destination is taken and some are quarantined for requests
+    given up on: ask the destination whether it answers, under the SID given up on
+    longest ago, with a command other than that request's (so a late reply to it is
+    counted as mismatched, never taken for the probe's), waiting until ``end``. Any answer
+    is the evidence that ends those quarantines (:meth:`SidSpace.answered_after`); no
+    answer quarantines the SID again. Without it, a PLC silent long enough for every SID
+    to be given up on (max_sid_spaces=1, many requests in flight) left no SID free to learn
+    that it answers again until ``min_quarantine`` (15 s) had passed."""
+    sids = session.sids
+    mine = sids.given_up.get(state.base)
+    if not mine:
+        return
+    key = min(mine, key=lambda k: mine[k][0])
+    command = mine[key][1]
+    mrc, src = next(c for c in PROBES if (c[0] << 8) | c[1] != command)
+    if key in sids.pending:  # (taken meanwhile)
+        return
+    until = sids.quarantine.pop(key, None)
+    sids.lingering.pop(key, None)
+    cursor = state.cursor
+    state.cursor = key & 0xFF
+    p = EventPending(0, mrc, src)
+    now = session.clock()
+    try:
+        frame = session.start(p, state, mrc, src, b"", 0, now, max(end, now + 0.001), None)
+    finally:
+        state.cursor = cursor
+        if until is not None:
+            sids.quarantine[key] = until  # (until the evidence, or its own give-up)
+    if frame is None:
+        return
+    session.stats.sid_probes += 1
+    try:
+        transport = session.transport
+        if transport.fast_send is not None:
+            transport.fast_send(frame)
+        else:
+            await transport.send(frame, max(end - now, 0.001))
+        await p.wait()
+    except Exception:  # no answer (or the link failed): the probe's SID is quarantined
+        session.abandon(p, session.timeout)
+    except BaseException:
+        session.abandon(p, session.timeout)
+        raise
 
 
 async def start_when_free(
