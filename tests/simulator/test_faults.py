@@ -28,6 +28,7 @@ from aiofins.simulator import (
     run_simulator,
 )
 
+from ..virtual_time import on_virtual_time
 from .test_servers import (
     READ_D100,
     READ_D100_REPLY,
@@ -117,9 +118,10 @@ async def test_reorder_holds_until_next_response() -> None:
         assert sim.counters.reordered == 1
 
 
-@pytest.mark.anyio
+@on_virtual_time
 async def test_delay_does_not_hold_up_later_requests() -> None:
-    # The delay is the margin the marker has to overtake the read, however loaded the machine.
+    # On virtual time (asyncio, trio; uvloop's clock cannot be virtual): the marker overtakes
+    # the read whatever the machine's load, and the delay is exact.
     rule = FaultRule(delay=Delay(1.0, 1.0))
     async with udp_sim(plan_for_read(rule)) as (sim, sock):
         start = anyio.current_time()
@@ -127,18 +129,18 @@ async def test_delay_does_not_hold_up_later_requests() -> None:
         await send(sim, sock, MARKER)
         assert (await recv(sock)).startswith(MARKER_REPLY_HEAD)
         assert await recv(sock) == READ_D100_REPLY
-        assert anyio.current_time() - start >= 1.0
+        assert anyio.current_time() - start == pytest.approx(1.0, abs=1e-6)
         assert sim.counters.delayed == 1
 
 
-@pytest.mark.anyio
+@on_virtual_time
 async def test_late_answer() -> None:
     rule = FaultRule(late=1.0, late_after=0.3, delay=Delay(0.0, 0.01))
     async with udp_sim(plan_for_read(rule)) as (sim, sock):
         start = anyio.current_time()
         await send(sim, sock, READ_D100)
         assert await recv(sock) == READ_D100_REPLY
-        assert anyio.current_time() - start >= 0.3
+        assert anyio.current_time() - start == pytest.approx(0.3, abs=1e-6)
         assert sim.counters.late == 1
         assert sim.counters.delayed == 0
 
@@ -393,10 +395,11 @@ async def test_frame_log_to_file_and_urls(tmp_path: pathlib.Path) -> None:
     assert bytes.fromhex("".join(words[0][3:])) == READ_D100
 
 
-@pytest.mark.anyio
+@on_virtual_time
 async def test_held_answers_are_bounded_the_rest_dropped_and_counted() -> None:
     """--delay/--late held one task per delayed request without bound (61k requests: RSS
-    31 -> 388 MB). At most max_held wait; the rest are dropped and counted."""
+    31 -> 388 MB). At most max_held wait; the rest are dropped and counted. On virtual time:
+    the 1 s delay holds the first ones while the others arrive, whatever the load."""
     plan = plan_for_read(FaultRule(delay=Delay(1.0, 1.0)))  # held while the other eight arrive
     plan.max_held = 3
     async with udp_sim(plan) as (sim, sock):
