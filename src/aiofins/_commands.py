@@ -47,6 +47,8 @@ from .protocol.commands.errorlog import (
     FinsWriteAccessLogRead,
 )
 from .protocol.commands.file import (
+    FILE_READ_OVERHEAD,
+    MAX_FILE_READ,
     FileMemoryFormat,
     FileNameRead,
     SingleFileRead,
@@ -119,6 +121,7 @@ from .protocol.header import FinsAddress
 
 if TYPE_CHECKING:
     from .protocol.commands import Request
+    from .protocol.limits import RouteLimits
 
 R = TypeVar("R")
 
@@ -134,6 +137,11 @@ class CommandMethods:
         timeout: float | None = None,
         retries: int | None = None,
     ) -> R:  # pragma: no cover - provided by Client
+        raise NotImplementedError
+
+    def route_to(
+        self, dest: FinsAddress | str | None = None
+    ) -> RouteLimits:  # pragma: no cover - provided by Client
         raise NotImplementedError
 
     async def memory_area_read(
@@ -624,14 +632,19 @@ class CommandMethods:
         disk: Disk | str,
         name: str,
         position: int = 0,
-        length: int = 1988,
+        length: int | None = None,
         directory: str = "",
         *,
         dest: FinsAddress | str | None = None,
         timeout: float | None = None,
         retries: int | None = None,
     ) -> SingleFileReadResult:
-        """SINGLE FILE READ (22 02); see :class:`SingleFileRead`."""
+        """SINGLE FILE READ (22 02); see :class:`SingleFileRead`. ``length`` defaults to the
+        most one response carries on the route to ``dest`` (1,988 bytes on Ethernet, 528 over
+        Host Link), so the default never asks for more than the route can answer."""
+        if length is None:
+            carried = self.route_to(dest).max_response_data_bytes - FILE_READ_OVERHEAD
+            length = max(0, min(MAX_FILE_READ, carried))
         return await self.call(
             SingleFileRead(
                 disk=_disk(disk), name=name, position=position, length=length, directory=directory
