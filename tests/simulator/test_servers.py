@@ -21,6 +21,8 @@ from aiofins.simulator import FaultPlan, FaultRule, Simulator, VirtualPLC, run_s
 from aiofins.simulator import tcp as tcp_server
 from tests.conftest import PTY_LINE
 
+from ..virtual_time import on_virtual_time
+
 pytestmark = pytest.mark.anyio
 
 # wire-format §8.1: read D100 x 10 from node 0x0A as node 0x22, SID 01.
@@ -291,19 +293,24 @@ async def test_tcp_server_refuses_limits_that_limit_nothing(
             pass
 
 
+@on_virtual_time
 async def test_tcp_connection_without_handshake_is_closed() -> None:
     """A connection that never sends the handshake held a descriptor forever (enough of
-    them and accept() failed)."""
+    them and accept() failed). On virtual time (asyncio, trio; uvloop's clock cannot be
+    virtual): a loaded machine's slow handshake is not taken for a missing one, and the
+    time the silent one is given is exact."""
     assert tcp_server.HANDSHAKE_TIMEOUT <= 2  # short: a real client shakes hands at once
     async with run_simulator(make_plc(), tcp=("127.0.0.1", 0), handshake_timeout=0.1) as sim:
         peer = await connect(sim.tcp_port)
+        start = anyio.current_time()
         async with peer.stream:
             assert await peer.closed_by_server()
+        assert anyio.current_time() - start == pytest.approx(0.1, abs=1e-6)
         assert sim.tcp is not None and sim.tcp.handshake_timeouts == 1
         ok, reply = await handshake(sim.tcp_port)  # a client that does shake hands stays
         async with ok.stream:
             assert reply == node_response(239, 10)
-            await anyio.sleep(0.3)
+            await anyio.sleep(0.3)  # three handshake timeouts pass
             await ok.stream.send(tcp_frame(READ_D100))
             assert (await ok.read_message())[16:18] == b"\xc0\x00"  # the FINS reply
         assert sim.tcp.handshake_timeouts == 1
