@@ -101,3 +101,24 @@ def test_unmatched_replies_are_counted_and_a_duplicate_teaches_the_linger() -> N
     assert space.linger_resent >= 0.4
     assert space.unmatched(stats, 0x10009) == ("unsolicited", 0.0)
     assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 2, 1)
+
+
+def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -> None:
+    """Issue #22, defect 5: the linger grows when a duplicate comes later than it, but the
+    SIDs answered just before under the old linger were free again at once, and one
+    reused took a later duplicate of its old reply for the new request's (another read's
+    words). They now linger the new linger from when they were answered."""
+    now = [100.0]
+    space, stats = SidSpace(min_linger=0.0, clock=lambda: now[0]), SessionStats({})
+    space.recent[0x10001] = 99.7  # the duplicate's reply, answered 0.3 s ago
+    space.recent[0x10002] = 99.9  # answered 0.1 s ago, free under the old linger (0)
+    space.recent[0x10003] = 99.0  # answered 1 s ago: past any linger learnt here
+    space.recent[0x10004] = 99.95  # answered, and its SID carries a new request already
+    space.pending[0x10004] = Pending(0x10004, 0x01, 0x01)
+    kind, lateness = space.unmatched(stats, 0x10001)
+    assert kind == "duplicate" and lateness == pytest.approx(0.3)
+    assert space.linger == pytest.approx(0.6)
+    assert space.lingering == {
+        0x10001: pytest.approx(100.3),
+        0x10002: pytest.approx(100.5),
+    }

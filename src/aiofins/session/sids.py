@@ -260,5 +260,21 @@ class SidSpace:
                 linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
                 if linger > self.linger:
                     self.linger = linger
+                    self.extend_lingers(now)
                     return kind, lateness
         return kind, 0.0
+
+    def extend_lingers(self, now: float) -> None:
+        """The linger grew (a duplicate came later than it): the SIDs answered within the
+        new linger, free again or about to be under the old one, linger the new one too,
+        from when they were answered. A duplicate of their replies may be as late as this
+        one; without this, a SID answered just before the duplicate was seen could be
+        reused under the old linger and take a later duplicate of its old reply for the
+        new request's (issue #22, defect 5: another read's words after a SID wrap)."""
+        linger = self.linger
+        lingering, pending = self.lingering, self.pending
+        for key, done_at in self.recent.items():
+            if done_at > 0 and now - done_at < linger and key not in pending:
+                until = done_at + linger
+                if lingering.get(key, 0.0) < until:
+                    lingering[key] = until

@@ -255,7 +255,9 @@ class SidSpaces:
         """``sids`` has seen a duplicate reply: the lingers it has learnt hold for every
         space (the peer duplicates replies, whichever socket they go to)."""
         for other in (self.primary, *(s.sids for s in self.extra)):
-            other.linger = max(other.linger, sids.linger)
+            if sids.linger > other.linger:
+                other.linger = sids.linger
+                other.extend_lingers(other.clock())
             other.linger_resent = max(other.linger_resent, sids.linger_resent)
 
     def may_open(self, now: float) -> bool:
