@@ -22,6 +22,8 @@ from aiofins.session.nodes import SOURCE_NODES
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
 
+from ..virtual_time import on_virtual_time
+
 pytestmark = pytest.mark.anyio
 
 
@@ -216,11 +218,11 @@ async def _serve_like_an_ethernet_unit(
                 tg.start_soon(answer, source, reply)
 
 
-async def test_sessions_to_one_ethernet_unit_do_not_steal_each_others_replies(
-    anyio_backend: object,
-) -> None:
+@on_virtual_time
+async def test_sessions_to_one_ethernet_unit_do_not_steal_each_others_replies() -> None:
     """Each key has its own session (socket): were their source nodes the same, the unit
-    would send one session's replies to the other's socket."""
+    would send one session's replies to the other's socket. On virtual time (asyncio, trio;
+    uvloop's clock cannot be virtual): no timeout is a loaded machine's."""
     plcs = Site(_plc(0, 1, 100), _plc(0, 7, 700), _plc(3, 5, 350))
     ports: list[int] = []
     async with anyio.create_task_group() as tg:
@@ -254,7 +256,9 @@ async def test_one_ethernet_unit_under_several_names_gets_a_source_node_per_sess
 ) -> None:
     """Sessions to one unit were told apart by the host as written: ``localhost`` and
     ``127.0.0.1`` (or two spellings of an IPv6 address) got the same source node, and the
-    unit sent one session's replies to the other's socket."""
+    unit sent one session's replies to the other's socket. (On the loop's real clock: a
+    name is resolved in a worker thread, which virtual time would jump past; each call has
+    1.3 s or more for a few milliseconds' work.)"""
     plcs = Site(_plc(0, 1, 100), _plc(0, 7, 700), _plc(3, 5, 350))
     ports: list[int] = []
     async with anyio.create_task_group() as tg:
