@@ -12,12 +12,14 @@ import pytest
 
 from aiofins.poller import Poller, Quality, ScanGroup, ScanState, Snapshot
 from aiofins.pool import Pool
-from aiofins.simulator.faults import Delay, FaultRule
-from aiofins.simulator.runner import Simulator
+from aiofins.simulator.faults import Delay, FaultPlan, FaultRule
+from aiofins.simulator.plc import VirtualPLC
+from aiofins.simulator.runner import Simulator, run_simulator
 from aiofins.transport.base import is_asyncio
 
 from ..session.test_session_tcp import TcpPeer, tcp_server
 from ..session.test_session_udp import Reply, answer, reply, udp_responder
+from ..virtual_time import on_virtual_time
 
 pytestmark = pytest.mark.anyio
 
@@ -114,7 +116,18 @@ async def test_leaving_with_a_scan_in_flight_gives_everything_back(sim: Simulato
             assert all(s.slots.in_flight == 0 for s in session._dests.values())
 
 
+@on_virtual_time
 async def test_an_outage_is_counted_logged_once_and_its_end_logged(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """On virtual time (asyncio's callback path and trio's task path; uvloop's clock cannot
+    be virtual): the 50 ms timeout ends only the scans of the outage, never a loaded
+    machine's slow answer."""
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as sim:
+        await _an_outage_is_counted_logged_once_and_its_end_logged(sim, caplog)
+
+
+async def _an_outage_is_counted_logged_once_and_its_end_logged(
     sim: Simulator, caplog: pytest.LogCaptureFixture
 ) -> None:
     url = f"udp://127.0.0.1:{sim.udp_port}"
@@ -131,7 +144,7 @@ async def test_an_outage_is_counted_logged_once_and_its_end_logged(
                 sim.plan.rule = FaultRule()
                 good = await take(poller, 3, lambda s: None)
         failed = [s for s in bad if s.error is not None]
-        assert len(failed) >= 3
+        assert len(failed) == 4  # every scan of the outage, exactly
         for snap in failed:
             assert snap.error is not None and snap.error.startswith("FinsTimeout: no response")
             assert snap["a"].quality is Quality.STALE and snap["a"].value == 5
@@ -201,7 +214,15 @@ async def test_a_link_that_dies_mid_scan_fails_that_scan_then_recovers() -> None
         assert group.errors == 1
 
 
-async def test_an_open_breaker_sends_scans_to_the_task_path_until_it_closes(
+@on_virtual_time
+async def test_an_open_breaker_sends_scans_to_the_task_path_until_it_closes() -> None:
+    """On virtual time (asyncio, trio; uvloop's clock cannot be virtual): the short timeout
+    ends only the scans of the outage, never a loaded machine's slow answer."""
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as sim:
+        await _test_an_open_breaker_sends_scans_to_the_task_path_until_it_closes(sim)
+
+
+async def _test_an_open_breaker_sends_scans_to_the_task_path_until_it_closes(
     sim: Simulator,
 ) -> None:
     url = f"udp://127.0.0.1:{sim.udp_port}"
