@@ -12,9 +12,11 @@ from aiofins.hooks import ResponseReceived
 from aiofins.metrics import FinsMetrics, command_family
 from aiofins.poller import Poller
 from aiofins.protocol.header import FinsAddress
-from aiofins.simulator.faults import FaultPlan, FaultRule
+from aiofins.simulator.faults import Delay, FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import run_simulator
+
+from .virtual_time import on_virtual_time
 
 PLC = FinsAddress(0, 1, 0)
 
@@ -62,8 +64,11 @@ def test_endpoint_labels_are_bounded() -> None:
     assert samples["aiofins_request_duration_seconds_bucket", le] == 0.0
 
 
-@pytest.mark.anyio
+@on_virtual_time
 async def test_pool_poller_and_latency_scraped_as_text() -> None:
+    """On virtual time (asyncio, trio; uvloop's clock cannot be virtual): the 0.2 s timeout
+    ends only the read the PLC ignores, never a loaded machine's slow answer; every answer
+    takes 10 ms of the PLC's (a latency to measure)."""
     registry = CollectorRegistry()
     metrics = FinsMetrics(registry=registry)
     async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan(seed=5)) as sim:
@@ -75,6 +80,7 @@ async def test_pool_poller_and_latency_scraped_as_text() -> None:
         ):
             metrics.watch_pool(pool)
             metrics.watch_poller(poller)
+            sim.plan.rule = FaultRule(delay=Delay(0.01, 0.01))
             async with pool.client(url) as plc:
                 for _ in range(3):
                     await plc.read("D0", 4)
@@ -82,7 +88,7 @@ async def test_pool_poller_and_latency_scraped_as_text() -> None:
                 sim.plan.rule = FaultRule(drop_request=1.0)
                 with pytest.raises(aiofins.FinsTimeout):
                     await plc.read("D0", 1)
-                sim.plan.rule = FaultRule()
+                sim.plan.rule = FaultRule(delay=Delay(0.01, 0.01))
             poller.add_group("g", url, {"t": "D0"}, interval=0.05)
             snapshots = aiter(poller)
             await anext(snapshots)

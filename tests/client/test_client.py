@@ -25,6 +25,7 @@ from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
 
 from ..session.test_session_udp import reply, udp_responder
+from ..virtual_time import on_virtual_time
 
 pytestmark = pytest.mark.anyio
 
@@ -120,7 +121,17 @@ async def test_relay_error_names_the_failing_node(sim: Simulator, url: str) -> N
         assert info.value.end_code.relay_error
 
 
-async def test_timeout_is_raised_and_the_next_call_works(sim: Simulator, url: str) -> None:
+@pytest.mark.parametrize("scheme", ["udp", "tcp"])
+@on_virtual_time
+async def test_timeout_is_raised_and_the_next_call_works(scheme: str) -> None:
+    """On virtual time (asyncio, trio; uvloop's clock cannot be virtual): the 0.2 s timeout
+    ends the ignored call only, never a loaded machine's slow answer to the next."""
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), tcp=("127.0.0.1", 0)) as sim:
+        port = sim.udp_port if scheme == "udp" else sim.tcp_port
+        await _timeout_is_raised_and_the_next_call_works(sim, f"{scheme}://127.0.0.1:{port}")
+
+
+async def _timeout_is_raised_and_the_next_call_works(sim: Simulator, url: str) -> None:
     sim.plan.per_command[0x0601] = FaultRule(drop_request=1.0)
     async with connect(url, timeout=0.2, retries=0) as plc:
         with pytest.raises(FinsTimeout):
