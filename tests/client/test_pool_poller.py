@@ -188,7 +188,15 @@ async def _until(condition: Callable[[], bool]) -> None:
             await anyio.sleep(0.01)
 
 
-async def test_pool_health_checks_and_closes_idle_sessions(sim: Simulator) -> None:
+@on_virtual_time
+async def test_pool_health_checks_and_closes_idle_sessions() -> None:
+    """On virtual time (asyncio, trio; uvloop's clock cannot be virtual): the 0.1 s health
+    check fails only when the PLC is silent, never on a loaded machine's slow answer."""
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0), faults=FaultPlan()) as sim:
+        await _test_pool_health_checks_and_closes_idle_sessions(sim)
+
+
+async def _test_pool_health_checks_and_closes_idle_sessions(sim: Simulator) -> None:
     url = f"udp://127.0.0.1:{sim.udp_port}"
     async with Pool(health_interval=0.05, idle_timeout=60, timeout=0.1, retries=0) as pool:
         async with pool.client(url) as plc:
@@ -351,37 +359,41 @@ async def test_borrowers_sharing_a_failed_connect_get_its_traceback_once(
         assert len(lengths) == 1, sorted(lengths)
 
 
-async def test_a_borrower_waits_for_a_connection_at_most_its_timeout(
-    anyio_backend: object,
-) -> None:
+@on_virtual_time
+async def test_a_borrower_waits_for_a_connection_at_most_its_timeout() -> None:
     """A FINS/TCP peer that answers the handshake late: borrowers (and poller scans) gave up
     only after the connect timeout (5 s) whatever their timeout. Now each waits at most its
-    own, and the attempt goes on for the next borrower."""
+    own, and the attempt goes on for the next borrower. On virtual time (asyncio, trio;
+    uvloop's clock cannot be virtual): each wait is asserted exactly."""
     peer = TcpPeer(handshake_gate=anyio.Event())
     async with tcp_server(peer):
         url = f"tcp://127.0.0.1:{peer.port}"
         still = "no connection within {} s: a connection attempt is still in progress"
         async with Pool(timeout=0.3) as pool:
-            with anyio.fail_after(1.5), pytest.raises(FinsTimeout, match=still.format(0.3)):
+            start = anyio.current_time()
+            with pytest.raises(FinsTimeout, match=still.format(0.3)):
                 async with pool.client(url):  # the pool's timeout by default
                     pass
-            with anyio.fail_after(1.5), pytest.raises(FinsTimeout, match=still.format(0.2)):
+            assert anyio.current_time() - start == pytest.approx(0.3, abs=1e-6)
+            start = anyio.current_time()
+            with pytest.raises(FinsTimeout, match=still.format(0.2)):
                 async with pool.client(url, timeout=0.2):
                     pass
+            assert anyio.current_time() - start == pytest.approx(0.2, abs=1e-6)
             with anyio.move_on_after(0.1):  # a borrower cancelled by its own deadline
                 async with pool.client(url, timeout=10):
                     pass
             poller = Poller(pool)
             group = poller.add_group("g", url, {"a": "D0"}, timeout=0.25)
-            with anyio.fail_after(1.5):
-                scan = await poller.scan_once(group)
+            start = anyio.current_time()
+            scan = await poller.scan_once(group)
+            assert anyio.current_time() - start == pytest.approx(0.25, abs=1e-6)
             assert scan is not None and scan["a"].quality is Quality.ERROR
             assert scan.error is not None and scan.error.startswith("FinsTimeout")
             assert peer.handshake_gate is not None
             peer.handshake_gate.set()  # the PLC answers at last
-            with anyio.fail_after(3):
-                async with pool.client(url) as plc:
-                    assert await plc.read("D0") == [0x1000]
+            async with pool.client(url) as plc:
+                assert await plc.read("D0") == [0x1000]
             assert peer.connections == 1  # the borrowers' giving up did not end the attempt
             stats = pool.stats(url)[url]
             assert stats.connect_failures == 0
