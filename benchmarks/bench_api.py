@@ -415,7 +415,11 @@ DAEMON_DECODE = struct.Struct(f">{DAEMON_WORDS}H")
 
 
 async def hand_written_daemon(
-    ports: list[int], interval: float, seconds: float, await_reply: bool = True
+    ports: list[int],
+    interval: float,
+    seconds: float,
+    await_reply: bool = True,
+    done: list[int] | None = None,
 ) -> float:
     """CPU seconds per scan of the daemon issue #25 compares the Poller with, written as a
     user would without a library: one datagram endpoint and one task per PLC, a prebuilt
@@ -426,7 +430,8 @@ async def hand_written_daemon(
     ``datagram_received`` sets after the SID check (given up at the next scan's time: a
     lost reply is a missed scan, no retry), decodes, sleeps. ``await_reply=False``: the
     reply is checked and decoded in ``datagram_received`` and the task only sends and
-    sleeps (the cheapest daemon: no task wake-up per reply, no timeout)."""
+    sleeps (the cheapest daemon: no task wake-up per reply, no timeout). ``done`` gets the
+    number of scans made in all (warm-up included), for ``callgrind_api.py``."""
     loop = asyncio.get_running_loop()
     frames = [
         bytes((0x80, 0, 2, 0, 1, 0, 0, 2, 0, sid, 0x01, 0x01, 0x82, 0, 0, 0, 0, DAEMON_WORDS))
@@ -495,6 +500,8 @@ async def hand_written_daemon(
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+    if done is not None:
+        done.append(scans[0])
     if len(latest) != len(ports) or latest[0][:2] != (0, 1):  # the C responder: word i is i
         raise AssertionError("the hand-written daemon read wrong words")
     return used / max(count, 1)

@@ -14,7 +14,10 @@ space only). Cases (uvloop unless named; sequential unless named):
 - ``sync``: ``aiofins.sync``'s ``plc.read("D100", 1)`` (callgrind counts both threads);
 - ``tasks``: 50 tasks x ``plc.read("D100", 1)`` on one client, per read;
 - ``dm`` / ``dmarray``: ``plc.read("D0", 32768)`` / ``plc.read_array("D0", 32768)``, per
-  frame (33 per read).
+  frame (33 per read);
+- ``daemon``: ``bench_api.hand_written_daemon`` over 10 C responders at 50 ms, 1 and 4 s
+  measured (after its 1 s warm-up), per scan (the scans it made, not a set number: under
+  valgrind it may fall behind its pace).
 
 The Poller's instructions per scan: ``callgrind_poller.py``.
 
@@ -37,7 +40,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_session import free_port, read_params, start_responder
+from bench_session import free_port, free_ports, read_params, start_responder
 
 #: (small, large) operations per case, and operations counted per unit.
 COUNTS: dict[str, tuple[int, int, int]] = {
@@ -50,6 +53,7 @@ COUNTS: dict[str, tuple[int, int, int]] = {
     "tasks": (1_000, 4_000, 1),
     "dm": (3, 13, 33),
     "dmarray": (3, 13, 33),
+    "daemon": (1, 4, 0),  # seconds measured; per scan made
 }
 
 
@@ -131,6 +135,12 @@ def _workload(case: str, ports: list[int], n: int) -> None:
         _fins(ports[0], n)
     elif case == "sync":
         _sync(ports[0], n)
+    elif case == "daemon":
+        from bench_api import hand_written_daemon
+
+        done: list[int] = []
+        _run(hand_written_daemon(ports, 0.05, float(n), True, done), uv)
+        print(done[0])
     else:
         _run(_reads(ports[0], n, case.removesuffix("-stock")), uv)
 
@@ -144,7 +154,7 @@ def _run(coro: Any, options: dict[str, Any]) -> None:
         loop.close()
 
 
-def _instructions(case: str, ports: list[int], n: int) -> int:
+def _instructions(case: str, ports: list[int], n: int) -> tuple[int, str]:
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "callgrind.out")
         command = [
@@ -158,12 +168,12 @@ def _instructions(case: str, ports: list[int], n: int) -> int:
             ",".join(map(str, ports)),
             str(n),
         ]
-        subprocess.run(command, check=True, capture_output=True, text=True)
+        run = subprocess.run(command, check=True, capture_output=True, text=True)
         with open(out) as f:
             text = f.read()
     match = re.search(r"^(?:summary|totals): (\d+)", text, re.MULTILINE)
     assert match, "no totals in callgrind's output"
-    return int(match.group(1))
+    return int(match.group(1)), run.stdout.strip()
 
 
 def main() -> None:
@@ -180,10 +190,16 @@ def main() -> None:
     try:
         for case in args.cases.split(","):
             low, high, unit = COUNTS[case]
-            small = _instructions(case, ports, low)
-            large = _instructions(case, ports, high)
-            per = (large - small) / (high - low) / unit
-            what = "frame" if unit > 1 else "op"
+            if case == "daemon" and len(ports) == 1:
+                ports = [ports[0], *free_ports(9)]
+                procs += [start_responder(port, None) for port in ports[1:]]
+            small, said_small = _instructions(case, ports, low)
+            large, said_large = _instructions(case, ports, high)
+            if unit:
+                per = (large - small) / (high - low) / unit
+            else:  # the daemon says how many scans it made
+                per = (large - small) / (int(said_large) - int(said_small))
+            what = {0: "scan", 1: "op"}.get(unit, "frame")
             print(f"{case:10s} {per / 1000:8.1f}k instructions per {what}", flush=True)
     finally:
         for proc in procs:
