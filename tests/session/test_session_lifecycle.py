@@ -414,11 +414,9 @@ async def test_the_breaker_opens_fails_fast_and_a_probe_closes_it() -> None:
                 await session.request(0x01, 0x01, read_params(0), timeout=0.05)
         assert session.breaker_state is BreakerState.OPEN
         sent = len(peer.received)
-        start = anyio.current_time()
-        with pytest.raises(CircuitOpen) as info:
+        with pytest.raises(CircuitOpen) as info:  # (not a FinsTimeout after 1 s: at once)
             await session.request(0x01, 0x01, read_params(0), timeout=1.0)
-        assert anyio.current_time() - start < 0.05  # at once, nothing sent
-        assert len(peer.received) == sent
+        assert len(peer.received) == sent  # nothing sent
         assert "failed 3 calls in a row" in str(info.value)
         assert 0 < info.value.retry_after <= 0.2
         assert isinstance(info.value, ConnectionLost)
