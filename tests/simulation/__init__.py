@@ -1,0 +1,1 @@
+"""Deterministic simulation of the whole client stack (issue 22): see world.py."""

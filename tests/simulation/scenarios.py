@@ -1,0 +1,73 @@
+"""The worlds of issue 22's defects 1-5: a configuration and a fault schedule each, as the
+issue tells them (used by test_defects.py and by ``python -m tests.simulation --defect N``)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from .world import Config, Episode, Result, World
+
+#: One connect() session, 16 tasks, UDP unit 1 answering normally unless told.
+BASE = Config(
+    units=1,
+    relays=frozenset(),
+    fixed=frozenset(),
+    timeout=0.2,
+    retries=0,
+    max_sid_spaces=4,
+    max_in_flight=255,
+    connect_sessions=1,
+    connect_tasks=16,
+    tcp_sessions=0,
+    pool_tasks=0,
+    poller_groups=0,
+    poll_interval=0.05,
+    think=0.0,
+    mean_gap=1.0,
+)
+
+#: defect -> (what the issue says, the configuration, the schedule, steps, seed)
+DEFECTS: dict[int, tuple[str, Config, list[Episode], int, int]] = {
+    1: (
+        "a breaker probe on the Poller's path never reports: silence 0.6 s, wrong SIDs 0.6 s",
+        replace(BASE, connect_sessions=0, poller_groups=1, max_in_flight=5),
+        [Episode(0.5, 0.6, 1, "silence", 1.0), Episode(1.1, 0.6, 1, "wrong_sid", 1.0)],
+        1000,
+        1,
+    ),
+    2: (
+        "extra SID spaces behind a unit that replies to one fixed port",
+        replace(BASE, fixed=frozenset({1})),
+        [Episode(0.2, 1.0, 1, "dup", 0.3)],
+        30000,
+        0,
+    ),
+    3: (
+        "a late relay error reaches a request to another destination that reused the SID",
+        replace(BASE, relays=frozenset({1}), connect_tasks=8, max_in_flight=16, max_sid_spaces=1),
+        [Episode(0.2, 3.0, 1, "relay", 0.3)],
+        30000,
+        2,
+    ),
+    4: (
+        "max_sid_spaces=1: after the faults, no free SID for long (all quarantined)",
+        replace(BASE, relays=frozenset({1}), max_in_flight=255, max_sid_spaces=1),
+        [Episode(0.2, 3.0, 1, "relay", 0.1)],
+        30000,
+        1,
+    ),
+    5: (
+        "replies duplicated up to 0.3 s late while SIDs wrap at a high rate",
+        BASE,
+        [Episode(0.05, 20.0, 1, "dup", 1.0)],
+        40000,
+        1,
+    ),
+}
+
+
+def run_defect(number: int) -> Result:
+    _, config, schedule, steps, seed = DEFECTS[number]
+    world = World(seed, steps, schedule=schedule, config=config)
+    world.command = f"python -m tests.simulation --defect {number}"
+    return world.run()

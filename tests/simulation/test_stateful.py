@@ -1,0 +1,79 @@
+"""Hypothesis drives the same harness: rules inject faults and let virtual time pass, every
+invariant is checked after each rule and at the end (recovery, quiescence, leaks). A failure
+shrinks to a short fault schedule (hypothesis prints the rules it took)."""
+
+from __future__ import annotations
+
+from contextlib import AbstractContextManager
+from dataclasses import replace
+
+from hypothesis import HealthCheck, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
+
+from .scenarios import BASE
+from .world import KINDS, World
+
+#: Two units (one relaying to network 2), every path: connect(), FINS/TCP, Pool, Poller.
+CONFIG = replace(
+    BASE,
+    units=2,
+    relays=frozenset({2}),
+    connect_sessions=1,
+    connect_tasks=4,
+    max_in_flight=5,
+    tcp_sessions=1,
+    pool_tasks=2,
+    poller_groups=1,
+    think=0.005,
+)
+
+
+class FaultySchedule(RuleBasedStateMachine):
+    def __init__(self) -> None:
+        super().__init__()
+        self.world = World(22, 10**9, manual=True, config=CONFIG)
+        self.context: AbstractContextManager[None] = self.world.context()
+        self.context.__enter__()
+        self.world.start()
+        self.open = True
+
+    @precondition(lambda self: self.world.violation is None)
+    @rule(
+        kind=st.sampled_from(KINDS),
+        unit=st.integers(1, CONFIG.units),
+        duration=st.floats(0.05, 1.5),
+        p=st.sampled_from((0.3, 1.0)),
+    )
+    def fault(self, kind: str, unit: int, duration: float, p: float) -> None:
+        if kind == "delay":
+            p *= 2 * CONFIG.timeout
+        self.world.inject(kind, unit, duration, p)
+
+    @precondition(lambda self: self.world.violation is None)
+    @rule(seconds=st.floats(0.01, 2.0))
+    def wait(self, seconds: float) -> None:
+        self.world.advance(seconds)
+
+    @invariant()
+    def every_invariant_holds(self) -> None:
+        world = self.world
+        assert world.violation is None, world.result().reproducer()
+
+    def teardown(self) -> None:
+        world = self.world
+        try:
+            if world.violation is None:
+                world.finish()
+        finally:
+            self.context.__exit__(None, None, None)
+        assert world.violation is None, world.result().reproducer()
+
+
+FaultySchedule.TestCase.settings = settings(
+    max_examples=10,
+    stateful_step_count=10,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+TestFaultySchedule = FaultySchedule.TestCase

@@ -1,0 +1,873 @@
+"""One seeded world: units, a faulty network, clients on every path, invariants checked.
+
+``run(seed, steps)`` builds the world the seed describes (:class:`Config`), runs it on a
+virtual-time asyncio loop until ``steps`` steps have happened (a step is one frame delivered
+or one client operation started), then ends the faults, lets every path recover, stops the
+clients, and checks that nothing leaked. The first violated invariant ends the run; the
+:class:`Result` says which, at which step and virtual time, and carries the schedule so far
+as a one-line reproducer.
+
+Invariants (docs/session.md, "Guarantees"):
+
+* never wrong: a read that succeeds returns the words the PLC held when it executed that
+  read (same parameters, executed between the call's start and end: the PLC's history);
+  a GOOD snapshot's tag holds a value the PLC had at that address when a read executed
+  during the scan (values encode their PLC, so another PLC's words never pass); an
+  :class:`~aiofins.EndCodeError` names an end code the destination answered during the
+  call (a late relay error of another destination's request does not);
+* at most once: a write (no retries opted in) executed at most once; a write reported ok
+  executed exactly once;
+* never stuck: every call ends by its deadline (checked by a timer at the deadline plus
+  one nanosecond of virtual time); once a unit has answered normally for
+  ``2 x timeout + longest breaker cooldown`` (+ the reconnect backoff on FINS/TCP, + one
+  interval for a scan), every call and scan to it succeeds;
+* nothing leaks: after quiescence no request in flight, no slot taken or waited for, no
+  probe out, every socket and connection closed, no task left, the network's counters add
+  up.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import struct
+import zlib
+from collections.abc import Awaitable, Callable, Coroutine, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import anyio
+
+import aiofins
+import aiofins.connection
+from aiofins.poller import Poller, Quality
+from aiofins.protocol.errors import EndCodeError, FinsError
+from aiofins.protocol.header import FinsAddress
+from aiofins.session import Session
+from aiofins.session.breaker import BreakerState
+
+from .clock import session_clock
+from .loop import VirtualTimeLoop, WorldStuck
+from .network import DUPLICATE_LAG, Network, SimDatagram, SimStream
+from .plant import DM, REMOTE_NETWORK, WINDOW, Conversion, Target, Unit
+
+#: A call must have ended this long (virtual seconds) after its deadline.
+DEADLINE_SLACK = 1e-6
+#: The session's default breaker cooldown ceiling and reconnect backoff ceiling.
+BREAKER_COOLDOWN_MAX = 2.0
+RECONNECT_BACKOFF_MAX = 5.0
+#: Fault kinds of the schedule, and the kinds that act per frame with a probability.
+KINDS = (
+    "loss",
+    "dup",
+    "delay",
+    "silence",
+    "restart",
+    "wrong_sid",
+    "runt",
+    "short",
+    "long",
+    "busy",
+    "error",
+    "relay",
+    "tcp_reset",
+    "bad_handshake",
+)
+ALWAYS = frozenset({"silence", "restart", "bad_handshake", "tcp_reset"})
+
+
+class Violation(Exception):
+    """An invariant does not hold."""
+
+    def __init__(self, invariant: str, detail: str) -> None:
+        super().__init__(f"{invariant}: {detail}")
+        self.invariant = invariant
+        self.detail = detail
+
+
+@dataclass(frozen=True)
+class Episode:
+    """A fault on one unit from ``start`` for ``duration`` virtual seconds."""
+
+    start: float
+    duration: float
+    unit: int
+    kind: str
+    p: float
+
+    def __str__(self) -> str:
+        return f"{self.start:.3f}+{self.duration:.3f}:u{self.unit}:{self.kind}:{self.p:.2f}"
+
+    @classmethod
+    def parse(cls, text: str) -> Episode:
+        when, unit, kind, p = text.split(":")
+        start, duration = when.split("+")
+        return cls(float(start), float(duration), int(unit[1:]), kind, float(p))
+
+
+@dataclass(frozen=True)
+class Config:
+    """What the seed draws: the plant, the clients, their options."""
+
+    units: int
+    relays: frozenset[int]
+    fixed: frozenset[int]
+    timeout: float
+    retries: int
+    max_sid_spaces: int
+    max_in_flight: int
+    connect_sessions: int
+    connect_tasks: int
+    tcp_sessions: int
+    pool_tasks: int
+    poller_groups: int
+    poll_interval: float
+    think: float
+    mean_gap: float
+
+    @classmethod
+    def draw(cls, rng: random.Random) -> Config:
+        units = rng.randint(1, 3)
+        numbers = list(range(1, units + 1))
+        return cls(
+            units=units,
+            relays=frozenset(n for n in numbers if rng.random() < 0.5),
+            fixed=frozenset(n for n in numbers if rng.random() < 0.3),
+            timeout=rng.choice((0.1, 0.2, 0.2, 0.5)),
+            retries=rng.choice((0, 0, 1, 2)),
+            max_sid_spaces=rng.choice((1, 1, 2, 4)),
+            max_in_flight=rng.choice((1, 3, 5, 16, 255)),
+            connect_sessions=rng.randint(0, 2),
+            connect_tasks=rng.choice((1, 2, 4, 8, 16)),
+            tcp_sessions=rng.randint(0, 1),
+            pool_tasks=rng.randint(0, 3),
+            poller_groups=rng.randint(0, 2),
+            poll_interval=rng.choice((0.05, 0.1, 0.2)),
+            think=rng.choice((0.0, 0.005, 0.02)),
+            mean_gap=rng.choice((0.3, 1.0, 3.0)),
+        )
+
+
+@dataclass(eq=False)
+class Op:
+    """One client operation and what became of it."""
+
+    id: int
+    path: str
+    kind: str
+    unit: Unit
+    target: Target
+    start: float
+    deadline: float
+    params: list[bytes]
+    write: bytes = b""
+    end: float | None = None
+    outcome: str = "running"
+    error: BaseException | None = None
+    cancel_after: float | None = None
+    bound: float = 0.0
+
+
+@dataclass
+class Result:
+    seed: int
+    steps: int
+    ops: int
+    time: float
+    digest: int
+    violation: Violation | None
+    at_step: int
+    schedule: list[Episode] = field(default_factory=list)
+    config: Config | None = None
+    #: The command that replays this run.
+    command: str = ""
+
+    def reproducer(self) -> str:
+        """One line: the command that replays the run, where it failed, the schedule."""
+        schedule = ",".join(str(e) for e in self.schedule)
+        return (
+            f"{self.command}  # step {self.at_step}, t={self.time:.4f}: {self.violation}"
+            f" | schedule {schedule or '-'}"
+        )
+
+
+def words_of(data: bytes) -> list[int]:
+    return [v for (v,) in struct.iter_unpack(">H", data)]
+
+
+def read_params(address: int, count: int) -> bytes:
+    return bytes((DM, address >> 8, address & 0xFF, 0, count >> 8, count & 0xFF))
+
+
+class World:
+    """See the module's docstring. ``schedule`` replaces the drawn fault schedule (replay,
+    hypothesis); ``manual``: faults come only from :meth:`inject`."""
+
+    def __init__(
+        self,
+        seed: int,
+        steps: int,
+        *,
+        schedule: list[Episode] | None = None,
+        manual: bool = False,
+        config: Config | None = None,
+    ) -> None:
+        self.seed = seed
+        self.budget = steps
+        self.command = f"python -m tests.simulation --seed {seed} --steps {steps}"
+        rng = random.Random(seed)
+        drawn = Config.draw(rng)
+        self.config = config or drawn
+        self.rng_faults = random.Random(rng.random())
+        self.rng_net = random.Random(rng.random())
+        self.rng_units = random.Random(rng.random())
+        self.rng_clients = random.Random(rng.random())
+        self.rng_program = random.Random(rng.random())
+        self.jitter_seed = rng.random()
+        self.loop = VirtualTimeLoop()
+        self.now = self.loop.time
+        self.net = Network(self.loop, self.rng_net, self.step)
+        self.units: dict[int, Unit] = {}
+        self.targets: list[tuple[Unit, Target]] = []
+        self._build_plant()
+        self.steps = 0
+        self.ops: list[Op] = []
+        self.running: dict[int, Op] = {}
+        self.violation: Violation | None = None
+        self.violation_step = 0
+        self.violation_time = 0.0
+        self.digest = 0
+        self.manual = manual
+        self.replay = list(schedule) if schedule is not None else None
+        self.schedule: list[Episode] = []
+        self.active: dict[int, list[Episode]] = {n: [] for n in self.units}
+        #: unit -> since when it answers normally (inf while a fault is on)
+        self.clean_since: dict[int, float] = {n: 0.0 for n in self.units}
+        self.faults_over = False
+        self.stopping = False
+        self.budget_spent = asyncio.Event()
+        self.finished = asyncio.Event()
+        self.sessions: list[Session] = []
+        self.pools: list[aiofins.Pool] = []
+        self.hosts = 0
+        self.main: asyncio.Task[None] | None = None
+        c = self.config
+        self.bound_udp = 2 * c.timeout + BREAKER_COOLDOWN_MAX
+        self.bound_tcp = self.bound_udp + RECONNECT_BACKOFF_MAX
+
+    # -- the plant ---------------------------------------------------------------------
+
+    def _build_plant(self) -> None:
+        c = self.config
+        index = 0
+        for n in range(1, c.units + 1):
+            targets: dict[tuple[int, int], Target] = {}
+            conversion = Conversion.FIXED_PORT if n in c.fixed else Conversion.DYNAMIC
+            unit = Unit(n, targets, conversion, self.rng_units, self.now, self.net)
+            unit.late_after = 1.5 * c.timeout
+            targets[(0, n)] = t = Target(index, FinsAddress(0, n, 0), self.now)
+            self.targets.append((unit, t))
+            index += 1
+            if n in c.relays:
+                for node in (10 * n + 1, 10 * n + 2):
+                    address = FinsAddress(REMOTE_NETWORK, node, 0)
+                    targets[(REMOTE_NETWORK, node)] = t = Target(index, address, self.now)
+                    self.targets.append((unit, t))
+                    index += 1
+            self.units[n] = unit
+            self.net.add_unit(unit)
+
+    def _program(self) -> None:
+        """Every PLC's program changes a word every 20 ms (so reads are told apart)."""
+        rng = self.rng_program
+        for _, target in self.targets:
+            target.plc.write(f"D{rng.randrange(WINDOW)}", [target.history.next_value()])
+        if not self.stopping:
+            self.loop.call_later(0.02, self._program)
+
+    # -- steps and violations ----------------------------------------------------------
+
+    def step(self) -> None:
+        self.steps += 1
+        self.digest = zlib.crc32(struct.pack("<dq", self.now(), self.net.delivered), self.digest)
+        if self.steps >= self.budget and not self.budget_spent.is_set():
+            self.budget_spent.set()
+
+    def fail(self, invariant: str, detail: str) -> None:
+        if self.violation is not None:
+            return
+        self.violation = Violation(invariant, detail)
+        self.violation_step = self.steps
+        self.violation_time = self.now()
+        if self.main is not None:
+            self.main.cancel()
+
+    # -- the fault schedule ------------------------------------------------------------
+
+    def _next_episode(self, after: float) -> None:
+        if self.faults_over or self.manual:
+            return
+        rng = self.rng_faults
+        c = self.config
+        if rng.random() < 0.25:
+            gap = self.bound_tcp + rng.uniform(0.5, 2.0)  # long enough to check recovery
+        else:
+            gap = rng.expovariate(1 / c.mean_gap)
+        kind = rng.choice(KINDS)
+        duration = 0.0 if kind == "tcp_reset" else rng.uniform(0.05, 1.5)
+        p = 1.0 if kind in ALWAYS else rng.choice((0.05, 0.3, 0.7, 1.0))
+        if kind == "delay":
+            p = rng.choice((0.5, 1.0, 2.0)) * c.timeout
+        episode = Episode(after + gap, duration, rng.randint(1, c.units), kind, p)
+        self._plan(episode)
+
+    def _plan(self, episode: Episode) -> None:
+        self.loop.call_at(episode.start, self._begin, episode)
+
+    def inject(self, kind: str, unit: int, duration: float, p: float) -> None:
+        """Start a fault now (hypothesis' rules)."""
+        self._begin(Episode(self.now(), duration, unit, kind, p))
+
+    def _begin(self, episode: Episode) -> None:
+        if self.faults_over:
+            return
+        self.schedule.append(episode)
+        unit = self.units[episode.unit]
+        self.active[episode.unit].append(episode)
+        self._apply(unit)
+        if episode.kind in ("restart", "tcp_reset"):
+            for conn in [s for s in self.net.streams if s.unit is unit]:
+                conn.reset()
+        self.loop.call_at(episode.start + episode.duration, self._end, episode)
+        if self.replay is None:
+            self._next_episode(episode.start + episode.duration)
+
+    def _end(self, episode: Episode) -> None:
+        active = self.active[episode.unit]
+        if episode in active:
+            active.remove(episode)
+            self._apply(self.units[episode.unit])
+
+    def _apply(self, unit: Unit) -> None:
+        faults: dict[str, float] = {}
+        for e in self.active[unit.number]:
+            kind = "silence" if e.kind == "restart" else e.kind
+            if kind == "tcp_reset":
+                continue
+            faults[kind] = max(faults.get(kind, 0.0), e.p)
+        unit.faults = faults
+        if faults:
+            self.clean_since[unit.number] = float("inf")
+        elif self.clean_since[unit.number] == float("inf"):
+            # late relay errors, delayed and duplicated replies may still be on their way
+            lag = unit.late_after + DUPLICATE_LAG + max(self.config.timeout * 2, 0.1)
+            self.clean_since[unit.number] = self.now() + lag
+
+    def end_faults(self) -> None:
+        """No more faults: everything in flight is dropped, every unit answers normally."""
+        self.faults_over = True
+        self.net.flush()
+        now = self.now()
+        for n, unit in self.units.items():
+            self.active[n].clear()
+            unit.faults = {}
+            self.clean_since[n] = now
+
+    # -- operations --------------------------------------------------------------------
+
+    def _new_op(self, path: str, kind: str, unit: Unit, target: Target, timeout: float) -> Op:
+        rng = self.rng_clients
+        self.steps += 1
+        now = self.now()
+        op = Op(len(self.ops), path, kind, unit, target, now, now + timeout, [])
+        if rng.random() < 0.1:
+            op.cancel_after = rng.uniform(0.0, 1.5 * timeout)
+        self.ops.append(op)
+        self.running[op.id] = op
+        self.loop.call_at(op.deadline + DEADLINE_SLACK, self._overdue, op)
+        if self.steps >= self.budget and not self.budget_spent.is_set():
+            self.budget_spent.set()
+        return op
+
+    def _overdue(self, op: Op) -> None:
+        if op.end is None:
+            self.fail(
+                "never stuck",
+                f"op {op.id} ({op.path} {op.kind} to {op.target.history.address}) still"
+                f" running at its deadline {op.deadline:.4f} (started {op.start:.4f})",
+            )
+
+    def _pick(self) -> tuple[Unit, Target]:
+        return self.rng_clients.choice(self.targets)
+
+    def _timeout(self) -> float | None:
+        rng = self.rng_clients
+        if rng.random() < 0.2 and not self.faults_over:
+            return rng.uniform(0.02, 2 * self.config.timeout)
+        return None
+
+    async def _operate(self, client: Any, path: str, units: list[int]) -> None:
+        """One operation on ``client`` (any path), checked when it ends."""
+        rng = self.rng_clients
+        choices = [(u, t) for (u, t) in self.targets if u.number in units]
+        unit, target = rng.choice(choices)
+        dest = target.history.address
+        if dest.network == 0:
+            dest = FinsAddress(0, unit.number, 0)
+        timeout = self._timeout()
+        effective = timeout if timeout is not None else self.config.timeout
+        r = rng.random()
+        kind = "read" if r < 0.6 else "write" if r < 0.85 else "many"
+        address = rng.randrange(WINDOW - 8)
+        count = rng.randint(1, 8)
+        values: list[int] = []
+        commands: list[tuple[int, int, bytes]] = []
+        params: list[bytes] = []
+        if kind == "write":
+            count = rng.randint(1, 4)
+            values = [target.history.next_value() for _ in range(count)]
+        elif kind == "many":
+            big = not self.faults_over and rng.random() < 0.2
+            for _ in range(rng.randint(20, 60) if big else rng.randint(2, 6)):
+                a, n = rng.randrange(WINDOW - 8), rng.randint(1, 8)
+                params.append(read_params(a, n))
+                commands.append((1, 1, read_params(a, n)))
+            # request_many's timeout bounds each command's exchange (Session.request_many)
+            effective *= len(commands)
+        else:
+            params.append(read_params(address, count))
+        op = self._new_op(path, kind, unit, target, effective)
+        op.bound = self.bound_tcp if path == "tcp" else self.bound_udp
+        op.params = params
+        if kind == "write":
+            op.write = read_params(address, count) + struct.pack(f">{count}H", *values)
+        result: Any = None
+        try:
+            with anyio.CancelScope() as scope:
+                if op.cancel_after is not None:
+                    scope.deadline = op.start + op.cancel_after
+                if kind == "read":
+                    result = await client.read(f"D{address}", count, dest=dest, timeout=timeout)
+                elif kind == "write":
+                    await client.write(f"D{address}", values, dest=dest, timeout=timeout)
+                else:
+                    result = await client.execute_many(commands, dest=dest, timeout=timeout)
+            op.outcome = "cancelled" if scope.cancelled_caught else "ok"
+        except FinsError as exc:
+            op.outcome, op.error = "failed", exc
+        except Exception as exc:  # anything else is a finding
+            op.outcome, op.error = "crashed", exc
+        self._ended(op, result)
+        if op.outcome != "ok":  # as an application would, before it tries again
+            await asyncio.sleep(rng.uniform(0.5, 1.0) * self.config.timeout)
+
+    def _ended(self, op: Op, result: Any) -> None:
+        op.end = now = self.now()
+        self.running.pop(op.id, None)
+        self.digest = zlib.crc32(f"{op.id}{op.outcome}{now!r}".encode(), self.digest)
+        if now > op.deadline + DEADLINE_SLACK:
+            self.fail("never stuck", f"op {op.id} ended at {now:.6f}, deadline {op.deadline:.6f}")
+        if op.outcome == "crashed":
+            self.fail("never wrong", f"op {op.id} raised {op.error!r} (not a FinsError)")
+        elif op.outcome == "ok":
+            self._check_ok(op, result)
+        elif op.outcome == "failed":
+            self._check_error(op)
+            clean = self.clean_since[op.unit.number]
+            if (
+                self.faults_over  # (mid-run, load alone may make a call wait too long)
+                and op.cancel_after is None
+                and not op.unit.faults
+                and op.start >= clean + op.bound
+                and op.deadline - op.start >= self.config.timeout
+            ):
+                self.fail(
+                    "never stuck",
+                    f"op {op.id} ({op.path} {op.kind} to {op.target.history.address}) failed"
+                    f" with {op.error!r} at {now:.4f}, though the unit answers normally since"
+                    f" {clean:.4f} (bound {op.bound:.2f} s)",
+                )
+
+    def _check_ok(self, op: Op, result: Any) -> None:
+        h = op.target.history
+        if op.kind == "write":
+            if not h.writes.get(op.write):
+                self.fail("at most once", f"op {op.id}: write reported ok, never executed")
+            return
+        if op.kind == "read":
+            datas = [struct.pack(f">{len(result)}H", *result)]
+        else:
+            datas = [bytes(r.data) for r in result]
+        if len(datas) != len(op.params):
+            self.fail("never wrong", f"op {op.id}: {len(datas)} responses to {len(op.params)}")
+            return
+        for params, data in zip(op.params, datas, strict=True):
+            if op.kind == "many" and len(data) != 2 * params[5]:
+                continue  # a raw response of the wrong length: the caller sees it is not the words
+            if not any(
+                op.start <= t <= op.end and d == data  # type: ignore[operator]
+                for t, d in h.reads.get(params, ())
+            ):
+                self.fail(
+                    "never wrong",
+                    f"op {op.id} ({op.path} {op.kind} {params.hex()} from {h.address}) returned"
+                    f" {words_of(data)}: no read with these parameters executed between"
+                    f" {op.start:.4f} and {op.end:.4f} returned that",
+                )
+                return
+
+    def _check_error(self, op: Op) -> None:
+        exc = op.error
+        if not isinstance(exc, EndCodeError):
+            return
+        raw: Any = getattr(exc.end_code, "raw", exc.end_code)
+        code = int(raw) & 0xBF3F  # without the CPU error flags (bits 6, 7)
+        h = op.target.history
+        if not any(
+            op.start <= t <= op.end and c == code  # type: ignore[operator]
+            for t, c, _ in h.errors
+        ):
+            self.fail(
+                "never wrong",
+                f"op {op.id} ({op.path} {op.kind} to {h.address}) raised {exc!r}: no end code"
+                f" {code:04x} was answered for {h.address} during the call",
+            )
+
+    # -- snapshots ---------------------------------------------------------------------
+
+    def check_snapshot(self, snap: Any, target: Target, addresses: list[int], since: float) -> None:
+        self.steps += 1
+        now = self.now()
+        h = target.history
+        bad = []
+        for i, address in enumerate(addresses):
+            reading = snap.readings[f"t{i}"]
+            if reading.quality is not Quality.GOOD:
+                bad.append(i)
+                continue
+            seen = h.seen.get(address, ())
+            if not any(since <= t <= now and v == reading.value for t, v in seen):
+                self.fail(
+                    "never wrong",
+                    f"snapshot {snap.group}#{snap.scan}: tag t{i} (D{address} of {h.address})"
+                    f" GOOD with {reading.value}, never read there between {since:.4f}"
+                    f" and {now:.4f}",
+                )
+                return
+        unit = self._unit_of(target)
+        clean = self.clean_since[unit.number]
+        scan_start = now - snap.duration
+        # mid-run other clients' load may delay a scan; an open breaker may not stay open
+        judged = self.faults_over or "CircuitOpen" in str(snap.error)
+        late = scan_start >= clean + self.bound_udp + 2 * self.config.poll_interval
+        if bad and judged and late and not unit.faults:
+            self.fail(
+                "never stuck",
+                f"snapshot {snap.group}#{snap.scan} at {now:.4f} not GOOD ({snap.error}),"
+                f" though {h.address} answers normally since {clean:.4f}",
+            )
+
+    def _unit_of(self, target: Target) -> Unit:
+        for u, t in self.targets:
+            if t is target:
+                return u
+        raise LookupError(target)
+
+    # -- the clients -------------------------------------------------------------------
+
+    def think(self) -> float:
+        """Seconds a client task waits between operations (up to): after the faults, a few
+        operations per path suffice to show it recovered."""
+        return max(self.config.think, 0.1) if self.faults_over else self.config.think
+
+    def _host(self) -> str:
+        self.hosts += 1
+        return f"10.9.{self.hosts // 250}.{self.hosts % 250 + 1}"
+
+    async def _tasks(self, client: Any, path: str, units: list[int], count: int) -> None:
+        async def loop() -> None:
+            while not self.stopping:
+                think = self.think()
+                await asyncio.sleep(self.rng_clients.uniform(0, think) if think else 0)
+                if self.stopping:
+                    return
+                await self._operate(client, path, units)
+
+        async with anyio.create_task_group() as tg:
+            for _ in range(count):
+                tg.start_soon(loop)
+
+    async def _connect_path(self, number: int, ready: Callable[[], Awaitable[None]]) -> None:
+        c = self.config
+        units = list(self.units)
+        unit = self.units[units[number % len(units)]]
+        transport = SimDatagram(self.net, self._host(), unit.address)
+        async with aiofins.connect(
+            transport=transport,
+            dest=FinsAddress(0, unit.number, 0),
+            src=FinsAddress(0, 200 + number, 0),
+            timeout=c.timeout,
+            retries=c.retries,
+            max_sid_spaces=c.max_sid_spaces,
+            max_in_flight=c.max_in_flight,
+        ) as client:
+            self.sessions.append(client.session)
+            await self._tasks(client, "connect", [unit.number], c.connect_tasks)
+            await ready()
+
+    async def _tcp_path(self, ready: Callable[[], Awaitable[None]]) -> None:
+        c = self.config
+        unit = self.units[1]
+        while True:  # connect() fails while the unit refuses handshakes: try again, as apps do
+            try:
+                async with aiofins.connect(
+                    transport=SimStream(self.net, unit),
+                    dest=FinsAddress(0, unit.number, 0),
+                    timeout=c.timeout,
+                    retries=c.retries,
+                    max_in_flight=c.max_in_flight,
+                ) as client:
+                    self.sessions.append(client.session)
+                    await self._tasks(client, "tcp", [unit.number], 1)
+                    await ready()
+                    return
+            except FinsError:
+                if self.stopping:
+                    await ready()
+                    return
+                await asyncio.sleep(c.timeout)
+
+    async def _pool_path(self, ready: Callable[[], Awaitable[None]]) -> None:
+        c = self.config
+        pool = aiofins.Pool(
+            timeout=c.timeout,
+            retries=c.retries,
+            max_sid_spaces=c.max_sid_spaces,
+            max_in_flight=c.max_in_flight,
+            backoff_max=1.0,
+            backoff_min=0.05,
+        )
+        pool._random.seed(self.jitter_seed)
+        self.pools.append(pool)
+        # units with a fixed reply port get no pool session (one session per such unit)
+        urls = {n: f"udp://10.0.0.{n}" for n in self.units if n not in c.fixed}
+        async with pool:
+            async with anyio.create_task_group() as tg:
+                if urls and c.pool_tasks:
+                    tg.start_soon(self._pool_tasks, pool, urls)
+                if urls and c.poller_groups:
+                    tg.start_soon(self._poll, pool, urls)
+            for entries in pool._entries.values():
+                for entry in entries:
+                    if entry.client is not None:
+                        self.sessions.append(entry.client.session)
+            await ready()
+
+    async def _pool_tasks(self, pool: aiofins.Pool, urls: dict[int, str]) -> None:
+        async def loop() -> None:
+            rng = self.rng_clients
+            while not self.stopping:
+                think = self.think()
+                await asyncio.sleep(rng.uniform(0, think) if think else 0)
+                if self.stopping:
+                    return
+                n = rng.choice(sorted(urls))
+                try:
+                    async with pool.client(urls[n]) as client:
+                        await self._operate(client, "pool", [n])
+                except FinsError:
+                    pass  # the borrow failed (its own timeout): the op was never started
+
+        async with anyio.create_task_group() as tg:
+            for _ in range(self.config.pool_tasks):
+                tg.start_soon(loop)
+
+    async def _poll(self, pool: aiofins.Pool, urls: dict[int, str]) -> None:
+        c = self.config
+        rng = self.rng_clients
+        groups: dict[str, tuple[Target, list[int], list[float]]] = {}
+        async with Poller(pool) as poller:
+            for g in range(c.poller_groups):
+                n = rng.choice(sorted(urls))
+                target = self.units[n].targets[(0, n)]
+                count = rng.randint(1, 6)
+                if rng.random() < 0.5:  # contiguous: one 0101 frame
+                    base = rng.randrange(WINDOW - 8)
+                    addresses = list(range(base, base + count))
+                else:  # scattered: a 0104 multiple read
+                    addresses = sorted(rng.sample(range(WINDOW), count))
+                tags = {f"t{i}": f"D{a}" for i, a in enumerate(addresses)}
+                poller.add_group(f"g{g}", urls[n], tags, interval=c.poll_interval)
+                groups[f"g{g}"] = (target, addresses, [self.now()])
+            async for snap in poller:
+                target, addresses, since = groups[snap.group]
+                self.check_snapshot(snap, target, addresses, since[0])
+                since[0] = self.now()
+                if self.stopping:
+                    break
+
+    # -- the run -----------------------------------------------------------------------
+
+    async def _main(self) -> None:
+        c = self.config
+        self.loop.call_later(0.02, self._program)
+        if self.replay is not None:
+            for e in self.replay:
+                self._plan(e)
+        elif not self.manual:
+            self._next_episode(0.0)
+        closed = anyio.Event()
+        ready_count = 0
+
+        async def ready() -> None:
+            nonlocal ready_count
+            ready_count += 1
+            await closed.wait()
+
+        paths: list[Callable[[], Coroutine[Any, Any, None]]] = []
+        for i in range(c.connect_sessions):
+            paths.append(lambda i=i: self._connect_path(i, ready))  # type: ignore[misc]
+        if c.tcp_sessions:
+            paths.append(lambda: self._tcp_path(ready))
+        if c.pool_tasks or c.poller_groups:
+            paths.append(lambda: self._pool_path(ready))
+        if not paths:
+            paths.append(lambda: self._connect_path(0, ready))
+        async with anyio.create_task_group() as tg:
+            for p in paths:
+                tg.start_soon(p)
+            if self.manual:
+                await self.finished.wait()
+            else:
+                with anyio.move_on_after(max(60.0, self.budget * 0.05)):
+                    await self.budget_spent.wait()
+            await self.recover()
+            self.stopping = True
+            while ready_count < len(paths):
+                await asyncio.sleep(0.05)
+            await self.quiesce()
+            closed.set()
+        self.check_closed()
+
+    async def recover(self) -> None:
+        """End the faults; every path must work again within its bound."""
+        self.end_faults()
+        tcp = self.config.tcp_sessions
+        await asyncio.sleep((self.bound_tcp if tcp else self.bound_udp) + 1.0)
+
+    async def quiesce(self) -> None:
+        """Clients stopped: let quarantines and lingers run out, then nothing may be busy."""
+        await asyncio.sleep(30.0)
+        for s in self.sessions:
+            where = s.transport.description
+            if s.stats.in_flight:
+                self.fail("nothing leaks", f"{where}: {s.stats.in_flight} requests in flight")
+            breaker: Any = s._breaker
+            if breaker.state is BreakerState.HALF_OPEN:
+                self.fail("nothing leaks", f"{where}: a breaker probe never reported")
+            for key, slots in s._slots.items():
+                if slots.in_flight or slots.waiters:
+                    self.fail(
+                        "nothing leaks",
+                        f"{where}: {key} has {slots.in_flight} slots taken,"
+                        f" {len(slots.waiters)} waiting",
+                    )
+
+    def check_closed(self) -> None:
+        net = self.net
+        if net.sockets:
+            self.fail("nothing leaks", f"sockets still bound: {sorted(net.sockets)}")
+        if net.streams:
+            self.fail("nothing leaks", f"{len(net.streams)} FINS/TCP connections still open")
+        if net.sent != net.delivered + net.lost + net.flushed + net.in_flight:
+            self.fail("nothing leaks", "the network's counters do not add up")
+        ended = sum(op.end is not None for op in self.ops)
+        if ended != len(self.ops):
+            self.fail("nothing leaks", f"{len(self.ops) - ended} operations never ended")
+
+    def start(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.main = self.loop.create_task(self._main())
+
+    def run(self) -> Result:
+        with self.context():
+            self.start()
+            assert self.main is not None
+            self.drive(self.main)
+        return self.result()
+
+    def advance(self, seconds: float) -> None:
+        """Run the world for ``seconds`` of virtual time (manual mode)."""
+        if self.main is not None and not self.main.done():
+            self.drive(asyncio.sleep(seconds))
+
+    def finish(self) -> None:
+        """End a manual run: recovery, quiescence, the leak checks."""
+        self.finished.set()
+        if self.main is not None:
+            self.drive(self.main)
+
+    def drive(self, until: Awaitable[Any]) -> None:
+        try:
+            self.loop.run_until_complete(until)
+        except asyncio.CancelledError:
+            if self.violation is None:
+                raise
+        except WorldStuck as exc:
+            self.fail("never stuck", str(exc))
+        except BaseException as exc:  # a crash of the stack is a finding
+            if self.violation is None:
+                self.fail("never wrong", f"the run raised {exc!r}")
+
+    @contextlib.contextmanager
+    def context(self) -> Iterator[None]:
+        state = random.getstate()
+        random.seed(self.jitter_seed)  # the link's and breaker's jitter
+        saved = aiofins.connection.make_transport
+        net = self.net
+
+        def make_transport(endpoint: Any, **options: Any) -> SimDatagram:
+            return SimDatagram(net, self._host(), (endpoint.host, endpoint.port))
+
+        aiofins.connection.make_transport = make_transport
+        try:
+            with session_clock(self.loop.time):
+                yield
+                self._finish_loop()
+        finally:
+            aiofins.connection.make_transport = saved
+            random.setstate(state)
+            asyncio.set_event_loop(None)
+            self.loop.close()
+
+    def _finish_loop(self) -> None:
+        tasks = [t for t in asyncio.all_tasks(self.loop) if not t.done()]
+        if tasks and self.violation is None:
+            self.fail("nothing leaks", f"{len(tasks)} tasks left: {tasks[:3]}")
+        for t in tasks:
+            t.cancel()
+        if tasks:
+            with contextlib.suppress(BaseException):
+                self.loop.run_until_complete(asyncio.gather(*tasks, return_exceptions=True))
+        if self.loop.unhandled and self.violation is None:
+            self.fail("nothing leaks", f"unhandled in the loop: {self.loop.unhandled[0]}")
+
+    def result(self) -> Result:
+        return Result(
+            seed=self.seed,
+            steps=self.steps,
+            ops=len(self.ops),
+            time=self.violation_time if self.violation else self.loop.time(),
+            digest=self.digest,
+            violation=self.violation,
+            at_step=self.violation_step,
+            schedule=list(self.schedule),
+            config=self.config,
+            command=self.command,
+        )
+
+
+def run(seed: int, steps: int, schedule: list[Episode] | None = None) -> Result:
+    """Run the world of ``seed`` for ``steps`` steps (see the module's docstring)."""
+    return World(seed, steps, schedule=schedule).run()
