@@ -9,7 +9,7 @@ import os
 import sys
 import time
 
-from .world import Episode, run
+from .world import Episode, run, suspect
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -41,12 +41,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     started = time.perf_counter()
     steps = violations = 0
+    kinds: dict[str, int] = {}
     for seed in seeds:
         result = run(seed, args.steps, schedule)
         steps += result.steps
         if result.violation is not None:
             violations += 1
-            print(result.reproducer(), flush=True)
+            line = result.reproducer()
+            kind = suspect(result)
+            kinds[kind] = kinds.get(kind, 0) + 1
+            print(f"{line}  [{kind}]", flush=True)
             if args.stop:
                 break
         elif not args.quiet:
@@ -56,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{len(seeds)} seeds, {steps} steps, {violations} violations, {elapsed:.1f} s",
         flush=True,
     )
+    for kind, count in sorted(kinds.items()):
+        print(f"  {count} x {kind}")
     return 1 if violations else 0
 
 

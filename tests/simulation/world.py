@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import random
 import struct
 import zlib
@@ -824,6 +825,9 @@ class World:
     def context(self) -> Iterator[None]:
         state = random.getstate()
         random.seed(self.jitter_seed)  # the link's and breaker's jitter
+        # the library logs as usual (its formatting runs), but not into the test's capture
+        library = logging.getLogger("aiofins")
+        propagate, library.propagate = library.propagate, False
         saved = aiofins.connection.make_transport
         net = self.net
 
@@ -837,6 +841,7 @@ class World:
                 self._finish_loop()
         finally:
             aiofins.connection.make_transport = saved
+            library.propagate = propagate
             random.setstate(state)
             asyncio.set_event_loop(None)
             self.loop.close()
@@ -871,3 +876,26 @@ class World:
 def run(seed: int, steps: int, schedule: list[Episode] | None = None) -> Result:
     """Run the world of ``seed`` for ``steps`` steps (see the module's docstring)."""
     return World(seed, steps, schedule=schedule).run()
+
+
+#: What a violation's words say about which known defect caused it (first match wins).
+SIGNS = (
+    ("defect 1 (a probe never reports)", "a probe is testing whether it answers again"),
+    ("defect 3 (a relay error reaches another request)", "RelayError("),
+    ("defect 4 (no free SID for long after the faults)", "all 256 are in flight, quarantined"),
+    ("an extra SID space opened from a callback (NoEventLoopError)", "NoEventLoopError"),
+    ("defect 5 (a late duplicate taken for a new reply)", "write reported ok, never executed"),
+)
+
+
+def suspect(result: Result) -> str:
+    """The known defect a violation points to (its words, its world), or ``"unknown"``."""
+    line = result.reproducer()
+    for name, sign in SIGNS:
+        if sign in line:
+            return name
+    if result.config is not None and result.config.fixed:
+        return "defect 2 (a reply for another space)"
+    if ":dup:" in line and "never wrong" in line:
+        return "defect 5 (a late duplicate taken for a new reply)"
+    return "unknown"
