@@ -4,6 +4,7 @@ only what arrives, in which order."""
 
 from __future__ import annotations
 
+import contextvars
 from collections.abc import Awaitable, Callable, Sequence
 
 import anyio
@@ -255,3 +256,23 @@ def test_a_lost_connection_request_leaves_the_caller_to_its_timeout() -> None:
 
     on_virtual_time(main)
     assert times == [5.0, 10.25]
+
+
+def test_a_datagram_sent_from_an_asyncio_callback_arrives() -> None:
+    """A session sends from event-loop callbacks under asyncio (a batch's flush, the Poller's
+    timer). Under ``asyncio.run`` (not anyio's runner) no task and no anyio context is
+    current there, and the send must need neither (it raised anyio's NoEventLoopError,
+    found by tests/simulation)."""
+    import asyncio
+
+    async def main() -> None:
+        async with MemoryNetwork() as net:
+            a = net.datagram_socket(*A)
+            b = net.datagram_socket(*B)
+            loop = asyncio.get_running_loop()
+            loop.call_soon(a.sendto, b"from a callback", B, context=contextvars.Context())
+            with anyio.fail_after(10):  # (a guard: without the fix it never arrives)
+                assert await b.receive() == (b"from a callback", A)
+            assert net.stats.callback_errors == net.stats.hook_errors == 0
+
+    asyncio.run(main())

@@ -55,6 +55,7 @@ hook's) or counted as delivered (a callback's). Every drop is counted by its rea
 
 from __future__ import annotations
 
+import asyncio
 import heapq
 import itertools
 import logging
@@ -444,6 +445,14 @@ class _Due:
     what: Callable[[], None] = field(compare=False)
 
 
+def _loop_clock() -> Callable[[], float]:
+    """The running backend's clock, callable from its callbacks too (asyncio's loop.time)."""
+    try:
+        return asyncio.get_running_loop().time
+    except RuntimeError:
+        return anyio.current_time
+
+
 class MemoryNetwork:
     """A network in this process (see the module's docstring). Use as
     ``async with MemoryNetwork() as net:``: the delivery task runs inside.
@@ -481,10 +490,14 @@ class MemoryNetwork:
         self._heap: list[_Due] = []
         self._wake: anyio.Event | None = None
         self._tg: TaskGroup | None = None
+        #: The event loop's clock (anyio.current_time() needs a task: a send from an asyncio
+        #: callback, such as a batch's flush or the Poller's timer, has none).
+        self._now: Callable[[], float] = anyio.current_time
 
     # -- lifecycle ---------------------------------------------------------------------------
 
     async def __aenter__(self) -> MemoryNetwork:
+        self._now = _loop_clock()
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
@@ -508,7 +521,7 @@ class MemoryNetwork:
         """The delivery task: hands over each packet when it is due."""
         heap = self._heap
         while True:
-            now = anyio.current_time()
+            now = self._now()
             while heap and heap[0].at <= now:
                 due = heapq.heappop(heap)
                 try:
@@ -655,7 +668,7 @@ class MemoryNetwork:
 
     def _schedule_eof(self, stream: MemoryStream) -> None:
         out = stream._out
-        at = max(anyio.current_time(), out.last_due)
+        at = max(self._now(), out.last_due)
 
         def arrive() -> None:
             out.eof = True
@@ -689,7 +702,7 @@ class MemoryNetwork:
             self.reset(sender)
             return
         out = sender._out
-        now = anyio.current_time()
+        now = self._now()
         pieces = _split(data, len(delays))
         for piece, delay in zip(pieces, delays, strict=True):
             at = max(now + max(delay, 0.0), out.last_due)
@@ -720,7 +733,7 @@ class MemoryNetwork:
             self.stats.dropped += 1
             return
         self.stats.duplicated += len(delays) - 1
-        now = anyio.current_time()
+        now = self._now()
         for delay in delays:
             self._push(now + max(delay, 0.0), what)
 

@@ -1,23 +1,31 @@
-"""An in-memory network on the virtual clock, and the transports the sessions use on it.
+"""The simulation's network: UDP over :mod:`aiofins.memnet` under the real
+:class:`~aiofins.transport.UdpTransport`, FINS/TCP over a stream model of its own.
 
-This is the harness's thin adapter until the shared in-memory datagram/stream network
-(under the real UDP and FINS/TCP transports) lands: :class:`SimDatagram` and
-:class:`SimStream` implement the transport contract (:class:`aiofins.transport.base.Transport`)
-the way the UDP and FINS/TCP transports do (own source node per socket, SID spaces, a
-reliable stream with a fresh SID space per connection), with every frame going through
-:class:`Network`, which applies the schedule's link faults: loss, duplication of replies,
-delay (and so reordering). A step of the simulation is one frame delivered here.
+Datagrams: every session's socket is a real ``UdpTransport`` on the shared in-memory
+network (``network=``), so the transport's own code runs; each unit listens on its
+``10.0.0.K:9600`` socket there (:class:`UnitPort`), and :meth:`Network.fate` (the network's
+fault hook) applies the schedule's link faults: loss, duplication of replies (up to 0.3 s
+late), delay (and so reordering). A step of the simulation is one frame put on the wire.
+
+FINS/TCP: :class:`SimStream` keeps the FINS/TCP transport's contract (the handshake assigns
+our node, each connection a fresh SID space, in order, a reset ends it) over
+:class:`StreamConnection`, a model with the same faults as the units' (resets, refused
+handshakes); the real ``TcpTransport`` over memnet's streams would need the units behind the
+simulator's FINS/TCP server, which keeps no history: a next step.
 
 Commands are never duplicated by the network: a duplicated command would execute twice and
-no client could keep a write at most once; duplicated *replies* (up to 0.3 s late) are.
+no client could keep a write at most once; duplicated *replies* are.
 """
 
 from __future__ import annotations
 
 import asyncio
 import random
-from collections.abc import Callable
+import struct
+import zlib
+from collections.abc import Callable, Sequence
 
+from aiofins.memnet import DatagramSocket, MemoryNetwork, Packet
 from aiofins.protocol.errors import ConnectionLost
 from aiofins.transport.base import FrameSink, TaskSpawner, Transport
 
@@ -39,12 +47,14 @@ class Network:
         self.loop = loop
         self.rng = rng
         self.on_step = on_step
-        self.sockets: dict[Address, SimDatagram] = {}
         self.units: dict[Address, Unit] = {}
+        self.ports: dict[Address, UnitPort] = {}
         self.streams: set[StreamConnection] = set()
-        self.next_port = 50000
+        self.digest = 0
         #: Counters that must add up: sent = delivered + lost + nowhere + in flight.
         self.sent = 0
+        #: FINS/TCP frames: sent = delivered + flushed + in flight.
+        self.streams_sent = 0
         self.delivered = 0
         self.lost = 0
         self.nowhere = 0
@@ -56,34 +66,33 @@ class Network:
     def add_unit(self, unit: Unit) -> None:
         self.units[unit.address] = unit
 
-    # -- datagrams ---------------------------------------------------------------------
+    def attach(self, memnet: MemoryNetwork) -> None:
+        """Bind every unit's FINS port on ``memnet``."""
+        for address, unit in self.units.items():
+            self.ports[address] = UnitPort(memnet.datagram_socket(*address), unit, self)
 
-    def bind(self, sock: SimDatagram) -> Address:
-        """A free port on the socket's host: the FINS port if free (the table's port),
-        else the next ephemeral one."""
-        if (sock.host, FINS_PORT) not in self.sockets:
-            addr = (sock.host, FINS_PORT)
-        else:
-            self.next_port += 1
-            addr = (sock.host, self.next_port)
-        self.sockets[addr] = sock
-        return addr
+    # -- datagrams (on memnet) ---------------------------------------------------------
 
-    def unbind(self, addr: Address) -> None:
-        self.sockets.pop(addr, None)
-
-    def _faults(self, unit: Unit | None) -> dict[str, float]:
-        return unit.faults if unit is not None else {}
-
-    def send(self, src: Address, dst: Address, frame: bytes) -> None:
-        """A command datagram from a socket to a unit."""
-        unit = self.units.get(dst)
-        faults = self._faults(unit)
+    def fate(self, packet: Packet) -> Sequence[float]:
+        """memnet's fault hook: the delays of a datagram's copies (none: lost)."""
+        self.digest = zlib.crc32(
+            struct.pack("<dq", self.loop.time(), packet.number) + packet.data, self.digest
+        )
+        if packet.kind != "datagram":
+            return [0.0]
+        to_unit = self.units.get(packet.dest)
+        unit = to_unit or self.units.get(packet.source)
         self.sent += 1
-        if faults and "loss" in faults and self.rng.random() < faults["loss"]:
+        self.on_step()
+        faults = unit.faults if unit is not None else {}
+        rng = self.rng
+        if faults and "loss" in faults and rng.random() < faults["loss"]:
             self.lost += 1
-            return
-        self._schedule(self._delay(faults), src, dst, frame)
+            return []
+        delay = self._delay(faults)
+        if to_unit is None and faults and "dup" in faults and rng.random() < faults["dup"]:
+            return [delay, delay + rng.random() * DUPLICATE_LAG]
+        return [delay]
 
     def reply(self, unit: Unit, to: Address | object, frame: bytes, late: float = 0.0) -> None:
         """A reply from ``unit`` to a socket address or a stream connection."""
@@ -91,17 +100,11 @@ class Network:
             to.to_client(frame, late)
             return
         assert isinstance(to, tuple)
-        faults = unit.faults
-        self.sent += 1
-        rng = self.rng
-        if faults and "loss" in faults and rng.random() < faults["loss"]:
-            self.lost += 1
-            return
-        delay = self._delay(faults) + late
-        self._schedule(delay, unit.address, to, frame)
-        if faults and "dup" in faults and rng.random() < faults["dup"]:
-            self.sent += 1
-            self._schedule(delay + rng.random() * DUPLICATE_LAG, unit.address, to, frame)
+        port = self.ports[unit.address]
+        if late:
+            self.loop.call_later(late, port.send, frame, to, self.epoch)
+        else:
+            port.send(frame, to, self.epoch)
 
     def _delay(self, faults: dict[str, float]) -> float:
         d = BASE_DELAY + self.rng.random() * JITTER
@@ -109,84 +112,32 @@ class Network:
             d += self.rng.random() * faults["delay"]
         return d
 
-    def _schedule(self, delay: float, src: Address, dst: Address, frame: bytes) -> None:
-        self.in_flight += 1
-        self.loop.call_at(self.loop.time() + delay, self._arrive, self.epoch, src, dst, frame)
-
-    def _arrive(self, epoch: int, src: Address, dst: Address, frame: bytes) -> None:
-        self.in_flight -= 1
-        if epoch != self.epoch:
-            self.flushed += 1
-            return
-        self.delivered += 1
-        unit = self.units.get(dst)
-        if unit is not None:
-            unit.receive(frame, src)
-        else:
-            sock = self.sockets.get(dst)
-            if sock is None:
-                self.nowhere += 1
-            else:
-                sock.datagram(frame)
-        self.on_step()
-
     def flush(self) -> None:
-        """Drop every frame in flight (late replies included): what arrives from now on was
-        sent from now on."""
+        """Drop every reply not yet sent late, and every stream frame in flight."""
         self.epoch += 1
 
 
-class SimDatagram(Transport):
-    """A UDP socket on :class:`Network` (the UDP transport's contract)."""
+class UnitPort:
+    """A unit's UDP port on memnet: each datagram to the unit, its replies back."""
 
-    reconnectable = True
-    own_source_node = True
-    default_sid_spaces = 4
-
-    def __init__(self, network: Network, host: str, peer: Address) -> None:
+    def __init__(self, sock: DatagramSocket, unit: Unit, network: Network) -> None:
+        self.sock = sock
+        self.unit = unit
         self.network = network
-        self.host = host
-        self.peer = peer
-        self.addr: Address | None = None
-        self._sink: FrameSink | None = None
+        sock.on_readable = self._readable
 
-    @property
-    def is_open(self) -> bool:
-        return self._sink is not None
+    def _readable(self) -> None:
+        sock, unit = self.sock, self.unit
+        while True:
+            try:
+                frame, source = sock.recvfrom(4096)
+            except (BlockingIOError, OSError):
+                return
+            unit.receive(frame, source)
 
-    @property
-    def description(self) -> str:
-        return f"udp://{self.peer[0]}:{self.peer[1]}"
-
-    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
-        if self._sink is not None:
-            return
-        self.addr = self.network.bind(self)
-        self._sink = sink
-        self.fast_send = self._send
-
-    def _send(self, frame: bytes) -> None:
-        if self._sink is None or self.addr is None:
-            raise ConnectionLost(f"{self.description} is closed")
-        self.network.send(self.addr, self.peer, frame)
-
-    async def send(self, frame: bytes, timeout: float | None = None) -> None:
-        self._send(frame)
-
-    def datagram(self, frame: bytes) -> None:
-        sink = self._sink
-        if sink is not None:
-            sink.frame_received(frame)
-
-    def another(self) -> SimDatagram:
-        return SimDatagram(self.network, self.host, self.peer)
-
-    async def aclose(self) -> None:
-        if self.addr is not None:
-            self.network.unbind(self.addr)
-        self.addr = None
-        self._sink = None
-        self.fast_send = None
+    def send(self, frame: bytes, to: Address, epoch: int) -> None:
+        if epoch == self.network.epoch and not self.sock.closed:
+            self.sock.sendto(frame, to)
 
 
 class StreamConnection:
@@ -208,13 +159,13 @@ class StreamConnection:
 
     def to_unit(self, frame: bytes) -> None:
         net = self.network
-        net.sent += 1
+        net.streams_sent += 1
         net.in_flight += 1
         net.loop.call_at(self._at(0.0), self._arrive, True, frame)
 
     def to_client(self, frame: bytes, late: float) -> None:
         net = self.network
-        net.sent += 1
+        net.streams_sent += 1
         net.in_flight += 1
         net.loop.call_at(self._at(late), self._arrive, False, frame)
 

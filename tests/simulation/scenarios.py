@@ -46,8 +46,8 @@ DEFECTS: dict[int, tuple[str, Config, list[Episode], int, int]] = {
         "a late relay error reaches a request to another destination that reused the SID",
         replace(BASE, relays=frozenset({1}), connect_tasks=8, max_in_flight=16, max_sid_spaces=1),
         [Episode(0.2, 3.0, 1, "relay", 0.3)],
-        30000,
-        2,
+        8000,
+        1,
     ),
     4: (
         "max_sid_spaces=1: after the faults, no free SID for long (all quarantined)",

@@ -42,15 +42,17 @@ import anyio
 
 import aiofins
 import aiofins.connection
+from aiofins.memnet import MemoryNetwork
 from aiofins.poller import Poller, Quality
 from aiofins.protocol.errors import EndCodeError, FinsError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.breaker import BreakerState
+from aiofins.transport import UdpTransport
 
 from .clock import session_clock
 from .loop import VirtualTimeLoop, WorldStuck
-from .network import DUPLICATE_LAG, Network, SimDatagram, SimStream
+from .network import DUPLICATE_LAG, Network, SimStream
 from .plant import DM, REMOTE_NETWORK, WINDOW, Conversion, Target, Unit
 
 #: A call must have ended this long (virtual seconds) after its deadline.
@@ -249,6 +251,9 @@ class World:
         self.stopping = False
         self.budget_spent = asyncio.Event()
         self.finished = asyncio.Event()
+        self.closed = asyncio.Event()
+        self.ready_count = 0
+        self.memnet: MemoryNetwork | None = None
         self.sessions: list[Session] = []
         self.pools: list[aiofins.Pool] = []
         self.hosts = 0
@@ -366,14 +371,15 @@ class World:
             self.clean_since[unit.number] = self.now() + lag
 
     def end_faults(self) -> None:
-        """No more faults: everything in flight is dropped, every unit answers normally."""
+        """No more faults: late relay errors not yet sent are dropped, every unit answers
+        normally (from when the last delayed or duplicated datagram has arrived)."""
         self.faults_over = True
         self.net.flush()
-        now = self.now()
+        since = self.now() + 2 * self.config.timeout + DUPLICATE_LAG + 0.01
         for n, unit in self.units.items():
             self.active[n].clear()
             unit.faults = {}
-            self.clean_since[n] = now
+            self.clean_since[n] = since
 
     # -- operations --------------------------------------------------------------------
 
@@ -448,13 +454,20 @@ class World:
             with anyio.CancelScope() as scope:
                 if op.cancel_after is not None:
                     scope.deadline = op.start + op.cancel_after
+                if kind == "many":  # its timeout bounds each command: the caller bounds it all
+                    scope.deadline = min(scope.deadline, op.deadline)
                 if kind == "read":
                     result = await client.read(f"D{address}", count, dest=dest, timeout=timeout)
                 elif kind == "write":
                     await client.write(f"D{address}", values, dest=dest, timeout=timeout)
                 else:
                     result = await client.execute_many(commands, dest=dest, timeout=timeout)
-            op.outcome = "cancelled" if scope.cancelled_caught else "ok"
+            if not scope.cancelled_caught:
+                op.outcome = "ok"
+            elif op.cancel_after is not None and op.cancel_after < op.deadline - op.start:
+                op.outcome = "cancelled"
+            else:
+                op.outcome = "expired"  # ended by its deadline, as it must
         except FinsError as exc:
             op.outcome, op.error = "failed", exc
         except Exception as exc:  # anything else is a finding
@@ -473,7 +486,7 @@ class World:
             self.fail("never wrong", f"op {op.id} raised {op.error!r} (not a FinsError)")
         elif op.outcome == "ok":
             self._check_ok(op, result)
-        elif op.outcome == "failed":
+        elif op.outcome in ("failed", "expired"):
             self._check_error(op)
             clean = self.clean_since[op.unit.number]
             if (
@@ -486,8 +499,8 @@ class World:
                 self.fail(
                     "never stuck",
                     f"op {op.id} ({op.path} {op.kind} to {op.target.history.address}) failed"
-                    f" with {op.error!r} at {now:.4f}, though the unit answers normally since"
-                    f" {clean:.4f} (bound {op.bound:.2f} s)",
+                    f" with {op.error or op.outcome!r} at {now:.4f}, though the unit answers"
+                    f" normally since {clean:.4f} (bound {op.bound:.2f} s)",
                 )
 
     def _check_ok(self, op: Op, result: Any) -> None:
@@ -603,7 +616,13 @@ class World:
         c = self.config
         units = list(self.units)
         unit = self.units[units[number % len(units)]]
-        transport = SimDatagram(self.net, self._host(), unit.address)
+        transport = UdpTransport(
+            unit.ip,
+            unit.address[1],
+            local_host=self._host(),
+            local_port=9600 if unit.conversion is Conversion.FIXED_PORT else 0,
+            network=self.memnet,
+        )
         async with aiofins.connect(
             transport=transport,
             dest=FinsAddress(0, unit.number, 0),
@@ -718,12 +737,10 @@ class World:
                 self._plan(e)
         elif not self.manual:
             self._next_episode(0.0)
-        closed = anyio.Event()
-        ready_count = 0
+        self.closed = closed = asyncio.Event()
 
         async def ready() -> None:
-            nonlocal ready_count
-            ready_count += 1
+            self.ready_count += 1
             await closed.wait()
 
         paths: list[Callable[[], Coroutine[Any, Any, None]]] = []
@@ -735,6 +752,15 @@ class World:
             paths.append(lambda: self._pool_path(ready))
         if not paths:
             paths.append(lambda: self._connect_path(0, ready))
+        async with MemoryNetwork(fate=self.net.fate, default_host="10.9.0.254") as memnet:
+            self.memnet = memnet
+            self.net.attach(memnet)
+            await self._run_paths(paths)
+            self.check_closed()
+            for port in self.net.ports.values():
+                port.sock.close()
+
+    async def _run_paths(self, paths: list[Callable[[], Coroutine[Any, Any, None]]]) -> None:
         async with anyio.create_task_group() as tg:
             for p in paths:
                 tg.start_soon(p)
@@ -745,17 +771,17 @@ class World:
                     await self.budget_spent.wait()
             await self.recover()
             self.stopping = True
-            while ready_count < len(paths):
+            while self.ready_count < len(paths):
                 await asyncio.sleep(0.05)
             await self.quiesce()
-            closed.set()
-        self.check_closed()
+            self.closed.set()
 
     async def recover(self) -> None:
         """End the faults; every path must work again within its bound."""
         self.end_faults()
         tcp = self.config.tcp_sessions
-        await asyncio.sleep((self.bound_tcp if tcp else self.bound_udp) + 1.0)
+        lag = 2 * self.config.timeout + DUPLICATE_LAG
+        await asyncio.sleep(lag + (self.bound_tcp if tcp else self.bound_udp) + 1.0)
 
     async def quiesce(self) -> None:
         """Clients stopped: let quarantines and lingers run out, then nothing may be busy."""
@@ -777,12 +803,17 @@ class World:
 
     def check_closed(self) -> None:
         net = self.net
-        if net.sockets:
-            self.fail("nothing leaks", f"sockets still bound: {sorted(net.sockets)}")
+        memnet: Any = self.memnet
+        bound = sorted(a for a in memnet._datagram if a not in net.ports)
+        if bound:
+            self.fail("nothing leaks", f"sockets still bound: {bound}")
         if net.streams:
             self.fail("nothing leaks", f"{len(net.streams)} FINS/TCP connections still open")
-        if net.sent != net.delivered + net.lost + net.flushed + net.in_flight:
-            self.fail("nothing leaks", "the network's counters do not add up")
+        stats = memnet.stats
+        if stats.hook_errors or stats.callback_errors or stats.overflows:
+            self.fail("nothing leaks", f"the network lost frames to errors: {stats}")
+        if net.streams_sent != net.delivered + net.flushed + net.in_flight:
+            self.fail("nothing leaks", "the stream counters do not add up")
         ended = sum(op.end is not None for op in self.ops)
         if ended != len(self.ops):
             self.fail("nothing leaks", f"{len(self.ops) - ended} operations never ended")
@@ -829,10 +860,10 @@ class World:
         library = logging.getLogger("aiofins")
         propagate, library.propagate = library.propagate, False
         saved = aiofins.connection.make_transport
-        net = self.net
 
-        def make_transport(endpoint: Any, **options: Any) -> SimDatagram:
-            return SimDatagram(net, self._host(), (endpoint.host, endpoint.port))
+        def make_transport(endpoint: Any, **options: Any) -> UdpTransport:
+            host = self._host()
+            return UdpTransport(endpoint.host, endpoint.port, local_host=host, network=self.memnet)
 
         aiofins.connection.make_transport = make_transport
         try:
@@ -864,7 +895,7 @@ class World:
             steps=self.steps,
             ops=len(self.ops),
             time=self.violation_time if self.violation else self.loop.time(),
-            digest=self.digest,
+            digest=zlib.crc32(struct.pack("<II", self.digest, self.net.digest)),
             violation=self.violation,
             at_step=self.violation_step,
             schedule=list(self.schedule),
@@ -883,7 +914,7 @@ SIGNS = (
     ("defect 1 (a probe never reports)", "a probe is testing whether it answers again"),
     ("defect 3 (a relay error reaches another request)", "RelayError("),
     ("defect 4 (no free SID for long after the faults)", "all 256 are in flight, quarantined"),
-    ("an extra SID space opened from a callback (NoEventLoopError)", "NoEventLoopError"),
+    ("a background task started from a callback (NoEventLoopError)", "NoEventLoopError"),
     ("defect 5 (a late duplicate taken for a new reply)", "write reported ok, never executed"),
 )
 
