@@ -10,19 +10,10 @@ from __future__ import annotations
 
 import pytest
 
-from .world import run, suspect
+from .world import UNFIXED, run, suspect
 
 SEEDS = range(200)
 STEPS = 2000
-#: Kinds of violation of defects not yet fixed on main (see report-sim.md for the seeds).
-UNFIXED = {
-    "defect 1 (a probe never reports)",
-    "defect 2 (a reply for another space)",
-    "defect 3 (a relay error reaches another request)",
-    "defect 4 (no free SID for long after the faults)",
-    "defect 5 (a late duplicate taken for a new reply)",
-    "a background task started from a callback (NoEventLoopError)",
-}
 
 
 def test_200_seeds_of_2000_steps_hold_every_invariant(capsys: pytest.CaptureFixture[str]) -> None:

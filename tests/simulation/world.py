@@ -919,6 +919,21 @@ SIGNS = (
 )
 
 
+#: Kinds of violation of defects not yet fixed on main: allowed by the slice and the state
+#: machine while their worlds in test_defects.py are strict xfails (report-sim.md lists the
+#: seeds). A defect's fix removes its line.
+UNFIXED = frozenset(
+    {
+        "defect 1 (a probe never reports)",
+        "defect 2 (a reply for another space)",
+        "defect 3 (a relay error reaches another request)",
+        "defect 4 (no free SID for long after the faults)",
+        "defect 5 (a late duplicate taken for a new reply)",
+        "a background task started from a callback (NoEventLoopError)",
+    }
+)
+
+
 def suspect(result: Result) -> str:
     """The known defect a violation points to (its words, its world), or ``"unknown"``."""
     line = result.reproducer()
