@@ -1,8 +1,8 @@
 """Issue 22's defects, each as a world the harness must find it in (scenarios.py).
 
-Each test fails on main before its fix (the harness finds the defect) and is marked
-``xfail(strict=True)`` naming it: when the fix lands the test passes, strict xfail fails,
-and the mark goes.
+Each test failed on main before its fix (the harness found the defect: report-sim.md) and
+was marked ``xfail(strict=True)`` naming it until the fix landed (then strict xfail failed,
+and the mark went). Defects 1-4 are fixed; defect 5 is not yet.
 """
 
 from __future__ import annotations
@@ -17,22 +17,18 @@ def _clean(number: int) -> None:
     assert result.violation is None, result.reproducer()
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 defect 1: the Poller's probe never reports")
 def test_defect_1_the_poller_recovers_after_silence_then_wrong_sids() -> None:
     _clean(1)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 defect 2: no DNA/DA1/DA2 check per space")
 def test_defect_2_extra_spaces_behind_a_fixed_reply_port() -> None:
     _clean(2)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 defect 3: a late relay error, another request")
 def test_defect_3_a_late_relay_error_names_its_own_request() -> None:
     _clean(3)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 defect 4: quarantine on a fixed time")
 def test_defect_4_one_sid_space_recovers_after_the_faults() -> None:
     _clean(4)
 

@@ -924,10 +924,6 @@ SIGNS = (
 #: seeds). A defect's fix removes its line.
 UNFIXED = frozenset(
     {
-        "defect 1 (a probe never reports)",
-        "defect 2 (a reply for another space)",
-        "defect 3 (a relay error reaches another request)",
-        "defect 4 (no free SID for long after the faults)",
         "defect 5 (a late duplicate taken for a new reply)",
         "a background task started from a callback (NoEventLoopError)",
     }
