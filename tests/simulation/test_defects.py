@@ -2,12 +2,10 @@
 
 Each test failed on main before its fix (the harness found the defect: report-sim.md) and
 was marked ``xfail(strict=True)`` naming it until the fix landed (then strict xfail failed,
-and the mark went). Defects 1-4 are fixed; defect 5 is not yet.
+and the mark went). All five are fixed on main.
 """
 
 from __future__ import annotations
-
-import pytest
 
 from .scenarios import DEFECTS, run_defect
 
@@ -33,7 +31,6 @@ def test_defect_4_one_sid_space_recovers_after_the_faults() -> None:
     _clean(4)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 defect 5: a late duplicate after a SID wrap")
 def test_defect_5_late_duplicates_while_sids_wrap() -> None:
     _clean(5)
 

@@ -924,7 +924,6 @@ SIGNS = (
 #: seeds). A defect's fix removes its line.
 UNFIXED = frozenset(
     {
-        "defect 5 (a late duplicate taken for a new reply)",
         "a background task started from a callback (NoEventLoopError)",
     }
 )
