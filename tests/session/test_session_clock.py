@@ -76,12 +76,11 @@ def test_a_plc_silent_for_10_s_fails_each_read_at_its_deadline_and_answers_at_on
             assert session.stats.retries == 20
             assert len(session._quarantine) == 10
 
-    started = time.perf_counter()
     run_on_virtual_time(main, backend)
     assert failures == [(float(t), t) for t in range(1, 11)]
     assert answered == [(10.0, bytes.fromhex("1234"))]
     assert transport.frames_sent == 10 * 3 + 1
-    assert time.perf_counter() - started < 60  # (not a bound: 10 s were virtual)
+    # (No wall-clock check that the 10 s were virtual: the exact times above show it.)
 
 
 def test_the_breaker_opens_during_the_outage_and_a_probe_closes_it_after() -> None:
