@@ -80,7 +80,7 @@ async def test_non_idempotent_request_is_not_retried_unless_asked() -> None:
         assert len({f[9] for f in peer.received}) == 2  # retransmitted with its own SID
 
 
-@pytest.mark.anyio
+@on_virtual_time  # the answered read after the timeout has 0.05 s: not on a loaded wall clock
 async def test_late_reply_is_counted_and_never_reaches_the_next_request() -> None:
     late: list[bytes] = []
 
@@ -544,7 +544,7 @@ async def test_waiting_for_a_free_sid_is_bounded_by_the_requests_timeout() -> No
             assert 0.2 - 1e-6 <= anyio.current_time() - start <= 0.2 + slack + 1e-6
 
 
-@pytest.mark.anyio
+@on_virtual_time  # the answered read after the timeout has 0.1 s: not on a loaded wall clock
 async def test_a_late_relay_error_never_reaches_a_request_to_another_destination() -> None:
     """A relay error (bit 15) comes from the relay point, with the relay's address, and is
     matched by SID and command code. Issue #22, defect 3: one that came after its request
