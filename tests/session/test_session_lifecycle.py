@@ -131,6 +131,7 @@ async def test_a_late_duplicate_teaches_the_linger(caplog: pytest.LogCaptureFixt
         assert session.stats.sid_exhausted > 0  # the linger made requests wait for a SID
 
 
+@on_virtual_time  # 256 calls of 0.05 s, and each SID wait's probes: not on a loaded wall clock
 async def test_sid_exhaustion_is_logged_once_and_counted(caplog: pytest.LogCaptureFixture) -> None:
     async with (
         udp_responder(lambda c: []) as peer,
