@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Callable, Sequence
 
@@ -79,6 +80,19 @@ def _add_examples(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
                 sub.formatter_class = HelpFormatter
 
 
+def stdout_closed() -> int:
+    """The reader of our output went away (``aiofins read … | head``): end quietly.
+
+    Like a command killed by SIGPIPE: no message, and the exit code a shell shows for one
+    (141). Standard output is pointed at the null device so that Python's last flush at
+    exit cannot raise again.
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 128 + 13  # SIGPIPE's number on every POSIX system
+
+
 def report(prefix: str, exc: BaseException, expected: tuple[type[BaseException], ...]) -> bool:
     """Print ``exc`` (each error of a group) on stderr if all are ``expected``; whether it did.
 
@@ -120,6 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
     except Exception as exc:  # a FinsError or OSError, maybe from inside a task group
+        if all(isinstance(e, BrokenPipeError) for e in leaf_errors(exc)):
+            return stdout_closed()
         if report("aiofins", exc, (FinsError, OSError)):
             return 1
         raise
