@@ -255,7 +255,8 @@ class Batch:
     def sid_elsewhere(self, p: BatchPending, now: float, end: float) -> None:
         """Command ``p.index`` found every SID of the transport's own taken: sent at once on
         an extra SID space that has one (another is opened meanwhile if none has), else
-        tried again shortly, keeping its slot, at most until the batch's ``timeout``."""
+        tried again shortly (every :data:`_SID_WAIT`, the last time at its deadline),
+        keeping its slot, at most until the batch's ``timeout`` after its first try."""
         session = self.session
         state = self.state
         index = p.index
@@ -272,10 +273,12 @@ class Batch:
         since = self.sid_waits.setdefault(index, now)
         if index == self.next - 1 or len(self.sid_waits) == 1:
             session.stats.sid_exhausted += 1
-        if now - since >= self.timeout:
+        left = since + self.timeout - now
+        if left <= 0.0:
             self.finish(no_free_sid(session, state, self.timeout))
             return
-        self.later(_SID_WAIT, index)
+        # The last look is at the deadline itself, not at the first SID_WAIT past it.
+        self.later(min(_SID_WAIT, left), index)
 
     def send_on(self, space: ExtraSpace, p: BatchPending, frame: bytes) -> None:
         """Send ``p`` at once on an extra SID space's own transport."""
