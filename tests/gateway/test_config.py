@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from aiofins.endpoint import OPTIONS, parse_endpoint
 from aiofins.gateway import ConfigError, load_config
-from aiofins.gateway.config import parse_config
+from aiofins.gateway.config import PLC_OPTIONS, parse_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -279,3 +280,49 @@ def test_a_malformed_tag_file_is_reported_by_check_with_its_lines(tmp_path: Path
     assert len(lines) == 2, lines
     assert lines[0].startswith(f"{path}:3: {csv}:4: a cell of 5008 characters")
     assert lines[1].startswith(f"{path}:3: {csv}:5: a cell longer than csv's limit")
+
+
+def test_per_plc_options_are_the_url_options_of_the_one_table() -> None:
+    """A PLC's ``options`` take every URL option of ``aiofins.endpoint.OPTIONS`` (the
+    breaker's and the reconnection's too), in TOML's own types, checked by that table."""
+    text = """
+[[groups]]
+name = "g"
+tags = { x = "D0" }
+[[plcs]]
+name = "p1"
+url = "udp://10.0.0.5"
+[plcs.options]
+breaker_threshold = 2
+breaker_cooldown = [0.1, 5]
+reconnect_backoff = "0.5,30"
+read_only = true
+[[plcs]]
+name = "p2"
+url = "tcp://10.0.0.6"
+options = { breaker_cooldown = [5, 1] }
+[[plcs]]
+name = "p3"
+url = "serial:///dev/ttyUSB0"
+options = { breaker_threshold = -1, baudrate = 19200 }
+[[plcs]]
+name = "p4"
+url = "udp://10.0.0.7?breaker_threshold=1"
+options = { breaker_threshold = 3 }
+"""
+    assert {"breaker_threshold", "breaker_cooldown", "reconnect_backoff"} <= PLC_OPTIONS
+    assert {name for name, option in OPTIONS.items() if option.schemes} == PLC_OPTIONS
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, "plcs.toml")
+    problems = info.value.problems
+    assert len(problems) == 3, problems  # p3: serial and its options parse
+    assert problems[0].startswith("plcs.toml:16: breaker_cooldown must be MIN,MAX seconds")
+    assert problems[1].startswith("plcs.toml:20: breaker_threshold must be a whole number")
+    assert problems[2].startswith("plcs.toml:23: ") and "given twice" in problems[2]
+    good = parse_config(text.split('[[plcs]]\nname = "p2"')[0], "plcs.toml")
+    (p1,) = good.plcs
+    endpoint = parse_endpoint(p1.url)
+    assert endpoint.option("breaker_threshold") == "2"
+    assert endpoint.option("breaker_cooldown") == "0.1,5.0"
+    assert endpoint.option("reconnect_backoff") == "0.5,30.0"
+    assert endpoint.option("read_only") == "True"

@@ -14,10 +14,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlencode, urlsplit, urlunsplit
+from urllib.parse import urlencode
 
 from ..connection import check_options
-from ..endpoint import SERIAL_SETTINGS, parse_endpoint
+from ..endpoint import OPTIONS, option_value, parse_endpoint
 from ..protocol.errors import CommandError, FinsError
 from ..tagfile import TagFileError, load_tags
 from ..tags import Tag, parse_tag
@@ -32,8 +32,9 @@ DEFAULT_PLC_STATUS_TOPIC = "fins/{plc}/status"
 DEFAULT_GATEWAY_TOPIC = "fins/_gateway/{gateway}"
 #: Names of gateways, PLCs and groups: they become MQTT topic levels.
 NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
-#: URL query options a PLC's ``options`` table may set (per-endpoint options).
-PLC_OPTIONS = frozenset({"dest", "src", "node", "timeout"}) | SERIAL_SETTINGS
+#: Options a PLC's ``options`` table may set: the URL query options of the one option table,
+#: :data:`aiofins.endpoint.OPTIONS` (each checked there, and against the URL's scheme).
+PLC_OPTIONS = frozenset(name for name, option in OPTIONS.items() if option.schemes)
 
 
 class ConfigError(CommandError):
@@ -531,14 +532,20 @@ class _Reader:
                 self.problem(at("plcs", i, "name"), f"PLC {name!r} is defined twice")
             seen.add(name)
             options = self.take(t, "plcs", "options", dict, {}, i)
-            for key in options:
+            given: dict[str, object] = {}
+            for key, value in options.items():
                 if key not in PLC_OPTIONS:
                     self.problem(
                         at("plcs", i, "options"),
                         f"option {key!r} is not a per-PLC option "
                         f"(known: {', '.join(sorted(PLC_OPTIONS))})",
                     )
-            url = _with_options(url, {k: v for k, v in options.items() if k in PLC_OPTIONS})
+                    continue
+                try:  # TOML's own types too: breaker_cooldown = [0.1, 5], read_only = true
+                    given[key] = option_value(key, value)
+                except FinsError as exc:
+                    self.problem(at("plcs", i, "options"), str(exc))
+            url = _with_options(url, given)
             try:
                 parse_endpoint(url)
             except FinsError as exc:
@@ -726,10 +733,10 @@ def _topic(fields: set[str]) -> Callable[[str], str | None]:
 
 
 def _with_options(url: str, options: Mapping[str, Any]) -> str:
+    """``url`` with ``options`` added to its query, the rest of it as written (a round trip
+    through ``urlsplit`` turned ``serial:///dev/ttyUSB0`` into ``serial:/dev/ttyUSB0``)."""
     if not options:
         return url
-    parts = urlsplit(url)
-    query = "&".join(
-        p for p in (parts.query, urlencode({k: str(v) for k, v in options.items()})) if p
-    )
-    return urlunsplit(parts._replace(query=query))
+    base, _, query = url.partition("?")
+    added = urlencode({k: str(v) for k, v in options.items()}, safe=",")
+    return f"{base}?{query}&{added}" if query else f"{base}?{added}"
