@@ -15,6 +15,7 @@ import random
 import socket
 
 import anyio
+import looptime
 import pytest
 
 from aiofins.hooks import EventHooks, SidSpaceChanged
@@ -229,6 +230,27 @@ async def test_request_many_uses_more_spaces_too() -> None:
 
 @on_virtual_time
 async def test_an_extra_connection_lost_fails_only_its_own_space() -> None:
+    await _extra_connection_lost()
+
+
+def test_an_extra_connection_lost_under_asyncio_run_closes_its_space() -> None:
+    """The same under asyncio's own runner (as ``asyncio.run`` starts most applications),
+    not anyio's: the reset connection's ``connection_lost`` is an asyncio callback outside
+    any task, and closing its space starts a task, which anyio starts only from a task
+    (it raised ``NoEventLoopError`` there and the space stayed CLOSING for ever: issue 22's
+    soak, a FINS/TCP reset). On looptime's loop (virtual time), with nothing unhandled."""
+    unhandled: list[dict[str, object]] = []
+    loop = looptime.new_event_loop(start=0.0)
+    loop.set_exception_handler(lambda loop, context: unhandled.append(context))
+    try:
+        loop.run_until_complete(_extra_connection_lost())
+    finally:
+        loop.run_until_complete(loop.shutdown_asyncgens())
+        loop.close()
+    assert unhandled == []
+
+
+async def _extra_connection_lost() -> None:
     events: list[SidSpaceChanged] = []
     async with (
         tcp_server(TcpPeer()) as peer,

@@ -303,7 +303,7 @@ class Session:
         tg = anyio.create_task_group()
         await tg.__aenter__()
         self._tg = tg
-        background = Background(tg, self._link.background_failed)
+        background = Background(tg, self._link.background_failed, self._watcher.from_task)
         self._background = self._link.background = self._watcher.background = background
         self._spaces.background = background
         try:

@@ -310,7 +310,7 @@ class SidSpaces:
         """Open ``space``, close it once idle: a background task ending at a boundary (a
         failure is this space's alone: counted, logged, its requests failed)."""
         assert self.background is not None
-        space.background = Background(self.background.task_group, lambda e: self.lost(space, e))
+        space.background = self.background.child(lambda e: self.lost(space, e))
         transport = space.transport
         try:
             await transport.open(space, space.background)
