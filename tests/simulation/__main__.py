@@ -22,6 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stop", action="store_true", help="stop at the first violation")
     parser.add_argument("--quiet", action="store_true", help="print only violations and totals")
     parser.add_argument("--defect", type=int, help="run the world of issue 22's defect N")
+    parser.add_argument("--unfixed", action="store_true", help="run the unfixed families' worlds")
     parser.add_argument("--log", action="store_true", help="show the library's warnings")
     args = parser.parse_args(argv)
     if not args.log:
@@ -33,6 +34,16 @@ def main(argv: list[str] | None = None) -> int:
         found = run_defect(args.defect)
         print(found.reproducer() if found.violation else "no violation")
         return 1 if found.violation else 0
+    if args.unfixed:
+        from .scenarios import UNFIXED_WORLDS, run_unfixed
+
+        shown = 0
+        for kind, (what, *_) in UNFIXED_WORLDS.items():
+            print(f"{kind}: {what}")
+            for result in run_unfixed(kind):
+                shown += result.violation is not None
+                print(result.reproducer() if result.violation else "  no violation")
+        return 1 if shown else 0
     seeds = [args.seed] if args.seed is not None else range(args.first, args.first + args.seeds)
     schedule = (
         [Episode.parse(e) for e in args.schedule.split(",") if e and e != "-"]

@@ -1,11 +1,12 @@
 """The worlds of issue 22's defects 1-5: a configuration and a fault schedule each, as the
-issue tells them (used by test_defects.py and by ``python -m tests.simulation --defect N``)."""
+issue tells them (used by test_defects.py and by ``python -m tests.simulation --defect N``);
+and a world for each family of violations not yet fixed on main (``world.UNFIXED``)."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from .world import Config, Episode, Result, World
+from .world import UNFIXED, Config, Episode, Result, World
 
 #: One connect() session, 16 tasks, UDP unit 1 answering normally unless told.
 BASE = Config(
@@ -71,3 +72,40 @@ def run_defect(number: int) -> Result:
     world = World(seed, steps, schedule=schedule, config=config)
     world.command = f"python -m tests.simulation --defect {number}"
     return world.run()
+
+
+#: A world for each kind of violation in ``world.UNFIXED``: (what it shows, the
+#: configuration, the schedule, steps, seeds). It fails on main while the family is not
+#: fixed (any of its seeds showing a violation of that kind); test_defects.py runs it as a
+#: strict xfail. Pinned configurations and schedules (found by the soak), so that a change
+#: of the generator leaves them alone.
+UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]]] = {
+    "no free SID after the faults (defect 4/5 family)": (
+        "fixed reply ports, 16 tasks: after replies duplicated 1 s (70 %) and wrong SIDs,"
+        " every SID of one space lingers past the recovery bound (soak seed 20047)",
+        replace(
+            BASE,
+            units=3,
+            fixed=frozenset({1, 2, 3}),
+            retries=1,
+            max_in_flight=3,
+            connect_sessions=2,
+            think=0.02,
+        ),
+        [Episode(0.509, 1.022, 2, "dup", 0.7), Episode(3.501, 0.5, 2, "wrong_sid", 0.3)],
+        20000,
+        (20047, 2),
+    ),
+}
+assert set(UNFIXED_WORLDS) == UNFIXED, "every unfixed family needs its world (and no more)"
+
+
+def run_unfixed(kind: str) -> list[Result]:
+    """The runs of ``kind``'s world, one per seed."""
+    _, config, schedule, steps, seeds = UNFIXED_WORLDS[kind]
+    results = []
+    for seed in seeds:
+        world = World(seed, steps, schedule=schedule, config=config)
+        world.command = f"python -m tests.simulation --unfixed  # its seed {seed}"
+        results.append(world.run())
+    return results

@@ -3,11 +3,17 @@
 Each test failed on main before its fix (the harness found the defect: report-sim.md) and
 was marked ``xfail(strict=True)`` naming it until the fix landed (then strict xfail failed,
 and the mark went). All five are fixed on main.
+
+The families the soak found and main has not fixed yet (``world.UNFIXED``, allowed by the
+slice) run the same way: each its world, a strict xfail, so that the fix is noticed.
 """
 
 from __future__ import annotations
 
-from .scenarios import DEFECTS, run_defect
+import pytest
+
+from .scenarios import DEFECTS, UNFIXED_WORLDS, run_defect, run_unfixed
+from .world import UNFIXED, suspect
 
 
 def _clean(number: int) -> None:
@@ -37,3 +43,21 @@ def test_defect_5_late_duplicates_while_sids_wrap() -> None:
 
 def test_every_defect_has_a_world() -> None:
     assert sorted(DEFECTS) == [1, 2, 3, 4, 5]
+
+
+@pytest.mark.parametrize(
+    "kind",
+    [pytest.param(k, marks=pytest.mark.xfail(strict=True, reason=k)) for k in sorted(UNFIXED)],
+)
+def test_an_unfixed_family_shows_in_its_world(kind: str) -> None:
+    """Fails while the family is not fixed (every seed of its world clean: fixed; then
+    remove it from world.UNFIXED and its world, which makes this a plain pass)."""
+    found = [r for r in run_unfixed(kind) if r.violation is not None]
+    for r in found:
+        print(r.reproducer())
+    assert not [r for r in found if suspect(r) == kind]
+    assert not found  # (another kind: a finding of its own)
+
+
+def test_every_unfixed_family_has_a_world() -> None:
+    assert set(UNFIXED_WORLDS) == UNFIXED

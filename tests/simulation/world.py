@@ -913,18 +913,19 @@ def run(seed: int, steps: int, schedule: list[Episode] | None = None) -> Result:
 SIGNS = (
     ("defect 1 (a probe never reports)", "a probe is testing whether it answers again"),
     ("defect 3 (a relay error reaches another request)", "RelayError("),
-    ("defect 4 (no free SID for long after the faults)", "all 256 are in flight, quarantined"),
+    ("no free SID after the faults (defect 4/5 family)", "all 256 are in flight, quarantined"),
     ("a background task started from a callback (NoEventLoopError)", "NoEventLoopError"),
     ("defect 5 (a late duplicate taken for a new reply)", "write reported ok, never executed"),
 )
 
 
-#: Kinds of violation of defects not yet fixed on main: allowed by the slice and the state
-#: machine while their worlds in test_defects.py are strict xfails (report-sim.md lists the
-#: seeds). A defect's fix removes its line.
+#: Kinds of violation not yet fixed on main: the slice and the state machine allow them,
+#: and each has a world in ``scenarios.UNFIXED_WORLDS`` that test_defects.py runs as a
+#: strict xfail, so that a fix is noticed (its world passes, the xfail fails): the fix
+#: removes the kind here and its world there.
 UNFIXED = frozenset(
     {
-        "a background task started from a callback (NoEventLoopError)",
+        "no free SID after the faults (defect 4/5 family)",
     }
 )
 
