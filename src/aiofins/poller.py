@@ -48,9 +48,12 @@ from .client import add_addressing_hint
 from .endpoint import parse_endpoint
 from .hooks import EventHooks, ScanDone
 from .pool import backend_sleep, event_loop_clock
+from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, EndCodeError, FinsError
+from .protocol.frames import END_CODE, MIN_REPLY_SIZE
 from .protocol.values import Value
-from .session.callback import CallbackBatch, start_requests
+from .session.callback import CallbackBatch, CallbackPending, start_request, start_requests
+from .session.response import new_response
 from .tags import ReadPlan, TagNames, parse_tag
 from .transport.base import is_asyncio
 
@@ -60,6 +63,10 @@ if TYPE_CHECKING:
     from .session import Response
 
 logger = logging.getLogger("aiofins.poller")
+
+#: A plan of one frame as a scan sends it: its command ``(mrc, src, params)`` and the
+#: decoder of its reply frame (``None``: the reply is decoded tag by tag).
+_OneFrame = tuple[tuple[int, int, bytes], Callable[[bytes], "tuple[Value, ...] | None"] | None]
 
 #: Seconds between two warnings about one group's missed scans (the count says how many).
 MISSED_WARNING_INTERVAL = 60.0
@@ -176,14 +183,21 @@ class ScanGroup:
     #: The pool lease the group's scans borrow the endpoint's client with (kept between scans).
     _lease: _Lease | None = field(default=None, repr=False)
     #: The scan in flight on the callback path (see :meth:`Poller._scan_soon`), if any:
-    #: (its requests, the lease, the client lent, when it started: loop clock, wall clock).
-    _scan: tuple[CallbackBatch, _Lease, Client, float, float] | None = field(
+    #: (its request(s), the lease, the client lent, when it started: loop clock, wall clock).
+    _scan: tuple[CallbackBatch | CallbackPending, _Lease, Client, float, float] | None = field(
         default=None, repr=False
     )
-    #: What ends such a scan (the poller's :meth:`~Poller._scanned_soon` for this group).
+    #: What ends such a scan of several frames (the poller's :meth:`~Poller._scanned_soon`
+    #: for this group) and of one frame (:meth:`~Poller._scanned_frame`).
     _done: Callable[[list[Response] | None, BaseException | None], None] | None = field(
         default=None, repr=False
     )
+    _frame_done: Callable[[bytes | None, BaseException | None], None] | None = field(
+        default=None, repr=False
+    )
+    #: The plan's one frame, made once: (its command, the decoder of its reply frame, or
+    #: None); ``()`` for a plan of several frames (sent as a batch); ``None``: not made yet.
+    _one: _OneFrame | tuple[()] | None = field(default=None, repr=False)
     #: A snapshot of the callback path for the group's task to deliver (backpressure).
     _undelivered: Snapshot | None = field(default=None, repr=False)
 
@@ -268,6 +282,7 @@ class Poller:
         assert self._tg is not None
         group._wake.bind()
         group._done = partial(self._scanned_soon, group)
+        group._frame_done = partial(self._scanned_frame, group)
         group._enter(ScanState.IDLE)
         self._tg.start_soon(self._run_group, group)
         self._plan_scan(self._now() if now is None else now, group)
@@ -526,14 +541,28 @@ class Poller:
             lease.release()
             return False
         started = self._now()
+        one = group._one
+        if one is None:
+            one = group._one = _one_frame(plan)
+        request: CallbackBatch | CallbackPending | None
         try:
-            request = start_requests(
-                client.session,
-                plan.scan_commands()[0],
-                done,
-                dest=client.dest,
-                timeout=group.timeout,
-            )
+            if one:
+                assert group._frame_done is not None
+                request = start_request(
+                    client.session,
+                    one[0],
+                    group._frame_done,
+                    dest=client.dest,
+                    timeout=group.timeout,
+                )
+            else:
+                request = start_requests(
+                    client.session,
+                    plan.scan_commands()[0],
+                    done,
+                    dest=client.dest,
+                    timeout=group.timeout,
+                )
         except Exception:  # a bug, not the PLC: the group's task scans (and says what)
             logger.exception("scan group %s: the scan could not start", group.name)
             request = None
@@ -545,6 +574,45 @@ class Poller:
         group._enter(ScanState.SCANNING)
         group.scans += 1
         return True
+
+    def _scanned_frame(
+        self, group: ScanGroup, frame: bytes | None, error: BaseException | None
+    ) -> None:
+        """A scan of one frame of :meth:`_scan_soon` ended (called by the session with the
+        reply frame): decoded from the frame in one call where the plan allows (see
+        :meth:`ReadPlan.frame_decoder`), else as :meth:`_scanned_soon` does."""
+        scan = group._scan
+        if scan is None:  # (given up by the poller's exit)
+            return
+        group._scan = None
+        _, lease, client, started, stamp = scan
+        lease.release()
+        if group._lease is None:
+            group._lease = lease
+        try:
+            if frame is None:
+                self._end_scan(group, client, started, stamp, None, error)
+                return
+            one = group._one
+            decode = one[1] if one else None
+            values = None if decode is None else decode(frame)
+            if values is None:  # tag by tag (and what is wrong with which)
+                raw = int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
+                response = new_response(EndCode(raw), frame[MIN_REPLY_SIZE:], frame)
+                self._end_scan(group, client, started, stamp, [response], None)
+                return
+            if frame[END_CODE] or frame[END_CODE + 1]:  # (CPU error flags)
+                client.last_end_code = EndCode(
+                    int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
+                )
+            else:
+                client.last_end_code = _NORMAL
+            self._handover(group, self._scanned(group, started, stamp, values, None, _NO_BAD, None))
+        except Exception:  # a bug, not the PLC: logged, and the group scans on
+            logger.exception("scan group %s: the scan could not end", group.name)
+            group.errors += 1
+            if group.state is ScanState.SCANNING:
+                group._enter(ScanState.IDLE)
 
     def _scanned_soon(
         self, group: ScanGroup, responses: list[Response] | None, error: BaseException | None
@@ -588,7 +656,11 @@ class Poller:
                 error = exc
         elif isinstance(error, EndCodeError):
             add_addressing_hint(error, client.dest, client.session.source)
-        snapshot = self._scanned(group, started, stamp, values, read, bad, error)
+        self._handover(group, self._scanned(group, started, stamp, values, read, bad, error))
+
+    def _handover(self, group: ScanGroup, snapshot: Snapshot | None) -> None:
+        """A callback scan's snapshot to the buffer, or, if the buffer is full, to the
+        group's task to wait for room; the scan is over (IDLE) otherwise."""
         if snapshot is not None and not self._channel.send_nowait(snapshot):
             group._enter(ScanState.DELIVERING)  # full: the group's task waits for room
             group._undelivered = snapshot
@@ -748,6 +820,8 @@ class Poller:
 
 
 _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR
+_NORMAL = EndCode(0)
+_NO_BAD: dict[str, str] = {}  # (read only: a good scan's tags that are no value of their type)
 #: Scan times this close are due now: event loops round timers (uvloop to 1 ms), and a timer
 #: that fires a little early must not make the timer task spin until the exact time.
 _TIMER_SLACK = 0.001
@@ -799,6 +873,15 @@ def _good_readings(names: TagNames, values: tuple[Value, ...], stamp: float) -> 
     readings._values = values
     readings._stamp = stamp
     return readings
+
+
+def _one_frame(plan: ReadPlan) -> _OneFrame | tuple[()]:
+    """A plan of one frame: its command and the decoder of its reply (``None``: decoded
+    tag by tag); ``()`` for a plan of several frames."""
+    commands = plan.scan_commands()[0]
+    if len(commands) != 1 or plan.multiple:
+        return ()
+    return commands[0], plan.frame_decoder()
 
 
 def _decode(

@@ -27,6 +27,7 @@ from .protocol.addresses import parse_address
 from .protocol.areas import MemoryAddress, check_span
 from .protocol.commands.memory import MemoryAreaRead, MultipleMemoryAreaRead
 from .protocol.errors import AddressError, CommandError, DecodeError
+from .protocol.frames import MIN_REPLY_SIZE
 from .protocol.values import Value, ValueType, WordOrder, parse_value_type
 from .protocol.wordcodec import NUMBER_CODES
 
@@ -232,6 +233,42 @@ class ReadPlan:
         if masks:  # each bit: its word & its mask, as a bool (no Python loop)
             numbers += tuple(map(truth, map(and_, bit_words(flat), masks)))
         return numbers if order is None else order(numbers)
+
+    def frame_decoder(self) -> Callable[[bytes], tuple[Value, ...] | None] | None:
+        """For a plan of one 0101 frame whose tags all decode in bulk: a function from a
+        normal reply frame (header, command and end code, then the words) straight to the
+        values :meth:`decode_values` gives, or ``None`` where that would (and for a frame
+        of the wrong size: then :meth:`decode` says why). ``None`` for other plans. Built
+        once per plan: a scan of the Poller decodes its reply in one call."""
+        built: Callable[[bytes], tuple[Value, ...] | None] | tuple[()] | None
+        built = self.cache.get("frame")
+        if built is None:
+            built = self.cache["frame"] = self._compile_frame_decoder()
+        return built or None
+
+    def _compile_frame_decoder(self) -> Callable[[bytes], tuple[Value, ...] | None] | tuple[()]:
+        fast: _Values | None = self.cache.get("values")
+        if fast is None:
+            fast = self.cache["values"] = self._compile_values()
+        if not fast or not fast[0] or self.run_read(0)[4] is None:
+            return ()
+        count, _, pack, unpack, bit_words, masks, order = fast
+        words = struct.Struct(f">{count}H").unpack_from
+        size = MIN_REPLY_SIZE + 2 * count
+
+        def decode(frame: bytes) -> tuple[Value, ...] | None:
+            if len(frame) != size:
+                return None
+            flat = words(frame, MIN_REPLY_SIZE)
+            try:
+                numbers: tuple[Value, ...] = unpack(pack(*flat))
+            except struct.error:
+                return None
+            if masks:
+                numbers += tuple(map(truth, map(and_, bit_words(flat), masks)))
+            return numbers if order is None else order(numbers)
+
+        return decode
 
     def _compile_values(self) -> _Values:
         """What :meth:`decode_values` needs: the frames' lengths as :meth:`decode` checks

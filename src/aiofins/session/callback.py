@@ -17,6 +17,13 @@ synchronously and a link that is open, the breaker closed and a slot of the dest
 free. Otherwise :func:`start_requests` returns ``None`` and the caller takes the awaitable
 path (:meth:`Session.request_many`), which waits for the link, the slot or the breaker's
 probe as any call does.
+
+A caller of one command a time (a Poller's scan of one frame) takes
+:func:`start_request`: the same conditions, the same :meth:`Session.start` and receive
+path, but no batch: the command's :class:`CallbackPending` hands the reply frame itself to
+``done(frame, error)`` (no future, no :class:`Response`), and only a busy end code
+(2604/2605) turns it into a :class:`CallbackBatch`, whose retries after a growing pause,
+SID waits and extra SID spaces are the batch's.
 """
 
 from __future__ import annotations
@@ -24,17 +31,24 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 
+from ..protocol.errors import FinsTimeout
+from ..protocol.frames import ERROR_BITS
 from ..protocol.header import FinsAddress
 from .batch import Batch, Command
 from .breaker import BreakerState
 from .core import Session
+from .messages import no_response
 from .response import Response
+from .slots import DestState, Pending
 from .states import LinkState
 
 logger = logging.getLogger("aiofins.session")
 
 #: ``done(responses, error)``: the responses in command order, or ``None`` and the error.
 Done = Callable[[list[Response] | None, BaseException | None], object]
+#: ``done(frame, error)`` of :func:`start_request`: the reply frame (its end code a normal
+#: completion, possibly with CPU error flags), or ``None`` and the error.
+FrameDone = Callable[[bytes | None, BaseException | None], object]
 
 
 _CLOSED = BreakerState.CLOSED
@@ -145,3 +159,180 @@ def start_requests(
     finally:
         batch.starting = False
     return batch
+
+
+class CallbackPending(Pending):
+    """One command of :func:`start_request` on the wire: the receive path hands its reply
+    to :meth:`wake`, the deadline watcher its timeout (or the link its failure) to
+    :meth:`fail`, and either calls ``done`` from there. Made bare (``__new__`` only):
+    :func:`start_request` and :meth:`Session.start` set every field."""
+
+    __slots__ = ("done_with", "handle", "params", "retries", "session", "target", "timeout")
+
+    __init__ = object.__init__
+
+    session: Session
+    #: The destination's state (address, slots).
+    target: DestState
+    timeout: float
+    params: bytes
+    retries: int
+    done_with: FrameDone | None
+    #: The batch that took over after a busy end code (see :meth:`wake`), if any.
+    handle: CallbackBatch | None
+
+    def wake(self, frame: bytes) -> None:
+        """The reply (out of the pending table, its SID lingering): a normal completion is
+        counted and handed over; a busy end code (2604/2605) hands the command to a
+        :class:`CallbackBatch` that sends it again after the session's pause; any other
+        end code fails the call with the session's exception for it."""
+        done = self.done_with
+        if done is None:  # cancelled
+            return
+        session = self.session
+        end = self.end_code
+        if not end & ERROR_BITS:
+            if end:  # CPU error flags: logged and counted by the session's own step
+                session.response(frame, end)
+            else:
+                session.stats.completed += 1
+            self.done_with = None
+            self.free_slot()
+            session.tell_breaker(None, self.timeout)
+            _call(session, done, frame, None)
+            return
+        pause = session.busy_pause(frame, 0)
+        if pause is not None:
+            self.handle = _busy_batch(self, pause)
+            return
+        self._end(session.end_code_failure(frame, self.mrc, self.src))
+
+    def fail(self, exc: BaseException) -> None:
+        """No reply after every transmission (its SID quarantined and slot freed by the
+        watcher), or the link failed."""
+        if self.done_with is None:
+            return
+        if isinstance(exc, FinsTimeout):
+            exc = no_response(
+                self.session, self.target.address, self.mrc, self.src, self.timeout, self.attempts
+            )
+        self._end(exc)
+
+    def _end(self, error: BaseException) -> None:
+        done = self.done_with
+        assert done is not None
+        self.done_with = None
+        self.free_slot()
+        self.session.tell_breaker(error, self.timeout)
+        _call(self.session, done, None, error)
+
+    def cancel(self) -> None:
+        """Give up without calling ``done``: unanswered, its SID is quarantined; the slot
+        given back. (Nothing if it has ended.)"""
+        if self.done_with is None:
+            return
+        self.done_with = None
+        batch = self.handle
+        if batch is not None:
+            batch.cancel()
+            return
+        self.session.abandon(self, self.timeout)
+        self.free_slot()
+
+
+def _call(
+    session: Session, done: FrameDone, frame: bytes | None, error: BaseException | None
+) -> None:
+    try:
+        done(frame, error)
+    except Exception:  # the caller's bug: logged here, never raised into the transport
+        logger.exception("%s: a request's callback failed", session.transport.description)
+
+
+def _busy_batch(p: CallbackPending, pause: float) -> CallbackBatch:
+    """A busy end code came for ``p``: a one-command :class:`CallbackBatch` holding ``p``'s
+    slot sends it again after ``pause`` (its next busy replies pause longer, as in any
+    batch), and hands the outcome to ``p``'s ``done``."""
+    session = p.session
+    session.stats.busy_retries += 1
+    done = p.done_with
+    assert done is not None
+
+    def ended(responses: list[Response] | None, error: BaseException | None) -> None:
+        p.done_with = None
+        done(None if responses is None else responses[0].frame, error)
+
+    command: Command = (p.mrc, p.src, p.params)
+    batch = CallbackBatch(session, (command,), p.target, p.timeout, p.retries, 1)
+    batch.done = ended
+    batch.starting = False
+    batch.held = 1  # p's slot
+    p.slots = None
+    batch.next = batch.started = 1  # (sent by later(), not by a flush)
+    batch.busy[0] = 1
+    batch.later(pause, 0)
+    return batch
+
+
+def start_request(
+    session: Session,
+    command: Command,
+    done: FrameDone,
+    *,
+    dest: FinsAddress | None = None,
+    timeout: float | None = None,
+    retries: int | None = None,
+) -> CallbackPending | None:
+    """Send one idempotent ``command`` (``(mrc, src, params)``, checked by the caller) and
+    call ``done(frame, error)`` with its reply frame or its failure; the returned request's
+    :meth:`~CallbackPending.cancel` gives up on it. ``None`` (nothing sent) when it cannot
+    start at once, as :func:`start_requests`, or when every SID of the destination is
+    taken (the awaitable path waits for one)."""
+    if (
+        not session.on_asyncio
+        or session.link_state is not _OPEN
+        or session.breaker_state is not _CLOSED
+    ):
+        return None
+    send = session.transport.fast_send
+    if send is None:
+        return None
+    state = session.dest_state(session.dest if dest is None else dest)
+    slots = state.slots
+    if not slots.try_acquire():
+        return None
+    if timeout is None:
+        timeout = session.timeout
+    if retries is None:
+        retries = session.retries
+    p: CallbackPending = _new(CallbackPending)
+    p.fut = None
+    p.session = session
+    p.target = state
+    p.timeout = timeout
+    p.handle = None
+    p.params = command[2]
+    p.retries = retries
+    session.log_frames_now()
+    now = session.clock()
+    try:
+        frame = session.start(p, state, *command, retries, now, now + timeout, None)
+    except BaseException:
+        slots.release()
+        raise
+    if frame is None:  # no free SID of the session's own: the awaitable path waits
+        slots.release()
+        return None
+    p.slots = slots
+    p.done_with = done
+    try:
+        send(frame)
+    except Exception:  # the send failed: nothing of it left; the awaitable path says why
+        p.done_with = None
+        session.abandon(p, timeout)
+        p.free_slot()
+        return None
+    return p
+
+
+_new = object.__new__
