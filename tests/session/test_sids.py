@@ -87,20 +87,43 @@ def test_abandon_quarantines_and_drain_empties_the_table() -> None:
     assert space.drain() == [q] and space.pending == {}
 
 
+def answered(space: SidSpace, key: int, at: float, reply: bytes = b"reply") -> None:
+    """``key``'s request was answered with ``reply`` at ``at`` (negative: after a
+    retransmission)."""
+    space.recent[key] = at
+    space.answers[key] = reply
+
+
 def test_unmatched_replies_are_counted_and_a_duplicate_teaches_the_linger() -> None:
     space, stats = SidSpace(min_linger=0.01), SessionStats({})
     space.quarantine[0x10001] = monotonic() + 15
-    assert space.unmatched(stats, 0x10001) == ("late", 0.0)
+    assert space.unmatched(stats, 0x10001, b"late") == ("late", 0.0)
     assert space.quarantine[0x10001] <= monotonic() + LATE_REPLY_GRACE  # its reply has come
-    space.recent[0x10002] = monotonic() - 0.1  # answered 0.1 s ago: the network duplicated it
-    kind, lateness = space.unmatched(stats, 0x10002)
+    answered(space, 0x10002, monotonic() - 0.1)  # 0.1 s ago: the network duplicated it
+    kind, lateness = space.unmatched(stats, 0x10002, b"reply")
     assert kind == "duplicate" and 0.1 <= lateness < 1
     assert 0.2 <= space.linger <= MAX_LINGER
-    space.recent[0x10003] = -(monotonic() - 0.2)  # answered after a retransmission
-    assert space.unmatched(stats, 0x10003) == ("duplicate", 0.0)
+    answered(space, 0x10003, -(monotonic() - 0.2))  # answered after a retransmission
+    assert space.unmatched(stats, 0x10003, b"reply") == ("duplicate", 0.0)
     assert space.linger_resent >= 0.4
-    assert space.unmatched(stats, 0x10009) == ("unsolicited", 0.0)
+    assert space.unmatched(stats, 0x10009, b"reply") == ("unsolicited", 0.0)
     assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 2, 1)
+
+
+def test_a_reply_under_an_answered_sid_is_a_duplicate_only_if_a_copy_of_its_reply() -> None:
+    """Anything else under an answered SID (a reply with a wrong SID) is unsolicited and
+    teaches no linger: taken for a duplicate seconds late, it made every SID linger
+    seconds (issue #22, the soak's "no free SID" long after the faults)."""
+    now = [100.0]
+    space, stats = SidSpace(clock=lambda: now[0]), SessionStats({})
+    answered(space, 0x10001, 98.0, b"D100 holds 1")
+    answered(space, 0x10002, -98.0, b"D100 holds 1")  # (after a retransmission)
+    assert space.unmatched(stats, 0x10001, b"D200 holds 2") == ("unsolicited", 0.0)
+    assert space.unmatched(stats, 0x10002, b"D200 holds 2") == ("unsolicited", 0.0)
+    assert (space.linger, space.linger_resent, space.lingering) == (0.0, 0.0, {})
+    assert space.unmatched(stats, 0x10001, b"D100 holds 1") == ("duplicate", 2.0)
+    assert space.linger == 4.0  # twice its lateness
+    assert (stats.duplicates, stats.unsolicited) == (1, 2)
 
 
 def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -> None:
@@ -110,12 +133,12 @@ def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -
     words). They now linger the new linger from when they were answered."""
     now = [100.0]
     space, stats = SidSpace(min_linger=0.0, clock=lambda: now[0]), SessionStats({})
-    space.recent[0x10001] = 99.7  # the duplicate's reply, answered 0.3 s ago
-    space.recent[0x10002] = 99.9  # answered 0.1 s ago, free under the old linger (0)
-    space.recent[0x10003] = 99.0  # answered 1 s ago: past any linger learnt here
-    space.recent[0x10004] = 99.95  # answered, and its SID carries a new request already
+    answered(space, 0x10001, 99.7)  # the duplicate's reply, answered 0.3 s ago
+    answered(space, 0x10002, 99.9)  # answered 0.1 s ago, free under the old linger (0)
+    answered(space, 0x10003, 99.0)  # answered 1 s ago: past any linger learnt here
+    answered(space, 0x10004, 99.95)  # answered, and its SID carries a new request already
     space.pending[0x10004] = Pending(0x10004, 0x01, 0x01)
-    kind, lateness = space.unmatched(stats, 0x10001)
+    kind, lateness = space.unmatched(stats, 0x10001, b"reply")
     assert kind == "duplicate" and lateness == pytest.approx(0.3)
     assert space.linger == pytest.approx(0.6)
     assert space.lingering == {

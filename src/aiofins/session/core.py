@@ -397,7 +397,7 @@ class Session:
             if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
                 p = match_relay_error(pending, frame)
             if p is None:
-                log_unmatched(self, key, sids, raw >= RELAY_ERROR_BIT)
+                log_unmatched(self, key, frame, sids, raw >= RELAY_ERROR_BIT)
                 return
             key = p.key
             del pending[key]
@@ -413,6 +413,7 @@ class Session:
         p.end_code = raw
         now = self.clock()
         sids.recent[key] = now
+        sids.answers[key] = frame
         latency = now - p.sent_at
         if sids.given_up:  # an outage's quarantines end now that the destination answers
             sids.answered_after(key, p.sent_at, now)

@@ -59,12 +59,15 @@ def cpu_flags_seen(where: str, end_code: int, logged: int) -> int:
     return logged | new
 
 
-def log_unmatched(session: Session, key: int, sids: SidSpace, relay_error: bool = False) -> None:
-    """A reply no request of ``session`` waits for (SID space ``sids``, reply key ``key``):
+def log_unmatched(
+    session: Session, key: int, frame: bytes, sids: SidSpace, relay_error: bool = False
+) -> None:
+    """A reply ``frame`` no request of ``session`` waits for (SID space ``sids``, reply
+    key ``key``):
     counted (late, duplicate or unsolicited; see :meth:`SidSpace.unmatched`), and logged
     when it says something about the link (a duplicate that lengthens the linger, late
     replies at 2, 4, 8 ...)."""
-    kind, lateness = sids.unmatched(session.stats, key, relay_error)
+    kind, lateness = sids.unmatched(session.stats, key, frame, relay_error)
     where = session.transport.description
     if kind == "duplicate":
         spaces = session._spaces

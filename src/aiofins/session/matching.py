@@ -38,18 +38,21 @@ LATE_REPLY_GRACE = 0.5
 def count_unmatched(
     stats: SessionStats,
     quarantine: dict[int, float],
-    recent: dict[int, float],
+    answers: dict[int, bytes],
     key: int,
+    frame: bytes,
     now: float,
     relay_error: bool = False,
 ) -> str:
-    """Count a reply no request waits for: late (timed out), duplicate, or unsolicited.
+    """Count a reply ``frame`` no request waits for: late (timed out), duplicate, or
+    unsolicited.
 
     A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE` from
     ``now``, the session's time): the reply the quarantine waited for has come. A relay
     error (``relay_error``: its key names the relay point) is late for any SID
-    quarantined under its SID number. Returns which: ``"late"``, ``"duplicate"`` or
-    ``"unsolicited"``.
+    quarantined under its SID number. A duplicate is a copy of the reply its SID was last
+    answered with (``answers``: key -> that reply). Returns which: ``"late"``,
+    ``"duplicate"`` or ``"unsolicited"``.
     """
     if relay_error:
         sid = key & 0xFF
@@ -68,7 +71,7 @@ def count_unmatched(
             quarantine[k] = min(until, now + LATE_REPLY_GRACE)
             return "late"
     for k in keys:
-        if k in recent:
+        if answers.get(k) == frame:
             stats.duplicates += 1
             return "duplicate"
     stats.unsolicited += 1

@@ -49,6 +49,7 @@ class SidSpace:
     """
 
     __slots__ = (
+        "answers",
         "clock",
         "given_up",
         "linger",
@@ -78,6 +79,9 @@ class SidSpace:
         #: SID key -> when its last request was answered (to count and time duplicates);
         #: negative after a retransmission.
         self.recent: dict[int, float] = {}
+        #: SID key -> the reply its last request was answered with: a duplicate is a copy
+        #: of it, byte for byte (at most one frame per key: 256 per destination).
+        self.answers: dict[int, bytes] = {}
         #: The linger after a completion the link has shown necessary (late duplicates).
         self.linger = min_linger
         #: The same after a retransmission (learnt from replies to earlier transmissions).
@@ -240,15 +244,20 @@ class SidSpace:
         return max(self.linger, self.linger_resent, rto_max, LINGER_FACTOR * (now - p.sent_at))
 
     def unmatched(
-        self, stats: SessionStats, key: int, relay_error: bool = False
+        self, stats: SessionStats, key: int, frame: bytes, relay_error: bool = False
     ) -> tuple[str, float]:
-        """A reply no request waits for: counted (late, duplicate or unsolicited). A late
-        reply ends its SID's quarantine; a duplicate teaches the linger (SIDs then wait
-        twice its lateness after a reply). Returns which (``"late"``, ``"duplicate"`` or
-        ``"unsolicited"``), and for a duplicate of a reply
-        the network repeated that made :attr:`linger` grow, how late it came (else 0.0)."""
+        """A reply ``frame`` no request waits for: counted (late, duplicate or
+        unsolicited). A late reply ends its SID's quarantine; a duplicate (a copy of the
+        reply its SID was last answered with, see :attr:`answers`) teaches the linger
+        (SIDs then wait twice its lateness after a reply). Returns which (``"late"``,
+        ``"duplicate"`` or ``"unsolicited"``), and for a duplicate of a reply the network
+        repeated that made :attr:`linger` grow, how late it came (else 0.0). Anything
+        else under an answered SID (a reply with a wrong SID, say) is unsolicited and
+        teaches nothing: taken for a duplicate, a stray reply under a SID answered seconds
+        ago made every SID linger seconds, and requests wait for SIDs long after the PLC
+        answered normally again (issue #22)."""
         now = self.clock()
-        kind = count_unmatched(stats, self.quarantine, self.recent, key, now, relay_error)
+        kind = count_unmatched(stats, self.quarantine, self.answers, key, frame, now, relay_error)
         if kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
