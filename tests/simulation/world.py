@@ -923,11 +923,7 @@ SIGNS = (
 #: and each has a world in ``scenarios.UNFIXED_WORLDS`` that test_defects.py runs as a
 #: strict xfail, so that a fix is noticed (its world passes, the xfail fails): the fix
 #: removes the kind here and its world there.
-UNFIXED = frozenset(
-    {
-        "no free SID after the faults (defect 4/5 family)",
-    }
-)
+UNFIXED: frozenset[str] = frozenset()  # (the "no free SID after the faults" family: fixed)
 
 
 def suspect(result: Result) -> str:
