@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiofins.protocol.errors import ConnectionLost, FinsTimeout, ParameterError
+from aiofins.protocol.errors import ConnectionLost, FinsTimeout, ParameterError, RelayError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.matching import LATE_REPLY_GRACE
@@ -540,6 +540,59 @@ async def test_waiting_for_a_free_sid_is_bounded_by_the_requests_timeout() -> No
             # (request_many's batch under asyncio looks for a SID every SID_WAIT: it gave up
             # at the first look past the deadline, 0.21 s; its last look is now at 0.2 s.)
             assert 0.2 - 1e-6 <= anyio.current_time() - start <= 0.2 + 1e-6
+
+
+@on_virtual_time
+async def test_relay_errors_for_requests_in_flight_to_several_destinations_each_reach_its_own() -> (
+    None
+):
+    """Reads of one command code in flight at once to 2.5.0, 3.6.0 and 4.7.0 through the
+    relay 1.9: the relay answers the first two with relay errors (from its own address,
+    each naming where forwarding failed), the third with data, all at once and in reverse.
+    A relay error is matched by SID and command code: the session has each in flight under
+    a SID of its own, so each error reaches its own request, and only its own."""
+    held: list[bytes] = []
+    failed_at = {2: (0x8205, b"\x02\x01"), 3: (0x8201, b"\x03\x01")}
+
+    def relay(cmd: bytes) -> list[Reply]:
+        held.append(cmd)
+        if len(held) < 3:
+            return []
+        out = []
+        for c in reversed(held):
+            if c[3] in failed_at:
+                code, trailer = failed_at[c[3]]
+                error = reply(c, code, trailer=trailer)
+                out.append((0.0, error[:6] + bytes((1, 9, 0)) + error[9:]))  # from the relay
+            else:
+                out.append((0.0, reply(c, 0, word_data(c))))
+        return out
+
+    results: dict[int, object] = {}
+    async with udp_responder(relay) as peer, session_for(peer, timeout=1.0) as session:
+
+        async def read(network: int, node: int) -> None:
+            try:
+                r = await session.request(
+                    0x01, 0x01, read_params(node), dest=FinsAddress(network, node, 0)
+                )
+                results[network] = r.data
+            except RelayError as exc:
+                results[network] = (exc.end_code.raw, exc.network, exc.node)
+
+        async with anyio.create_task_group() as tg:
+            for network, node in ((2, 5), (3, 6), (4, 7)):
+                tg.start_soon(read, network, node)
+        assert len({c[9] for c in held}) == 3  # a SID of its own each
+        (to_4,) = (c for c in held if c[3] == 4)
+        assert results == {
+            2: (0x8205, 2, 1),
+            3: (0x8201, 3, 1),
+            4: word_data(to_4),
+        }
+        stats = session.stats
+        assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (0, 0, 0)
+        assert (stats.completed, stats.end_code_errors) == (1, 2)
 
 
 @on_virtual_time  # the answered read after the timeout has 0.1 s: not on a loaded wall clock

@@ -18,15 +18,18 @@ def match_wildcard(pending: dict[int, Pending], key: int) -> Pending | None:
 def match_relay_error(pending: dict[int, Pending], frame: bytes) -> Pending | None:
     """A relay error comes from the relay point, not from the destination we asked.
 
-    Match it on SID and command code alone when exactly one request fits (preferring the
-    one whose destination network the reply names); never guess between several. A SID
-    that may still get a late relay error is given to no request to another destination
-    (see :meth:`SidSpace.relay_taken <aiofins.session.sids.SidSpace.relay_taken>`).
+    Its address (``SNA SA1 SA2``) is the relay's, and its trailer names where forwarding
+    failed, which may be any network on the route: nothing in it names the destination.
+    So it is matched on SID and command code alone, and only when exactly one request in
+    flight on this SID space fits; with several it answers none (it is counted as
+    unmatched, and each request gets its own reply or times out). The session makes
+    several impossible: while it addresses several destinations a SID is in flight to one
+    at a time, and one that may still get a late relay error is given to no request to
+    another destination (see :meth:`SidSpace.relay_taken
+    <aiofins.session.sids.SidSpace.relay_taken>`).
     """
     sid, mrc, src = frame[9], frame[10], frame[11]
     fits = [p for k, p in pending.items() if k & 0xFF == sid and p.mrc == mrc and p.src == src]
-    if len(fits) > 1:
-        fits = [p for p in fits if p.key >> 24 == frame[6]]
     return fits[0] if len(fits) == 1 else None
 
 
