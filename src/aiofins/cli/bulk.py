@@ -34,7 +34,7 @@ from ..protocol.commands.program import ProgramAreaWrite
 from ..protocol.commands.status import CpuMode
 from ..protocol.errors import CommandError
 from ..protocol.files import Disk
-from .options import add_read_only, add_timeout, add_yes, confirm, refuse
+from .options import URL_HELP, add_read_only, add_timeout, add_yes, confirm, refuse
 from .plc import with_client
 from .text import escape
 
@@ -65,7 +65,7 @@ class ProgressBar:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
+    p.add_argument("url", help=URL_HELP)
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
     add_timeout(p, 5.0, "seconds per frame (default 5)")

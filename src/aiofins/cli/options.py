@@ -38,6 +38,23 @@ def argument_type(check: Callable[[str], object]) -> Callable[[str], object]:
 timeout_seconds = argument_type(lambda value: seconds("timeout", value, text=True))
 
 
+URL_HELP = "udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N"
+
+
+def add_url_and_tags(p: argparse.ArgumentParser) -> None:
+    """URL, then tags as arguments and/or ``--tags FILE`` (``poll`` and ``watch``)."""
+    p.add_argument("url", help=URL_HELP)
+    p.add_argument("tags", nargs="*", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
+    p.add_argument(
+        "--tags",
+        dest="tag_files",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="CSV of name,address,type or a CX-Programmer symbol table (repeatable)",
+    )
+
+
 def add_timeout(p: argparse.ArgumentParser, default: float, help: str) -> None:
     p.add_argument("--timeout", type=timeout_seconds, default=default, help=help)
 

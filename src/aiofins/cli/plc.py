@@ -30,14 +30,14 @@ from ..protocol.endcodes import EndCode
 from ..protocol.errors import CommandError
 from ..protocol.inputs import float_value, shown
 from ..protocol.values import TYPE_NAMES, Value, parse_value_type
-from .options import add_read_only, add_timeout, add_yes, confirm, refuse
+from .options import URL_HELP, add_read_only, add_timeout, add_yes, confirm, refuse
 from .text import escape
 
 Handler = Callable[[Client, argparse.Namespace], Awaitable[Any]]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
+    p.add_argument("url", help=URL_HELP)
     p.add_argument("--dest", help="destination FINS address NET.NODE.UNIT")
     p.add_argument("--src", help="source FINS address NET.NODE.UNIT")
     add_timeout(p, 2.0, "seconds per attempt, and for a FINS/TCP connect and handshake (default 2)")

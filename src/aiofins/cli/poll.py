@@ -18,23 +18,14 @@ from ..poller import Poller, Snapshot
 from ..pool import Pool
 from ..protocol.errors import CommandError
 from ..tagfile import load_tags
-from .options import add_timeout
+from .options import add_timeout, add_url_and_tags
 from .plc import warn_of_cpu_errors
 from .text import escape
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("poll", help="poll tags periodically and print each scan")
-    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
-    p.add_argument("tags", nargs="*", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
-    p.add_argument(
-        "--tags",
-        dest="tag_files",
-        action="append",
-        default=[],
-        metavar="FILE",
-        help="CSV of name,address,type or a CX-Programmer symbol table (repeatable)",
-    )
+    add_url_and_tags(p)
     p.add_argument("--interval", type=float, default=1.0, help="seconds between scans")
     p.add_argument("--count", type=int, default=0, help="stop after N scans (0: run until ^C)")
     p.add_argument("--changes-only", action="store_true", help="print only changed tags")

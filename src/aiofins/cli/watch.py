@@ -24,7 +24,7 @@ import anyio
 from ..poller import Poller, Quality, Snapshot, TagReading
 from ..pool import Pool
 from ..protocol.errors import CommandError
-from .options import add_timeout
+from .options import add_timeout, add_url_and_tags
 from .poll import collect_tags
 from .text import escape
 
@@ -185,16 +185,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "sparkline of the last scans per tag, redrawn after every scan. Needs the watch "
         "extra (rich).",
     )
-    p.add_argument("url", help="udp://HOST[:PORT], tcp://HOST[:PORT] or serial://DEVICE?baudrate=N")
-    p.add_argument("tags", nargs="*", help="ADDRESS[:TYPE] or NAME=ADDRESS[:TYPE]")
-    p.add_argument(
-        "--tags",
-        dest="tag_files",
-        action="append",
-        default=[],
-        metavar="FILE",
-        help="CSV of name,address,type or a CX-Programmer symbol table (repeatable)",
-    )
+    add_url_and_tags(p)
     p.add_argument("--interval", type=float, default=0.5, help="seconds between scans")
     p.add_argument("--history", type=int, default=40, help="scans in the trend (default 40)")
     p.add_argument("--count", type=int, default=0, help="stop after N scans (0: run until ^C)")
