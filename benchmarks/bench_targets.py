@@ -19,7 +19,7 @@ DM holds i), with ``bench_api.py``'s functions:
   responders at 100 ms: missed scans (= 0), share of one core (≤ 50 %).
 
     python benchmarks/bench_targets.py [--rounds 5] [--seconds 1] [--pin 0]
-        [--skip poll100,poll1000]
+        [--skip calls,poll100,poll1000]
 
 Wall clock: read the ratios, and the load average the script prints before and after.
 """
@@ -176,7 +176,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=1.0, help="seconds per timed case")
     parser.add_argument("--pin", type=int, default=0, help="the core of the one-core rows")
-    parser.add_argument("--skip", default="", help="comma list of: poll100, poll1000")
+    parser.add_argument("--skip", default="", help="comma list of: calls (the sequential, 50-task and DM rows), poll100, poll1000")
     args = parser.parse_args()
     skip = set(args.skip.split(","))
     affinity = os.sched_getaffinity(0)
@@ -189,13 +189,14 @@ def main() -> None:
         with responders(0 if "poll100" in skip else 100) as many:
             for i in range(args.rounds):
                 print(f"round {i + 1} of {args.rounds} (load {load()})", flush=True)
-                os.sched_setaffinity(0, {args.pin})
-                try:
-                    sequential_round(ports[0], args.seconds)
-                    tasks_round(ports[1], args.seconds)
-                    dm_round(ports[0])
-                finally:
-                    os.sched_setaffinity(0, affinity)
+                if "calls" not in skip:
+                    os.sched_setaffinity(0, {args.pin})
+                    try:
+                        sequential_round(ports[0], args.seconds)
+                        tasks_round(ports[1], args.seconds)
+                        dm_round(ports[0])
+                    finally:
+                        os.sched_setaffinity(0, affinity)
                 if many:
                     poll100_round(many, 2 * args.seconds)
     finally:
