@@ -12,6 +12,7 @@ import pytest
 
 from aiofins.poller import Poller, Quality, ScanGroup, ScanState, Snapshot
 from aiofins.pool import Pool
+from aiofins.session.callback import CallbackPending
 from aiofins.simulator.faults import Delay, FaultPlan, FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator, run_simulator
@@ -94,6 +95,8 @@ async def test_a_scan_in_flight_holds_its_lease_and_its_state(sim: Simulator) ->
             (stats,) = pool.stats(url).values()
             assert stats.in_use == 1  # borrowed: the pool neither lends it as idle nor closes it
             assert (group._scan is not None) is is_asyncio()
+            if group._scan is not None:  # a plan of one frame: one request, no batch
+                assert isinstance(group._scan[0], CallbackPending)
             await take(poller, 1)
         (stats,) = pool.stats(url).values()
         assert stats.in_use == 0 and group._scan is None
@@ -340,3 +343,25 @@ async def test_a_plan_of_several_frames_and_strings_scans_on_the_callback_path(
     for snap in snaps:
         assert snap.error is None and snap.values == {"s": "hello", "x": 7, "y": True}
     assert tasks == (["g"] if is_asyncio() else ["g"] * 4)
+
+
+async def test_cpu_error_flags_in_a_reply_leave_the_scan_good_and_are_kept() -> None:
+    """A reply whose end code carries a non-fatal CPU error flag (0x0040) is a normal
+    completion: the scan is GOOD (decoded from the frame) and the end code is the client's
+    ``last_end_code``, on the callback path as on the task path."""
+
+    def flagged(cmd: bytes) -> list[Reply]:
+        return [(0.0, reply(cmd, 0x0040, b"\x00\x05\x00\x06"))]
+
+    async with udp_responder(flagged) as peer:
+        url = f"udp://127.0.0.1:{peer.port}"
+        async with Pool(timeout=1) as pool, Poller(pool) as poller:
+            tasks = count_task_scans(poller)
+            poller.add_group("g", url, {"a": "D100", "b": "D101"}, interval=0.01)
+            snaps = await take(poller, 3)
+            async with pool.client(url) as plc:
+                assert plc.last_end_code is not None and plc.last_end_code.raw == 0x0040
+    for snap in snaps:
+        assert snap.error is None and snap.values == {"a": 5, "b": 6}
+        assert snap["a"].quality is Quality.GOOD
+    assert tasks == (["g"] if is_asyncio() else ["g"] * 3)

@@ -89,6 +89,43 @@ def test_values_decode_in_tag_order_without_a_dict() -> None:
     assert compile_tags({"s": "D0:uint32:BADC"}).decode_values([[1, 2]], []) is None
 
 
+REPLY_HEAD = bytes.fromhex("c00002000100000100070101") + b"\x00\x00"  # 0101 reply, end 0000
+
+
+def words_frame(words: list[int]) -> bytes:
+    return REPLY_HEAD + b"".join(w.to_bytes(2, "big") for w in words)
+
+
+@given(st.lists(st.integers(0, 0xFFFF), min_size=6, max_size=6))
+def test_a_one_frame_plan_decodes_its_reply_frame_as_its_words(words: list[int]) -> None:
+    """frame_decoder: the reply frame straight to the values decode_values gives its words."""
+    plan = compile_tags(
+        {"flag": "D102.01", "temp": "D100:float32", "n": "D103:int16", "u": "D104:uint32"}
+    )
+    decode = plan.frame_decoder()
+    assert decode is not None and plan.frame_decoder() is decode  # made once per plan
+    got = decode(words_frame(words))
+    want = plan.decode_values([words], [])
+    assert got is not None and want is not None
+    assert len(got) == len(want) == 4
+    for a, b in zip(got, want, strict=True):
+        assert a == b or (a != a and b != b)  # (NaN floats: equal words, unequal values)
+
+
+def test_frame_decoder_gives_none_where_the_tags_are_decoded_by_name() -> None:
+    plan = compile_tags({"temp": "D100:float32", "n": "D102:int16"})
+    decode = plan.frame_decoder()
+    assert decode is not None
+    assert decode(words_frame([0x0000, 0x3FC0, 0xFFFF])) == (1.5, -1)
+    assert decode(words_frame([0x0000, 0x3FC0])) is None  # short: decode() says which frame
+    assert decode(words_frame([0, 0x3FC0, 0xFFFF, 0])) is None
+    assert compile_tags({"b": "D0:bcd16"}).frame_decoder() is None
+    assert compile_tags({"s": "D0:uint32:BADC"}).frame_decoder() is None
+    tags = {"a": "D0", "b": "D500", "c": "D1000.02"}
+    assert compile_tags(tags, max_multiple_elements=1).frame_decoder() is None  # 3 frames
+    assert compile_tags(tags).frame_decoder() is None  # one 0104 frame
+
+
 def test_results_not_matching_the_plans_frames_are_refused() -> None:
     tags = compile_tags({"temp": "D100:float32", "w": "D300"}).tags
     plan = ReadPlan(tags, (WordRun(0x82, 100, 2),), ((MemoryAddress(0x82, 300, 0),),))
