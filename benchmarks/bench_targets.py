@@ -176,7 +176,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=1.0, help="seconds per timed case")
     parser.add_argument("--pin", type=int, default=0, help="the core of the one-core rows")
-    parser.add_argument("--skip", default="", help="comma list of: calls (the sequential, 50-task and DM rows), poll100, poll1000")
+    parser.add_argument(
+        "--skip",
+        default="",
+        help="comma list of: calls (sequential, 50 tasks, DM), poll100, poll1000",
+    )
     args = parser.parse_args()
     skip = set(args.skip.split(","))
     affinity = os.sched_getaffinity(0)
