@@ -98,10 +98,14 @@ def is_busy(end_code: int) -> bool:
     return (end_code & END_CODE_MASK) in BUSY_CODES
 
 
-def check_command(mrc: int, src: int, params: bytes) -> None:
-    """Refuse a command code or parameter block no FINS frame can carry, before sending."""
+def check_command(mrc: object, src: object, params: object) -> None:
+    """Refuse a command code or parameter block no FINS frame can carry, before sending
+    (typed ``object``: it checks what a caller passed, whatever that is)."""
     if not isinstance(params, (bytes, bytearray, memoryview)):
         raise TypeError(f"command parameters must be bytes, got {type(params).__name__}")
+    if not (isinstance(mrc, int) and isinstance(src, int)):
+        kinds = f"{type(mrc).__name__}/{type(src).__name__}"
+        raise TypeError(f"command codes must be ints, got {kinds}")
     if not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
         raise CommandError(f"command code {mrc:#x}/{src:#x} out of range 0..255")
     if len(params) > MAX_PARAMETER_SIZE:
@@ -113,7 +117,7 @@ def check_command(mrc: int, src: int, params: bytes) -> None:
 _PARAMETER_TYPES = frozenset({bytes, bytearray, memoryview})
 
 
-def check_commands(commands: Sequence[tuple[int, int, bytes]]) -> None:
+def check_commands(commands: Sequence[tuple[object, object, object]]) -> None:
     """:func:`check_command` for each of ``commands`` (``(mrc, src, params)``). When every
     one fits, as nearly always, that is found in a few passes over the whole list in C;
     the loop that says which does not only runs when one may not."""

@@ -97,14 +97,14 @@ class _AsyncioSocket:
         self.sink = sink
         self.backlog: deque[bytes] = deque()
         self.awaited = replies_awaited(sink)
-        loop.add_reader(sock.fileno(), self._readable)
+        loop.add_reader(sock.fileno(), self.poll)
 
-    def _readable(self) -> None:
+    def poll(self) -> None:
+        """Drain the queued datagrams into the sink: the reader callback, and the
+        session's read right after a send."""
         exc = _drain(self.sock.recv, self.sink, self.awaited)
         if exc is not None:
             self.owner._lost(self, exc)
-
-    poll = _readable
 
     def send(self, frame: bytes) -> None:
         if self.backlog:
@@ -220,14 +220,14 @@ class _NetworkSocket:
         self.owner = owner
         self.sink = sink
         self.awaited = replies_awaited(sink)
-        sock.on_readable = self._readable
+        sock.on_readable = self.poll
 
-    def _readable(self) -> None:
+    def poll(self) -> None:
+        """Drain the queued datagrams into the sink: the reader callback, and the
+        session's read right after a send."""
         exc = _drain(self.sock.recv, self.sink, self.awaited)
         if exc is not None:
             self.owner._lost(self, exc)
-
-    poll = _readable
 
     def send(self, frame: bytes) -> None:
         try:
