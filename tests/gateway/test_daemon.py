@@ -131,7 +131,9 @@ url = "udp://127.0.0.1:{free_port()}"
         async with subscribe(broker.port, "fins/_gateway/#") as late:
             await late.wait_for(lambda: late.messages)
             assert late.messages[0].retain
-            assert late.on("fins/_gateway/gw") == [{"state": "offline", "instance": instance}]
+            assert late.on("fins/_gateway/gw") == [
+                {"state": "offline", "instance": instance, "stopped": True}
+            ]
 
 
 async def test_changes_only_publishes_the_tags_that_changed(broker: Broker) -> None:

@@ -8,10 +8,13 @@ message not yet written is back in its outbox, in order.
 
 from __future__ import annotations
 
+import ast
+import json
 import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import anyio
 import anyio.abc
@@ -25,6 +28,8 @@ from aiofins.gateway.mqtt import LinkState, MqttLink, Outbox
 from .conftest import Broker, subscribe
 
 pytestmark = pytest.mark.anyio
+
+SRC = Path(__file__).resolve().parents[2] / "src" / "aiofins"
 
 #: Twelve messages of 512 KB: more than our socket's send buffer (at most 4 MB) and the
 #: peer's 4 KB receive buffer hold, so a write is cut short while the peer does not read.
@@ -193,17 +198,78 @@ async def test_a_qos0_backlog_goes_out_after_the_connect_in_order(broker: Broker
         link.close()
 
 
-async def test_the_qos0_fast_path_is_in_use(broker: Broker) -> None:
-    """QoS 0 messages go straight to aiomqtt's paho client (its private ``_client``): an
-    aiomqtt that no longer has one fails here, loudly, instead of costing ~1.6 times the CPU
-    per published scan in silence (benchmarks/README.md)."""
+async def test_a_qos0_message_is_written_in_put_itself(broker: Broker) -> None:
+    """The QoS 0 fast path: a message put into an empty outbox is on the wire when ``put()``
+    returns (paho's ``publish()`` with the connection writing at once), no task involved."""
     link = MqttLink(MqttConfig(port=broker.port, timeout=2.0), client_id="f", status_topic="s")
+    async with subscribe(broker.port, "fast") as sub, anyio.create_task_group() as tg:
+        tg.start_soon(link.run)
+        with anyio.fail_after(10):
+            await link.connected.wait()
+        box = link.outbox("fast", qos=0)
+        link.put(box, b"x")
+        assert box.published == 1 and not box.messages  # handed over and written in put()
+        (_, _, info) = link._handed[-1]
+        assert info.is_published()  # written to the socket, not queued in paho
+        await sub.wait_for(lambda: [m.payload for m in sub.messages] == [b"x"])
+        link.close()
+
+
+def test_the_gateway_uses_no_private_name_of_another_library() -> None:
+    """The MQTT layer is built on public APIs only (paho-mqtt's documented API for external
+    event loops), so an upgrade cannot break it silently: no ``x._name`` on anything but
+    ``self``/``cls``, no ``getattr(x, "_name")``, no private module or name imported."""
+    found = []
+    for path in sorted((SRC / "gateway").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            where = f"{path.name}:{getattr(node, 'lineno', 0)}"
+            if (
+                isinstance(node, ast.Attribute)
+                and _private(node.attr)
+                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))
+            ) or (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Name)
+                and node.func.id in ("getattr", "setattr", "hasattr")
+                and len(node.args) > 1
+                and isinstance(node.args[1], ast.Constant)
+                and _private(str(node.args[1].value))
+            ):
+                found.append(f"{where}: {ast.unparse(node)}")
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [a.name for a in node.names]
+                if any(_private(part) for part in (node.module or "").split(".")) or any(
+                    _private(n) for n in names
+                ):
+                    found.append(f"{where}: from {node.module} import {', '.join(names)}")
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if any(_private(part) for part in alias.name.split(".")):
+                        found.append(f"{where}: import {alias.name}")
+    assert found == []
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+async def test_a_clean_stop_is_not_taken_for_a_takeover_by_the_next_start(broker: Broker) -> None:
+    """A gateway that stops publishes ``offline`` with ``"stopped": true``, retained; the next
+    process finds it on its status topic: a restart, not a second gateway (its last will,
+    from a crash, still counts once)."""
+    link = MqttLink(MqttConfig(port=broker.port, timeout=2.0), client_id="g", status_topic="st")
     async with anyio.create_task_group() as tg:
         tg.start_soon(link.run)
         with anyio.fail_after(10):
             await link.connected.wait()
-        assert link._paho is not None
-        box = link.outbox("fast", qos=0)
-        link.put(box, b"x")
-        assert box.published == 1 and not box.messages  # handed over in put() itself
         link.close()
+    async with subscribe(broker.port, "st") as sub:
+        await sub.wait_for(lambda: sub.messages)
+        (status,) = sub.on("st")
+    assert status == {"state": "offline", "instance": link.instance, "stopped": True}
+    successor = MqttLink(MqttConfig(port=broker.port), client_id="g", status_topic="st")
+    successor._status_seen(json.dumps(status).encode())
+    assert successor.takeovers == 0
+    will = {"state": "offline", "instance": link.instance}
+    successor._status_seen(json.dumps(will).encode())
+    assert successor.takeovers == 1

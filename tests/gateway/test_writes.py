@@ -14,6 +14,7 @@ from paho.mqtt.properties import Properties
 
 from aiofins.gateway import Gateway
 from aiofins.gateway.config import parse_config
+from aiofins.gateway.mqttclient import MAX_INCOMING_BYTES
 from aiofins.gateway.writes import REPLY_POOL
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.simulator.faults import Delay, FaultRule
@@ -80,6 +81,8 @@ async def test_nested_huge_and_non_finite_payloads_are_refused_and_the_gateway_l
             await pub.publish(f"{SET}/sp", b"1" * 20_000_000, qos=1)
             await pub.publish(f"{SET}/sp", b'{"value": 42, "id": "after"}', qos=1)
             await sub.wait_for(lambda: any(m["id"] == "after" for m in sub.on(f"{SET}/sp/reply")))
+            # (the two reply topics are two outboxes: no order between them)
+            await sub.wait_for(lambda: len(sub.on(f"{SET}/level/reply")) == 4)
             replies = sub.on(f"{SET}/sp/reply") + sub.on(f"{SET}/level/reply")
             assert len(replies) == len(cases) + 1, (
                 gateway.write_counts,
@@ -298,3 +301,41 @@ enabled = false
             assert "nests deeper" in nested["error"]
             assert plc.read_value("D120", "int16") == 9
             assert gateway.write_counts == {"written": 1, "invalid": 1}
+
+
+async def test_huge_payloads_over_mqtt_3_1_1_are_bounded_by_the_inbox(
+    broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    """MQTT 3.1.1 has no maximum packet size: the broker sends a message whole, and paho
+    reads it whole. One up to the inbox's byte bound is refused unread, answered; one over
+    it is dropped, counted and logged, unanswered; the gateway goes on."""
+    plc = VirtualPLC()
+    async with run_simulator(plc, udp=("127.0.0.1", 0)) as sim:
+        cfg = parse_config(
+            f'[gateway]\nname = "gw"\n[mqtt]\nport = {broker.port}\nprotocol = "3.1.1"\n'
+            "[http]\nenabled = false\n" + group(sim.udp_port),
+            "t.toml",
+        )
+        async with (
+            subscribe(broker.port, f"{SET}/sp/reply") as sub,
+            Gateway(cfg) as gateway,
+            publisher(broker.port) as pub,
+        ):
+            await gateway.link.connected.wait()
+            over = MAX_INCOMING_BYTES + 1
+            await pub.publish(f"{SET}/sp", b"1" * 1_000_000, qos=1)
+            await pub.publish(f"{SET}/sp", b"2" * over, qos=1)
+            await pub.publish(f"{SET}/sp", b'{"value": 43, "id": "after"}', qos=1)
+            await sub.wait_for(lambda: any(m["id"] == "after" for m in sub.on(f"{SET}/sp/reply")))
+            big, after = sub.on(f"{SET}/sp/reply")
+            assert big["error"].endswith("payload of 1000000 bytes: at most 65536 (not read)")
+            assert after["ok"] is True and plc.read_value("D120", "int16") == 43
+            inbox = gateway.link.inbox
+            assert (inbox.dropped, inbox.dropped_bytes) == (1, over)
+            assert gateway.write_counts == {"invalid": 1, "written": 1}
+            assert gateway.link.connects == 1 and gateway.link.disconnects == 0
+            (line,) = [r.getMessage() for r in caplog.records if "dropped" in r.getMessage()]
+            assert line.startswith(f"received MQTT messages dropped: 1 (the last on {SET}/sp, ")
+            assert f"{over} bytes" in line
+            text = gateway.metrics.render().decode()
+            assert "aiofins_gateway_mqtt_received_dropped_total 1.0" in text

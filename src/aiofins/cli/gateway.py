@@ -3,7 +3,7 @@
 Reads and checks the whole configuration first (every mistake reported with FILE:LINE,
 exit code 2, nothing connected), then runs until SIGINT or SIGTERM. The shard comes from
 ``--shard``, else ``AIOFINS_SHARD=I/N`` or ``AIOFINS_SHARDS=N`` with the host name's ordinal
-(see :mod:`aiofins.gateway.sharding`). Needs the ``gateway`` extra (aiomqtt,
+(see :mod:`aiofins.gateway.sharding`). Needs the ``gateway`` extra (paho-mqtt,
 prometheus_client).
 """
 

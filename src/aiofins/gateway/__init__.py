@@ -9,7 +9,7 @@
 
 See docs/gateway.md. The package sits above the library (Pool, Poller): nothing below
 imports it. :mod:`.config` and :mod:`.sharding` need no extra packages; the rest needs
-``aiomqtt`` and ``prometheus_client`` (the ``gateway`` extra).
+``paho-mqtt`` and ``prometheus_client`` (the ``gateway`` extra).
 """
 
 from __future__ import annotations

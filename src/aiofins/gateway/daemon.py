@@ -8,7 +8,7 @@
 
 The gateway sits above the library: one :class:`~aiofins.Pool` and one Poller hold a scan
 group per (PLC, group) pair of its shard; each snapshot becomes a JSON message in that pair's
-outbox (:mod:`.mqtt`), so no scan ever waits for the broker. Runs on asyncio (aiomqtt is
+outbox (:mod:`.mqtt`), so no scan ever waits for the broker. Runs on asyncio (the MQTT client is
 asyncio only; uvloop works).
 """
 
@@ -320,13 +320,16 @@ class Gateway:
 
     # -- writes -------------------------------------------------------------------------
 
-    def _on_message(self, topic: str, payload: bytes, retain: bool, expiry: float | None) -> None:
-        """A set request: refused at once (answered), or queued for its PLC's writer."""
+    def _on_message(
+        self, topic: str, payload: bytes, retain: bool, expiry: float | None, received: float
+    ) -> None:
+        """A set request (read from the broker at ``received``, the loop's clock): refused at
+        once (answered), or queued for its PLC's writer."""
         prefix, _, tag_name = topic.rpartition("/")
         route = self._set_routes.get(prefix + "/")
         if route is None or self._tg is None:
             return
-        now = anyio.current_time()
+        now = received
         group = route.group
         what = f"{route.plc}/{group.name}/{tag_name}"
         box = self._reply_boxes.get(topic)

@@ -155,6 +155,17 @@ class _Collector(Collector):
             "Times another client took the gateway's MQTT client id (a duplicate shard)",
             value=link.takeovers,
         )
+        inbox = link.inbox
+        yield GaugeMetricFamily(
+            "aiofins_gateway_mqtt_received_waiting",
+            "Received MQTT messages waiting for the gateway (the inbox)",
+            value=len(inbox.messages),
+        )
+        yield CounterMetricFamily(
+            "aiofins_gateway_mqtt_received_dropped",
+            "Received MQTT messages dropped: the inbox was full (messages or bytes)",
+            value=inbox.dropped,
+        )
         yield GaugeMetricFamily(
             "aiofins_gateway_queued_writes",
             "Set requests waiting in the PLCs' write queues",

@@ -1,20 +1,22 @@
-"""The gateway's link to the MQTT broker (aiomqtt): outboxes, publishers, reconnects.
+"""The gateway's link to the MQTT broker: outboxes, publishers, reconnects.
 
 Scans never wait for the broker: :meth:`MqttLink.put` appends a message to its topic's
 :class:`Outbox` (bounded: when full, the oldest message is dropped and counted) and returns.
 While the link is :attr:`LinkState.CONNECTED`, outboxes are sent in turn, one message each, so
 every topic keeps its order and no topic starves the others:
 
-* QoS 0 messages are handed to the connection's MQTT client (paho, under aiomqtt) as they
-  come, with no task switch or future per message: a message put into an empty outbox is
-  written to the socket at once (:func:`_publish_now`), a backlog (after a reconnect) goes
-  through one pump task. A message handed over but not yet written when the link breaks
-  goes back to the front of its outbox.
+* QoS 0 messages are handed to the connection (:class:`~.mqttclient.MqttConnection`, a
+  paho-mqtt client on the event loop) as they come, with no task switch or future per
+  message: a message put into an empty outbox is written to the socket at once, a backlog
+  (after a reconnect) goes through one pump task. A message handed over but not yet written
+  when the link breaks goes back to the front of its outbox.
 * QoS 1 and 2 messages go through a few publisher tasks that await the broker's
   acknowledgement; a message leaves its outbox only once acknowledged.
 
 So a publish cut off by a lost link is sent again after the reconnect (at least once). A lost
-or refused connection is tried again after a jittered, doubling backoff.
+or refused connection is tried again after a jittered, doubling backoff. Received messages
+wait in one :class:`~.mqttclient.Inbox` (bounded; drops counted and logged) for one task that
+hands them to ``on_message``, whatever connection they came on.
 
 The gateway's own status topic carries ``online`` (published on every connect, retained) and
 ``offline`` (the MQTT will, published by the broker if the gateway vanishes, and by the
@@ -38,13 +40,14 @@ from enum import Enum
 from typing import TYPE_CHECKING
 
 import anyio
+import anyio.lowlevel
 from anyio.streams.memory import MemoryObjectReceiveStream, MemoryObjectSendStream
 
 from .config import MqttConfig
+from .mqttclient import ConnectionLost, ConnectSettings, Inbox, MqttConnection
 from .payload import status_message
 
 if TYPE_CHECKING:
-    import aiomqtt
     import paho.mqtt.client as paho_mqtt
 
 log = logging.getLogger("aiofins.gateway")
@@ -54,17 +57,16 @@ log = logging.getLogger("aiofins.gateway")
 MAX_HANDED = 1024
 #: QoS 0 messages the pump hands over before it lets the event loop write them.
 PUMP_BATCH = 256
-#: Received messages waiting for the gateway, at most (more are discarded by aiomqtt,
-#: with a warning): a flood of set requests cannot grow memory.
-MAX_INCOMING = 10_000
+#: Received messages handed to ``on_message`` before the receiver lets other tasks run.
+RECEIVE_BATCH = 64
 #: Takeovers of the client id within :data:`TAKEOVER_WINDOW` seconds that stop the gateway
 #: (another gateway runs with the same shard: flapping helps no one).
 TAKEOVER_LIMIT = 3
 TAKEOVER_WINDOW = 60.0
 
-#: ``on_message(topic, payload, retain, expiry)``: ``expiry`` is the MQTT 5 message expiry
-#: interval left (seconds), or None.
-OnMessage = Callable[[str, bytes, bool, "float | None"], None]
+#: ``on_message(topic, payload, retain, expiry, received)``: ``expiry`` is the MQTT 5 message
+#: expiry interval left (seconds), or None; ``received`` when it was read (the loop's clock).
+OnMessage = Callable[[str, bytes, bool, "float | None", float], None]
 
 
 class DuplicateClient(Exception):
@@ -158,7 +160,8 @@ class MqttLink:
         self._closing = anyio.Event()
         #: Set once :meth:`run` has ended (after :meth:`close`).
         self.done = anyio.Event()
-        self._client: aiomqtt.Client | None = None
+        #: Received messages waiting for ``on_message`` (bounded; drops counted, logged).
+        self.inbox = Inbox()
         #: QoS 1/2 outboxes with messages, for the publisher tasks.
         send, receive = anyio.create_memory_object_stream[Outbox](float("inf"))
         self._ready: MemoryObjectSendStream[Outbox] = send
@@ -166,9 +169,9 @@ class MqttLink:
         #: QoS 0 outboxes with messages, for the pump.
         self._ready0: deque[Outbox] = deque()
         self._pump_idle: anyio.Event | None = None
-        #: The connected client's paho client (QoS 0 goes straight to it), or None.
-        self._paho: paho_mqtt.Client | None = None
-        #: QoS 0 messages handed to paho, oldest first, until known written.
+        #: The connection while connected (QoS 0 goes straight to it), or None.
+        self._conn: MqttConnection | None = None
+        #: QoS 0 messages handed to the connection, oldest first, until known written.
         self._handed: deque[tuple[Outbox, tuple[bytes, float], paho_mqtt.MQTTMessageInfo]] = deque()
         self._lost: Callable[[str], None] | None = None
 
@@ -200,8 +203,8 @@ class MqttLink:
         entry = (payload, time.time() if stamp is None else stamp)
         messages = box.messages
         if box.qos == 0:
-            paho = self._paho
-            if paho is not None and not messages and self._hand(paho, box, entry):
+            conn = self._conn
+            if conn is not None and not messages and self._hand(conn, box, entry):
                 return
         if len(messages) >= box.limit:
             if box.sending is None or messages[0] is not box.sending:
@@ -223,18 +226,18 @@ class MqttLink:
             if self._pump_idle is not None:
                 self._pump_idle.set()
 
-    def _hand(self, paho: paho_mqtt.Client, box: Outbox, entry: tuple[bytes, float]) -> bool:
-        """Hand a QoS 0 message to paho (written at once unless paho has output waiting);
-        False if paho has too many unwritten or the link is lost (the message stays with
+    def _hand(self, conn: MqttConnection, box: Outbox, entry: tuple[bytes, float]) -> bool:
+        """Hand a QoS 0 message to the connection (written at once unless the socket is
+        full); False if too many are unwritten or the link is lost (the message stays with
         the caller)."""
         handed = self._handed
         while handed and handed[0][2].is_published():
             handed.popleft()
         if len(handed) >= MAX_HANDED:
             return False
-        info = _publish_now(paho, box.topic, entry[0], box.retain)
+        info = conn.publish_now(box.topic, entry[0], box.retain)
         if info.rc:  # not MQTT_ERR_SUCCESS: no connection
-            self._paho = None
+            self._conn = None
             if self._lost is not None:
                 self._lost(f"publish failed: error {info.rc}")
             return False
@@ -245,9 +248,10 @@ class MqttLink:
         return True
 
     def _take_back(self) -> None:
-        """After the link broke: QoS 0 messages handed to paho but never written go back to
-        the front of their outboxes (or, where the outbox is full by now, count as dropped)."""
-        self._paho = None
+        """After the link broke: QoS 0 messages handed to the connection but never written go
+        back to the front of their outboxes (or, where the outbox is full by now, count as
+        dropped)."""
+        self._conn = None
         handed = self._handed
         while handed:
             box, entry, info = handed.pop()  # newest first: each goes in front of the next
@@ -274,29 +278,35 @@ class MqttLink:
     async def run(self) -> None:
         """Connect, publish, reconnect after a backoff, until :meth:`close`."""
         try:
-            await self._run()
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(self._receive)
+                await self._run()
+                tg.cancel_scope.cancel()
         finally:
             self.done.set()
 
     async def _run(self) -> None:
-        import aiomqtt
-
         backoff = self.config.backoff_min
         while not self._closing.is_set():
             self._enter(LinkState.CONNECTING)
+            conn = MqttConnection(self._settings(), self.inbox)
             try:
-                client = self._new_client(aiomqtt)
-                async with client:
+                try:
+                    await conn.connect()
+                except ConnectionLost as exc:
+                    self.connect_failures += 1
+                    why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
+                else:
                     self.connects += 1
                     backoff = self.config.backoff_min
-                    why = await self._serve(client)
-                self.disconnects += 1
-            except aiomqtt.MqttError as exc:
-                self.connect_failures += 1
-                why = f"cannot connect to {self.config.host}:{self.config.port}: {exc}"
+                    try:
+                        why = await self._serve(conn)
+                    finally:
+                        with anyio.CancelScope(shield=True):
+                            await conn.disconnect()
+                    self.disconnects += 1
             finally:
-                self._client = None
-                self._take_back()  # (the client is disconnected: what paho wrote is known)
+                self._take_back()  # (the connection is closed: what it wrote is known)
             if self._closing.is_set():
                 break
             delay = random.uniform(backoff / 2, backoff)  # jitter: shards do not reconnect in step
@@ -319,6 +329,8 @@ class MqttLink:
         other = status.get("instance") if isinstance(status, dict) else None
         if other is None or other == self.instance:
             return
+        if status.get("state") == "offline" and status.get("stopped") is True:
+            return  # a predecessor that stopped cleanly (a restart), not a takeover
         self._taken_over(str(other))
 
     def _taken_over(self, other: str) -> None:
@@ -351,54 +363,38 @@ class MqttLink:
             log.error("%s", self.fatal)
             self._closing.set()
 
-    def _new_client(self, aiomqtt_module: object) -> aiomqtt.Client:
-        import aiomqtt
-
+    def _settings(self) -> ConnectSettings:
         c = self.config
-        v5 = c.protocol == "5"
-        properties = None
-        if v5 and self.max_packet is not None:
-            from paho.mqtt.packettypes import PacketTypes
-            from paho.mqtt.properties import Properties
-
-            properties = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
-            properties.MaximumPacketSize = self.max_packet
-        tls = None
-        if c.tls:
-            tls = aiomqtt.TLSParameters(
-                ca_certs=c.ca_file, certfile=c.cert_file, keyfile=c.key_file
-            )
-        return aiomqtt.Client(
+        return ConnectSettings(
             c.host,
             c.port,
-            identifier=self.client_id,
-            username=os.environ.get(c.username_env) or None,
-            password=os.environ.get(c.password_env) or None,
-            will=aiomqtt.Will(
-                self.status_topic,
-                status_message("offline", instance=self.instance),
-                qos=1,
-                retain=True,
-            ),
+            self.client_id,
+            protocol=c.protocol,
             keepalive=c.keepalive,
             timeout=c.timeout,
-            tls_params=tls,
-            logger=logging.getLogger("aiofins.gateway.mqtt"),
-            protocol=aiomqtt.ProtocolVersion.V5 if v5 else aiomqtt.ProtocolVersion.V311,
-            properties=properties,
-            max_queued_incoming_messages=MAX_INCOMING,
+            username=os.environ.get(c.username_env) or None,
+            password=os.environ.get(c.password_env) or None,
+            tls=c.tls,
+            ca_file=c.ca_file,
+            cert_file=c.cert_file,
+            key_file=c.key_file,
+            will=(
+                self.status_topic,
+                status_message("offline", instance=self.instance),
+                1,
+                True,
+            ),
+            max_packet=self.max_packet,
         )
 
-    async def _serve(self, client: aiomqtt.Client) -> str:
-        """Publish and receive until the link breaks or the gateway closes; why it ended."""
-        import aiomqtt
-
+    async def _serve(self, conn: MqttConnection) -> str:
+        """Publish until the link breaks or the gateway closes; why it ended."""
         ended = ["closed"]
 
         async with anyio.create_task_group() as tg:
 
             def lost(why: str) -> None:
-                self._paho = self._lost = None  # nothing more is handed to this connection
+                self._conn = self._lost = None  # nothing more is handed to this connection
                 if ended == ["closed"]:
                     ended[0] = why
                 tg.cancel_scope.cancel()
@@ -406,83 +402,68 @@ class MqttLink:
             try:
                 # Our own status topic first: its retained message, if another instance's
                 # "online", is a second gateway with our name and shard.
-                await client.subscribe(self.status_topic, qos=1)
-                await client.publish(
+                await conn.subscribe(self.status_topic, qos=1)
+                await conn.publish(
                     self.status_topic,
                     status_message("online", instance=self.instance),
                     qos=1,
                     retain=True,
                 )
                 for topic in self.subscriptions:
-                    if self.config.protocol == "5":  # a live retained message keeps its flag
-                        from paho.mqtt.subscribeoptions import SubscribeOptions
-
-                        options = SubscribeOptions(qos=1, retainAsPublished=True)
-                        await client.subscribe(topic, options=options)
-                    else:  # 3.1.1 clears it on live messages: only replays show as retained
-                        await client.subscribe(topic, qos=1)
-            except aiomqtt.MqttError as exc:
+                    # MQTT 5: a live retained message keeps its flag (retain-as-published);
+                    # 3.1.1 clears it on live messages: only replays show as retained.
+                    await conn.subscribe(topic, qos=1, retain_as_published=True)
+            except ConnectionLost as exc:
                 return f"lost during setup: {exc}"
-            self._client = client
-            self._lost = lost
-            self._paho = _paho_client(client)
-            if self._paho is None and self.connects == 1:
-                log.warning(
-                    "this aiomqtt has no paho client to hand QoS 0 messages to: they go through "
-                    "its publish(), at about 1.6 times the CPU per message"
-                )
+            conn.on_lost = self._lost = lost
+            self._conn = conn
             self._enter(LinkState.CONNECTED, f"{self.config.host}:{self.config.port}")
             if self.on_connected is not None:
                 self.on_connected()
-            tg.start_soon(self._receive, client, lost)
-            tg.start_soon(self._pump, client, lost)
+            tg.start_soon(self._pump)
             for _ in range(self.config.publishers):
-                tg.start_soon(self._publish, client, self._ready_out.clone(), lost)
+                tg.start_soon(self._publish, conn, self._ready_out.clone(), lost)
             await self._closing.wait()
+            self._conn = None
             with anyio.move_on_after(self.config.timeout, shield=True):
-                with contextlib.suppress(aiomqtt.MqttError):
-                    await client.publish(
+                with contextlib.suppress(ConnectionLost):
+                    await conn.publish(
                         self.status_topic,
-                        status_message("offline", instance=self.instance),
+                        status_message("offline", instance=self.instance, stopped=True),
                         qos=1,
                         retain=True,
                     )
-            self._paho = self._lost = None
+            conn.on_lost = self._lost = None
             tg.cancel_scope.cancel()
+        conn.on_lost = None
         return ended[0]
 
-    async def _receive(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
-        import aiomqtt
-
-        on_message = self.on_message
+    async def _receive(self) -> None:
+        """Hand received messages to ``on_message``, oldest first, for as long as the link
+        runs (messages read before a connection broke are handled after it too)."""
+        inbox = self.inbox
         status_topic = self.status_topic
-        try:
-            async for message in client.messages:
-                payload = message.payload
-                if not isinstance(payload, (bytes, bytearray)):
-                    continue
-                if message.topic.value == status_topic:
-                    self._status_seen(bytes(payload))
-                    continue
-                if on_message is None:
-                    continue
-                expiry = getattr(message.properties, "MessageExpiryInterval", None)
-                try:
-                    on_message(
-                        str(message.topic),
-                        bytes(payload),
-                        bool(message.retain),
-                        None if expiry is None else float(expiry),
-                    )
-                except Exception:  # nothing a peer sends raises out of the receiver
-                    log.exception("a message on %s could not be handled", message.topic)
-        except aiomqtt.MqttError as exc:
-            lost(f"connection lost: {exc}")
+        handed = 0
+        while True:
+            message = await inbox.get()
+            handed += 1
+            if handed % RECEIVE_BATCH == 0:
+                await anyio.lowlevel.checkpoint()  # get() does not wait while messages wait
+            if message.topic == status_topic:
+                self._status_seen(message.payload)
+                continue
+            on_message = self.on_message
+            if on_message is None:
+                continue
+            try:
+                on_message(
+                    message.topic, message.payload, message.retain, message.expiry, message.at
+                )
+            except Exception:  # nothing a peer sends raises out of the receiver
+                log.exception("a message on %s could not be handled", message.topic[:200])
 
-    async def _pump(self, client: aiomqtt.Client, lost: Callable[[str], None]) -> None:
+    async def _pump(self) -> None:
         """Send the QoS 0 outboxes' backlogs, one message per outbox in turn."""
-        import aiomqtt
-
         ready = self._ready0
         while True:
             sent = 0
@@ -492,42 +473,29 @@ class MqttLink:
                 if not box.messages:
                     continue
                 entry = box.messages.popleft()
-                paho = self._paho
-                if paho is None:  # an aiomqtt without a paho client to hand to
-                    try:
-                        await client.publish(box.topic, entry[0], 0, box.retain)
-                    except aiomqtt.MqttError as exc:
-                        box.messages.appendleft(entry)
-                        self._queue(box)
-                        lost(f"publish failed: {exc}")
-                        return
-                    box.published += 1
-                    if self.on_published is not None:
-                        self.on_published(entry[1])
-                elif not self._hand(paho, box, entry):
+                conn = self._conn
+                if conn is None or not self._hand(conn, box, entry):
                     box.messages.appendleft(entry)
                     self._queue(box)
-                    if self._paho is None:
+                    if self._conn is None:
                         return  # lost
-                    await anyio.sleep(0.005)  # paho has enough unwritten: let it write
+                    await anyio.sleep(0.005)  # too many unwritten: let the socket drain
                     continue
                 if box.messages:
                     self._queue(box)
                 sent += 1
                 if sent % PUMP_BATCH == 0:
-                    await anyio.sleep(0)  # let the event loop write them
+                    await anyio.sleep(0)  # let the event loop run
             idle = self._pump_idle = anyio.Event()
             await idle.wait()
             self._pump_idle = None
 
     async def _publish(
         self,
-        client: aiomqtt.Client,
+        conn: MqttConnection,
         ready: MemoryObjectReceiveStream[Outbox],
         lost: Callable[[str], None],
     ) -> None:
-        import aiomqtt
-
         on_published = self.on_published
         async with ready:
             async for box in ready:
@@ -539,8 +507,8 @@ class MqttLink:
                         continue
                     entry = box.sending = box.messages[0]
                     try:
-                        await client.publish(box.topic, entry[0], box.qos, box.retain)
-                    except aiomqtt.MqttError as exc:
+                        await conn.publish(box.topic, entry[0], box.qos, box.retain)
+                    except ConnectionLost as exc:
                         lost(f"publish failed: {exc}")
                         return
                     finally:
@@ -561,41 +529,3 @@ class MqttLink:
 
 def _cut(text: str, limit: int = 100) -> str:
     return text if len(text) <= limit else f"{text[:limit]}..."
-
-
-def _paho_client(client: aiomqtt.Client) -> paho_mqtt.Client | None:
-    """The paho client an aiomqtt client runs on (its ``_client``: aiomqtt has no public
-    name for it), or None if this aiomqtt has none (QoS 0 then goes through its publish)."""
-    import paho.mqtt.client as paho_mqtt
-
-    paho = getattr(client, "_client", None)
-    return paho if isinstance(paho, paho_mqtt.Client) else None
-
-
-def _publish_now(
-    paho: paho_mqtt.Client, topic: str, payload: bytes, retain: bool
-) -> paho_mqtt.MQTTMessageInfo:
-    """``paho.publish(topic, payload, 0, retain)``, written to the socket right away.
-
-    Under aiomqtt, paho queues each message, asks the event loop (thread-safely: a wake-up
-    through its self-pipe) to watch the socket for writing, writes in a later loop step and
-    then calls aiomqtt's ``on_publish``, building a v5 ``Properties`` and ``ReasonCode`` for a
-    QoS 0 message that has none (and that aiomqtt ignores): most of what publishing cost. With
-    nothing else waiting in paho's output queue, the message is written now
-    instead: without the two callbacks paho writes in ``publish`` itself (what it does when
-    no event loop is registered). A write cut short leaves the rest queued in paho, and the
-    event loop is asked to write it as usual.
-    """
-    register = paho.on_socket_register_write
-    if register is None or paho.want_write():  # paho has output waiting: queue behind it
-        return paho.publish(topic, payload, 0, retain)
-    on_publish = paho.on_publish
-    paho.on_socket_register_write = None
-    paho.on_publish = None
-    try:
-        return paho.publish(topic, payload, 0, retain)
-    finally:
-        paho.on_socket_register_write = register
-        paho.on_publish = on_publish
-        if paho.want_write() and (sock := paho.socket()) is not None:
-            register(paho, paho.user_data_get(), sock)
