@@ -12,6 +12,12 @@ configuration, it reports after a warm-up:
 
     python benchmarks/bench_gateway.py [--plcs 1000] [--tags 20] [--seconds 30] [--warmup 10]
 
+To compare source trees in the same run (same responders and broker, rounds interleaved),
+name each tree's ``src`` directory; medians and the ratio to the first tree are printed:
+
+    git worktree add /tmp/base <commit>
+    python benchmarks/bench_gateway.py --shards 1 --rounds 5 --trees base=/tmp/base/src,new=src
+
 Needs gcc, mosquitto and mosquitto_sub (Debian: mosquitto mosquitto-clients).
 """
 
@@ -98,8 +104,19 @@ def config(broker: int, http_ports: list[int], ports: list[int], tags: int) -> s
 
 
 def run_case(
-    shards: int, cfg: Path, broker: int, seconds: float, warmup: float, tmp: Path
+    shards: int,
+    cfg: Path,
+    broker: int,
+    seconds: float,
+    warmup: float,
+    tmp: Path,
+    src: str | None = None,
 ) -> dict[str, object]:
+    """One case: ``shards`` gateway processes (of the aiofins in ``src``, a source tree's
+    ``src`` directory, if given) for ``warmup`` + ``seconds``."""
+    env = dict(os.environ)
+    if src is not None:
+        env["PYTHONPATH"] = str(Path(src).resolve())
     http_ports = [free_port() for _ in range(shards)]
     text = cfg.read_text()
     procs: list[subprocess.Popen[bytes]] = []
@@ -111,7 +128,7 @@ def run_case(
         args = [sys.executable, "-m", "aiofins.cli", "gateway", str(path), "--log-level", "ERROR"]
         if shards > 1:
             args += ["--shard", f"{i}/{shards}"]
-        procs.append(subprocess.Popen(args, stdout=subprocess.DEVNULL))
+        procs.append(subprocess.Popen(args, stdout=subprocess.DEVNULL, env=env))
     record = tmp / f"sub{shards}.txt"
     with record.open("w") as out:
         sub = subprocess.Popen(
@@ -173,6 +190,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--warmup", type=float, default=10.0)
     parser.add_argument("--shards", default="1,2", help="the cases to run (default 1,2)")
+    parser.add_argument(
+        "--trees",
+        default="",
+        help="NAME=SRC_DIR,... source trees to compare, rounds interleaved (default: this one)",
+    )
+    parser.add_argument("--rounds", type=int, default=1, help="rounds of every case and tree")
     args = parser.parse_args()
     for tool in ("gcc", "mosquitto", "mosquitto_sub"):
         if shutil.which(tool) is None:
@@ -211,17 +234,33 @@ def main() -> None:
                 f"{args.seconds:g} s measured after {args.warmup:g} s warm-up"
             )
             mosquitto_cpu0 = cpu_seconds(broker.pid)
-            for shards in (int(s) for s in args.shards.split(",")):
-                r = run_case(shards, cfg, broker_port, args.seconds, args.warmup, tmp)
-                per_process = ", ".join(f"{c:.0%}" for c in r["cpu_per_process"])  # type: ignore[attr-defined]
-                print(
-                    f"{shards} gateway(s): scans {r['scans']:.0f}, missed {r['missed']:.0f}, "
-                    f"failed {r['failed']:.0f}, published {r['published']:.0f}, "
-                    f"dropped {r['dropped']:.0f}, received {r['received']}; "
-                    f"CPU per process {per_process} of a core, "
-                    f"{r['cpu_us_per_scan']:.0f} us per published scan; "
-                    f"scan-to-delivery p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms"
-                )
+            trees: list[tuple[str, str | None]] = [
+                (name, src)
+                for name, _, src in (t.partition("=") for t in args.trees.split(",") if t)
+            ] or [("", None)]
+            cpu_per_scan: dict[tuple[int, str], list[float]] = {}
+            for round_ in range(args.rounds):
+                for shards in (int(s) for s in args.shards.split(",")):
+                    # Each round starts with the next tree: none always runs last (the
+                    # machine's load drifts within a round).
+                    shift = round_ % len(trees)
+                    for name, src in trees[shift:] + trees[:shift]:
+                        r = run_case(shards, cfg, broker_port, args.seconds, args.warmup, tmp, src)
+                        cpu_per_scan.setdefault((shards, name), []).append(
+                            float(r["cpu_us_per_scan"])  # type: ignore[arg-type]
+                        )
+                        label = f"round {round_ + 1} {name}: " if name else ""
+                        report(label, shards, r)
+            if len(trees) > 1 or args.rounds > 1:
+                print(f"load average at the end: {os.getloadavg()}")
+                for (shards, name), values in cpu_per_scan.items():
+                    first = statistics.median(cpu_per_scan[(shards, trees[0][0])])
+                    median = statistics.median(values)
+                    print(
+                        f"{shards} gateway(s) {name or 'this tree'}: CPU per published scan "
+                        f"median {median:.1f} us (runs {', '.join(f'{v:.0f}' for v in values)}),"
+                        f" {median / first:.3f} x {trees[0][0] or 'the first'}"
+                    )
             print(f"mosquitto CPU over all runs: {cpu_seconds(broker.pid) - mosquitto_cpu0:.1f} s")
         finally:
             for proc in responders:
@@ -230,6 +269,20 @@ def main() -> None:
                 proc.wait(timeout=10)
             broker.terminate()
             broker.wait(timeout=10)
+
+
+def report(label: str, shards: int, r: dict[str, object]) -> None:
+    per_process = ", ".join(f"{c:.0%}" for c in r["cpu_per_process"])  # type: ignore[attr-defined]
+    print(
+        f"{label}{shards} gateway(s): scans {r['scans']:.0f}, missed {r['missed']:.0f}, "
+        f"failed {r['failed']:.0f}, published {r['published']:.0f}, "
+        f"dropped {r['dropped']:.0f}, received {r['received']}; "
+        f"CPU per process {per_process} of a core, "
+        f"{r['cpu_us_per_scan']:.0f} us per published scan; "
+        f"scan-to-delivery p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms; "
+        f"load average {os.getloadavg()[0]:.1f}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":
