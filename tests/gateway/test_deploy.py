@@ -1,8 +1,9 @@
 """deploy/ run for real: deploy/Dockerfile's image, and deploy/docker-compose.yml's Mosquitto,
 three virtual PLCs and two gateway shards, watched by an MQTT subscriber on the host.
 
-Needs a Docker daemon, Debian's ``docker-compose`` and (once) ``debootstrap``: public images
-cannot be pulled here, so both images are built on deploy/debian-base.sh's Debian root.
+Needs a Docker daemon, Debian's ``docker-compose`` and (once) a Debian host's ``apt-get`` and
+``dpkg-deb``: public images cannot be pulled here, so both images are built on
+deploy/debian-base.sh's Debian root.
 .ci/run installs them, starts the daemon and sets ``AIOFINS_DOCKER_REQUIRED``: then anything
 missing fails the test; without it, the test skips saying what is missing.
 
@@ -79,8 +80,8 @@ def base_image() -> str:
     image = os.environ.get("AIOFINS_BASE_IMAGE", "aiofins-debian:bookworm")
     exists = subprocess.run(["docker", "image", "inspect", image], capture_output=True)
     if exists.returncode != 0:
-        if shutil.which("debootstrap") is None:
-            unavailable(f"no base image {image} and no debootstrap to make it (apt-get install it)")
+        if shutil.which("apt-get") is None or shutil.which("dpkg-deb") is None:
+            unavailable(f"no base image {image}, and no apt-get and dpkg-deb to make it (Debian)")
         if os.geteuid() != 0:
             unavailable(f"no base image {image}; as root, deploy/debian-base.sh makes it")
     return run("bash", str(DEPLOY / "debian-base.sh")).strip()
