@@ -1,4 +1,8 @@
-"""aiofins.sync: the blocking facade, against the virtual PLC served from another thread."""
+"""aiofins.sync: the blocking client, against the virtual PLC served from another thread.
+
+Calls run in the calling thread (UDP, FINS/TCP) or, with ``backend=``, on a private event
+loop's thread; the tests of what both promise run in both modes (``MODES``). The direct
+path's own tests are in test_sync_direct.py."""
 
 from __future__ import annotations
 
@@ -31,6 +35,10 @@ def url() -> Iterator[str]:
 
 def _loop_threads() -> list[threading.Thread]:
     return [t for t in threading.enumerate() if t.name == "aiofins.sync"]
+
+
+#: The two modes of a blocking client: calls in the calling thread, or on a loop's thread.
+MODES = pytest.mark.parametrize("backend", [None, "asyncio"], ids=["direct", "loop"])
 
 
 def test_reads_and_writes_words_values_and_commands(url: str) -> None:
@@ -80,16 +88,21 @@ def test_arrays_of_words_and_typed_values(url: str) -> None:
         assert plc.read("D5000", 2) == [0x0000, 0xC020]  # CDAB
 
 
-def test_a_plc_error_is_raised_in_the_calling_thread(url: str) -> None:
-    with aiofins.sync.connect(url) as plc, pytest.raises(aiofins.EndCodeError) as caught:
+@MODES
+def test_a_plc_error_is_raised_in_the_calling_thread(url: str, backend: str | None) -> None:
+    with (
+        aiofins.sync.connect(url, backend=backend) as plc,
+        pytest.raises(aiofins.EndCodeError) as caught,
+    ):
         plc.write("A0", [1])  # A0-A447 are read-only
     assert caught.value.end_code.raw == 0x2101
 
 
-def test_close_joins_the_loop_thread_and_later_calls_fail(url: str) -> None:
+@MODES
+def test_close_joins_the_loop_thread_and_later_calls_fail(url: str, backend: str | None) -> None:
     before = len(_loop_threads())
-    plc = aiofins.sync.connect(url)
-    assert len(_loop_threads()) == before + 1
+    plc = aiofins.sync.connect(url, backend=backend)
+    assert len(_loop_threads()) == before + (backend is not None)  # direct: no thread
     plc.read("D0")
     states = [plc.state]
     plc.close()
@@ -108,20 +121,24 @@ def test_a_failed_connect_leaves_no_thread() -> None:
     assert len(_loop_threads()) == before
 
 
-def test_a_timeout_is_bounded_and_raised_as_fins_timeout() -> None:
+@MODES
+def test_a_timeout_is_bounded_and_raised_as_fins_timeout(backend: str | None) -> None:
     # A UDP port nobody answers on: the datagram goes nowhere, the call times out.
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
         silent.bind(("127.0.0.1", 0))
         port = silent.getsockname()[1]
         with (
-            aiofins.sync.connect(f"udp://127.0.0.1:{port}", timeout=0.2, retries=0) as plc,
+            aiofins.sync.connect(
+                f"udp://127.0.0.1:{port}", timeout=0.2, retries=0, backend=backend
+            ) as plc,
             pytest.raises(aiofins.FinsTimeout),
         ):
             plc.read("D0")
 
 
-def test_threads_share_one_client(url: str) -> None:
-    with aiofins.sync.connect(url) as plc:
+@MODES
+def test_threads_share_one_client(url: str, backend: str | None) -> None:
+    with aiofins.sync.connect(url, backend=backend) as plc:
         plc.write("D500", list(range(8)))
         with ThreadPoolExecutor(4) as pool:
             results = list(pool.map(lambda i: plc.read(f"D{500 + i}", 1)[0], range(8)))
@@ -166,12 +183,13 @@ def test_a_bound_blocking_method_shows_the_async_methods_signature(url: str) -> 
         assert "count" in inspect.signature(plc.read).parameters
 
 
-def test_close_ends_a_call_waiting_in_another_thread() -> None:
+@MODES
+def test_close_ends_a_call_waiting_in_another_thread(backend: str | None) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
         silent.bind(("127.0.0.1", 0))
         silent.settimeout(10)
         plc = aiofins.sync.connect(
-            f"udp://127.0.0.1:{silent.getsockname()[1]}", timeout=30, retries=0
+            f"udp://127.0.0.1:{silent.getsockname()[1]}", timeout=30, retries=0, backend=backend
         )
         raised: list[BaseException] = []
 

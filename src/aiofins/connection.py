@@ -44,6 +44,7 @@ from .protocol.values import WordOrder
 from .session import Session
 from .session.nodes import SOURCE_NODES
 from .transport.base import Transport, url_host
+from .transport.blocking import BlockingTcpTransport, BlockingUdpTransport
 from .transport.serial import SerialTransport
 from .transport.tcp import DEFAULT_CONNECT_TIMEOUT, TcpTransport
 from .transport.udp import UdpTransport
@@ -85,29 +86,40 @@ def local_node_towards(host: str, avoid: int | None = None) -> int:
     return node
 
 
-def make_transport(endpoint: Endpoint, **options: Any) -> Transport:
+def make_transport(endpoint: Endpoint, *, blocking: bool = False, **options: Any) -> Transport:
     """The transport for an endpoint (serial settings come from the URL or ``options``;
-    ``local_port``, the UDP port to bind, from ``options`` or ``?local_port=``)."""
+    ``local_port``, the UDP port to bind, from ``options`` or ``?local_port=``).
+    ``blocking``: a transport of :mod:`aiofins.transport.blocking` (UDP and FINS/TCP), for a
+    driver without an event loop."""
     if endpoint.scheme == "udp":
         port = options.get("local_port")
         if port is None:
             port = endpoint.option("local_port", "0")
-        return UdpTransport(
-            endpoint.host, endpoint.port, local_port=int(option_value("local_port", port))
-        )
+        local_port = int(option_value("local_port", port))
+        if blocking:
+            return BlockingUdpTransport(endpoint.host, endpoint.port, local_port=local_port)
+        return UdpTransport(endpoint.host, endpoint.port, local_port=local_port)
     if endpoint.scheme == "tcp":
+        node = int(option_value("tcp_node", options.get("tcp_node", 0)))
+        connect_timeout = float(
+            option_value(
+                "tcp_connect_timeout",
+                options.get("tcp_connect_timeout", DEFAULT_CONNECT_TIMEOUT),
+            )
+        )
+        if blocking:
+            return BlockingTcpTransport(
+                endpoint.host, endpoint.port, node=node, connect_timeout=connect_timeout
+            )
         return TcpTransport(
             endpoint.host,
             endpoint.port,
-            node=int(option_value("tcp_node", options.get("tcp_node", 0))),
-            connect_timeout=float(
-                option_value(
-                    "tcp_connect_timeout",
-                    options.get("tcp_connect_timeout", DEFAULT_CONNECT_TIMEOUT),
-                )
-            ),
+            node=node,
+            connect_timeout=connect_timeout,
             gather_writes=bool(options.get("tcp_gather_writes", True)),
         )
+    if blocking:
+        raise CommandError(f"{endpoint.scheme}:// has no blocking transport (UDP and FINS/TCP do)")
     settings: dict[str, Any] = dict(SERIAL_DEFAULTS)
     settings.update(endpoint.options)
     settings.update({k: v for k, v in options.items() if k in SERIAL_SETTINGS})
@@ -453,6 +465,113 @@ async def _connect(
     **transport_options: Any,
 ) -> AsyncIterator[Client]:
     """:func:`connect`; ``source_held``: the caller holds the UDP source node (``src``)."""
+    prepared = await prepare(
+        url,
+        transport=transport,
+        dest=dest,
+        src=src,
+        timeout=timeout,
+        retries=retries,
+        max_in_flight=max_in_flight,
+        max_sid_spaces=max_sid_spaces,
+        gct=gct,
+        networks=networks,
+        limits=limits,
+        routes=routes,
+        source_network=source_network,
+        local_port=local_port,
+        word_order=word_order,
+        read_only=read_only,
+        hooks=hooks,
+        breaker_threshold=breaker_threshold,
+        breaker_cooldown=breaker_cooldown,
+        reconnect_backoff=reconnect_backoff,
+        source_held=source_held,
+        **transport_options,
+    )
+    try:
+        async with prepared.session as session:
+            yield prepared.client(session)
+    finally:
+        prepared.release()
+
+
+class Prepared:
+    """A connection made ready by :func:`prepare`: its transport and session (not open),
+    what its client takes, and what it holds until :meth:`release`."""
+
+    def __init__(
+        self,
+        session: Session,
+        endpoint: Endpoint | None,
+        dest_given: bool,
+        client_options: dict[str, Any],
+        held: tuple[str, int] | None,
+        bound: tuple[int, str] | None,
+    ) -> None:
+        self.session = session
+        self.endpoint = endpoint
+        self.dest_given = dest_given
+        self.client_options = client_options
+        self.held = held
+        self.bound = bound
+
+    def client(self, session: Session) -> Client:
+        """The client on ``session`` (this connection's, or what drives it), once the link
+        is open: a FINS/TCP peer's own node is its destination unless one was named."""
+        transport = self.session.transport
+        endpoint = self.endpoint
+        if (
+            transport.remote_node is not None
+            and not self.dest_given
+            and (
+                endpoint is None
+                or (endpoint.option("dest") is None and endpoint.option("node") is None)
+            )
+        ):
+            session.dest = FinsAddress(0, transport.remote_node, 0)
+        return Client(session, **self.client_options)
+
+    def release(self) -> None:
+        """Give back the UDP source node and the fixed local port this connection holds."""
+        held, self.held = self.held, None
+        if held is not None:
+            SOURCE_NODES.release(*held)
+        bound, self.bound = self.bound, None
+        if bound is not None:
+            _FIXED_PORTS.discard(bound)
+
+
+async def prepare(
+    url: str | None = None,
+    *,
+    transport: Transport | None = None,
+    dest: FinsAddress | str | None = None,
+    src: FinsAddress | str | None = None,
+    timeout: float | None = None,
+    retries: int = 2,
+    max_in_flight: int | None = None,
+    max_sid_spaces: int | None = None,
+    gct: int = 2,
+    networks: tuple[NetworkType, ...] = (),
+    limits: RouteLimits | None = None,
+    routes: Mapping[int, RouteSpec] | str | None = None,
+    source_network: int | None = None,
+    local_port: int | None = None,
+    word_order: WordOrder | str = WordOrder.LOW_FIRST,
+    read_only: bool = False,
+    hooks: EventHooks | None = None,
+    breaker_threshold: int | None = None,
+    breaker_cooldown: tuple[float, float] | None = None,
+    reconnect_backoff: tuple[float, float] | None = None,
+    source_held: bool,
+    blocking: bool = False,
+    **transport_options: Any,
+) -> Prepared:
+    """Everything :func:`connect` does before it opens: options checked, addresses chosen
+    (the UDP source node held), the transport (``blocking``: one of
+    :mod:`aiofins.transport.blocking`, for a driver without an event loop) and the session
+    made."""
     if url is None and transport is None:
         raise CommandError("the connection URL must be text (or give transport=); got None")
     if url is not None and transport is not None:
@@ -500,7 +619,9 @@ async def _connect(
                     f"not {spaces}"
                 )
             max_sid_spaces = 1
-        transport = make_transport(endpoint, local_port=local_port, **transport_options)
+        transport = make_transport(
+            endpoint, blocking=blocking, local_port=local_port, **transport_options
+        )
         if endpoint.scheme == "udp" and not source_held:
             link = await peer_link(endpoint)
             named = src is not None or endpoint.option("src") is not None
@@ -540,7 +661,8 @@ async def _connect(
                 else request_timeout(endpoint)
             ),
             retries=retries,
-            max_sid_spaces=_sid_spaces(endpoint, max_sid_spaces),
+            # (a blocking driver has one socket: no SID space opens in the background)
+            max_sid_spaces=1 if blocking else _sid_spaces(endpoint, max_sid_spaces),
             hooks=hooks,
             **_resilience(
                 endpoint,
@@ -551,24 +673,20 @@ async def _connect(
                 },
             ),
         )
-        async with session:
-            if (
-                transport.remote_node is not None
-                and dest is None
-                and (
-                    endpoint is None
-                    or (endpoint.option("dest") is None and endpoint.option("node") is None)
-                )
-            ):
-                session.dest = FinsAddress(0, transport.remote_node, 0)
-            yield Client(
-                session, limits=route, routes=route_map, word_order=word_order, read_only=guarded
-            )
-    finally:
+        return Prepared(
+            session,
+            endpoint,
+            dest is not None,
+            {"limits": route, "routes": route_map, "word_order": word_order, "read_only": guarded},
+            held,
+            bound,
+        )
+    except BaseException:
         if held is not None:
             SOURCE_NODES.release(*held)
         if bound is not None:
             _FIXED_PORTS.discard(bound)
+        raise
 
 
 #: Every keyword option :func:`connect` takes (what :class:`Pool` passes on to it).

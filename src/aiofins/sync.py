@@ -1,18 +1,29 @@
-"""A blocking facade for scripts and notebooks: ``aiofins.sync.connect(url)``.
+"""A blocking client for scripts and notebooks: ``aiofins.sync.connect(url)``.
 
-The async :class:`~aiofins.Client` runs on a private event loop in a thread of its own; each
-method of the blocking :class:`Client` sends its call there and waits for the result, so a
-script needs neither ``async`` nor ``await``::
+Each method of the blocking :class:`Client` is the async :class:`~aiofins.Client`'s method of
+the same name, run to its end before it returns, so a script needs neither ``async`` nor
+``await``::
 
     with aiofins.sync.connect("udp://192.168.250.1") as plc:
         words = plc.read("D100", 10)
 
-The methods are the async client's, with the same parameters, results and exceptions (a
-:class:`~aiofins.FinsTimeout` is raised in the calling thread). One blocking client may be
-used from several threads at once: their calls run concurrently on the loop, as async tasks
-would. :meth:`Client.close` (or leaving the ``with`` block) closes the session and joins the
-thread. Inside a running event loop (``async def``, FastAPI, a notebook that awaits) use the
-async client instead: a blocking call there would stall that loop for the call's duration.
+The methods have the async client's parameters, results and exceptions (a
+:class:`~aiofins.FinsTimeout` is raised in the calling thread).
+
+Over UDP and FINS/TCP a call runs in the calling thread: the session's request steps, which
+do no I/O, are driven on a blocking socket (see :mod:`aiofins._blocking`); no event loop
+and no other thread take part. One call runs at a time: a client may be shared by several
+threads, whose calls then take turns (one waits while another's is on the wire).
+
+With ``backend=`` (``"asyncio"``, ``"trio"``; ``backend_options={"use_uvloop": True}``),
+and always over a serial line, the async client runs on a private event loop in a thread of
+its own and each call is sent there: calls from several threads then run concurrently, as
+async tasks would (pipelined up to ``max_in_flight``).
+
+:meth:`Client.close` (or leaving the ``with`` block) closes the session (and joins the
+loop's thread); a call waiting in another thread ends with :class:`~aiofins.ConnectionLost`.
+Inside a running event loop (``async def``, FastAPI) use the async client instead: a
+blocking call there stalls that loop for the call's duration.
 """
 
 from __future__ import annotations
@@ -20,24 +31,30 @@ from __future__ import annotations
 import contextlib
 import enum
 import functools
+import math
 import threading
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from contextlib import AbstractContextManager, ExitStack
 from types import TracebackType
-from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, cast, overload
 
 import anyio
 from anyio.from_thread import BlockingPortal
 
+from ._blocking import BlockingDriver, run_to_end
 from .client import AddressLike, Progress
 from .client import Client as AsyncClient
+from .connection import Prepared, needs_lookup, prepare
 from .connection import connect as _async_connect
+from .endpoint import parse_endpoint
 from .protocol.arrays import FloatArray, NumberArray, WordArray
 from .protocol.endcodes import EndCode
 from .protocol.errors import ConnectionLost
 from .protocol.header import FinsAddress
 from .protocol.values import BoolTypeName, FloatTypeName, IntTypeName, Value, ValueType
+from .session import Session
 from .tags import ReadPlan
+from .transport.blocking import BlockingTransport
 
 __all__ = ["Client", "ClientState", "connect"]
 
@@ -91,6 +108,94 @@ class _LoopThread:
         self._thread.join()
 
 
+class _LoopRunner:
+    """Runs each call on a :class:`_LoopThread`'s event loop (calls from several threads run
+    there concurrently)."""
+
+    def __init__(self, loop: _LoopThread, state: Callable[[], ClientState]) -> None:
+        self.loop = loop
+        self.state = state
+
+    def call(self, method: Callable[..., Coroutine[Any, Any, R]], args: Any, kwargs: Any) -> R:
+        async def run() -> R:
+            return await method(*args, **kwargs)
+
+        try:
+            return self.loop.portal.call(run)
+        except RuntimeError:  # the portal stopped between the caller's check and the call
+            state = self.state()
+            if state is ClientState.OPEN:
+                raise
+            raise ConnectionLost(f"the blocking client is {state.value}") from None
+
+    def interrupt(self) -> None:
+        """Nothing to do: closing the session ends the calls waiting on the loop."""
+
+
+class _DirectRunner:
+    """Runs each call in the calling thread on a :class:`~aiofins._blocking.BlockingDriver`,
+    one at a time (a lock): the async client's coroutine runs to its end without an event
+    loop (see :func:`~aiofins._blocking.run_to_end`)."""
+
+    def __init__(self, driver: BlockingDriver, state: Callable[[], ClientState]) -> None:
+        self.driver = driver
+        self.state = state
+        self.lock = threading.RLock()
+        #: A call runs (in the thread holding the lock).
+        self.busy = False
+        #: The client is closing or closed: calls are refused.
+        self.closed = False
+
+    def call(self, method: Callable[..., Coroutine[Any, Any, R]], args: Any, kwargs: Any) -> R:
+        return self.blocking(method)(*args, **kwargs)
+
+    def blocking(self, method: Callable[P, Coroutine[Any, Any, R]]) -> Callable[P, R]:
+        """``method`` as a blocking function: each call runs it to its end under the lock
+        (:func:`~aiofins._blocking.run_to_end`, inlined: this runs once per call)."""
+        lock = self.lock
+
+        def blocking(*args: P.args, **kwargs: P.kwargs) -> R:
+            with lock:
+                if self.busy or self.closed:
+                    raise self._refusal()
+                self.busy = True
+                try:
+                    coro = method(*args, **kwargs)
+                    try:
+                        coro.send(None)
+                    except StopIteration as done:
+                        result: R = done.value
+                        return result
+                    return run_to_end(coro)  # (suspended: refused)
+                finally:
+                    self.busy = False
+
+        return blocking
+
+    def _refusal(self) -> Exception:
+        if self.closed:
+            return ConnectionLost(f"the blocking client is {self.state().value}")
+        # (the lock is the thread's own: a callback of its running call)
+        return RuntimeError(
+            "a call of the blocking client from inside one of its calls (a progress or "
+            "on_response callback): call it after the outer call returns"
+        )
+
+    def interrupt(self) -> None:
+        """Refuse calls from now on; end a call waiting in another thread (its socket is
+        shut down)."""
+        self.closed = True
+        self.driver.interrupt()
+
+    def close(self) -> None:
+        """Close the driver once no call runs (a call interrupted ends first)."""
+        with self.lock:
+            self.driver.close()
+
+
+_Runner = _LoopRunner | _DirectRunner
+
+
 class _Blocking(Generic[P, R]):
     """A blocking method made from a coroutine method of the async client.
 
@@ -118,11 +223,19 @@ class _Blocking(Generic[P, R]):
         if instance is None:
             return self
         method: Callable[P, Coroutine[Any, Any, R]] = getattr(instance.async_client, self._name)
+        runner = instance._runner
+        if isinstance(runner, _DirectRunner):
+            blocking = runner.blocking(method)
+        else:
+            loop_runner = runner
 
-        @functools.wraps(method)  # name, docstring and signature of the async method
-        def blocking(*args: P.args, **kwargs: P.kwargs) -> R:
-            return instance._call(method, *args, **kwargs)
+            def blocking(*args: P.args, **kwargs: P.kwargs) -> R:
+                return loop_runner.call(method, args, kwargs)
 
+        functools.update_wrapper(blocking, method)  # name, docstring, signature
+
+        # Made once per client: the instance's attribute hides this descriptor from now on.
+        instance.__dict__[self._name] = blocking
         return blocking
 
 
@@ -154,13 +267,19 @@ class Client:
     client is :attr:`async_client`; ``with`` closes the client on leaving the block.
     """
 
-    def __init__(self, async_client: AsyncClient, loop: _LoopThread, resources: ExitStack):
-        #: The async client underneath (its coroutines run on the private loop only).
+    def __init__(
+        self,
+        async_client: AsyncClient,
+        runner: Callable[[Callable[[], ClientState]], _Runner],
+        resources: ExitStack,
+    ):
+        #: The async client underneath: its coroutines run in the calling thread on the
+        #: blocking driver, or (``backend=``, serial) on the private loop only.
         self.async_client = async_client
-        self._loop = loop
         self._resources = resources
         self._state = ClientState.OPEN
         self._lock = threading.Lock()
+        self._runner = runner(lambda: self._state)
 
     @property
     def state(self) -> ClientState:
@@ -180,16 +299,7 @@ class Client:
     ) -> R:
         if self._state is not ClientState.OPEN:
             raise ConnectionLost(f"the blocking client is {self._state.value}")
-
-        async def run() -> R:
-            return await method(*args, **kwargs)
-
-        try:
-            return self._loop.portal.call(run)
-        except RuntimeError:  # the portal stopped between the check above and the call
-            if self._state is ClientState.OPEN:
-                raise
-            raise ConnectionLost(f"the blocking client is {self._state.value}") from None
+        return self._runner.call(method, args, kwargs)
 
     def _call_any(
         self, method: Callable[..., Coroutine[Any, Any, Any]], /, *args: Any, **kwargs: Any
@@ -207,6 +317,7 @@ class Client:
         if not self._move(ClientState.CLOSING):
             return
         try:
+            self._runner.interrupt()
             self._resources.close()
         finally:
             self._move(ClientState.CLOSED)
@@ -420,18 +531,94 @@ class Client:
 def connect(
     url: str,
     *,
-    backend: str = "asyncio",
+    backend: str | None = None,
     backend_options: Mapping[str, Any] | None = None,
     **options: Any,
 ) -> Client:
     """Connect to a PLC and return a blocking :class:`Client`.
 
     ``url`` and ``options`` are those of :func:`aiofins.connect` (``dest``, ``src``,
-    ``timeout``, ``retries``, ...). ``backend`` is the anyio backend of the private loop
-    (``"asyncio"`` or ``"trio"``; ``backend_options={"use_uvloop": True}`` for uvloop). The
-    connection is made before this returns: a bad URL or option raises here. Use it as a
-    context manager, or call :meth:`Client.close`.
+    ``timeout``, ``retries``, ...). Over UDP and FINS/TCP each call runs in the calling
+    thread, one at a time (see the module). ``backend`` runs the async client on a private
+    event loop in a thread of its own instead, where calls from several threads run
+    concurrently: ``"asyncio"`` or ``"trio"`` (``backend_options={"use_uvloop": True}`` for
+    uvloop); a serial line always does (on asyncio unless ``backend`` says). The connection
+    is made before this returns: a bad URL or option raises here. Use it as a context
+    manager, or call :meth:`Client.close`.
     """
+    if (
+        backend is None
+        and backend_options is None
+        and isinstance(url, str)
+        and "transport" not in options
+        and parse_endpoint(url).scheme in ("udp", "tcp")
+    ):
+        return _connect_direct(url, options)
+    return _connect_on_loop(url, backend or "asyncio", backend_options, options)
+
+
+def _connect_direct(url: str, options: dict[str, Any]) -> Client:
+    """The client whose calls run in the calling thread on a blocking driver."""
+    prepared = _prepare_blocking(url, options)
+    session = prepared.session
+    transport = session.transport
+    assert isinstance(transport, BlockingTransport)
+    driver = BlockingDriver(session, transport)
+    try:
+        driver.open(math.inf)  # bounded by the transport's own connect timeout
+        # The async client on the driver: its coroutines complete without suspending.
+        async_client = prepared.client(cast(Session, driver))
+    except BaseException:
+        driver.close()
+        prepared.release()
+        raise
+    made: list[_DirectRunner] = []
+
+    def runner(state: Callable[[], ClientState]) -> _DirectRunner:
+        made.append(_DirectRunner(driver, state))
+        return made[0]
+
+    resources = ExitStack()
+    resources.callback(prepared.release)
+    client = Client(async_client, runner, resources)
+    resources.callback(made[0].close)  # (first: callbacks run last in, first out)
+    return client
+
+
+def _prepare_blocking(url: str, options: dict[str, Any]) -> Prepared:
+    """:func:`aiofins.connection.prepare` for a blocking transport, run to its end here; a
+    host name is looked up in a thread of its own (``prepare`` looks names up through the
+    event loop's resolver: the thread runs one for the purpose)."""
+
+    def prepare_now() -> Coroutine[Any, Any, Prepared]:
+        return prepare(url, source_held=False, blocking=True, **options)
+
+    if not needs_lookup(parse_endpoint(url)):
+        return run_to_end(prepare_now())
+    box: list[Prepared | BaseException] = []
+
+    def run() -> None:
+        try:
+            box.append(anyio.run(prepare_now))
+        except BaseException as exc:
+            box.append(exc)
+
+    worker = threading.Thread(target=run, name="aiofins.sync.lookup", daemon=True)
+    worker.start()
+    worker.join()
+    result = box[0]
+    if isinstance(result, BaseException):
+        raise result
+    return result
+
+
+def _connect_on_loop(
+    url: str,
+    backend: str,
+    backend_options: Mapping[str, Any] | None,
+    options: dict[str, Any],
+) -> Client:
+    """The client whose calls run on a private event loop in a thread of its own."""
     loop = _LoopThread(backend, backend_options)
     resources = ExitStack()
     resources.callback(loop.stop)
@@ -443,4 +630,4 @@ def connect(
     except BaseException:
         resources.close()
         raise
-    return Client(async_client, loop, resources)
+    return Client(async_client, lambda state: _LoopRunner(loop, state), resources)

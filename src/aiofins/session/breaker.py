@@ -104,27 +104,35 @@ class CircuitBreaker:
 # The session's side: what a call does at the breaker (its start, its end), logged.
 
 
+def rejection(
+    breaker: CircuitBreaker, stats: SessionStats, dest: FinsAddress, where: str, now: float
+) -> CircuitOpen | None:
+    """Whether a call to ``dest`` (via ``where``) may go through the breaker at ``now`` (the
+    session's clock): ``None`` if so (the probe, while the breaker is open), else the
+    :class:`CircuitOpen` to fail it with at once (counted in ``stats.breaker_rejects``)."""
+    wait = breaker.admit(now)
+    if not wait:
+        return None
+    stats.breaker_rejects += 1
+    if wait == math.inf:
+        how = "a probe is testing whether it answers again"
+        wait = 0.0
+    else:
+        how = f"the next probe in {wait:.2f} s"
+    return CircuitOpen(
+        f"{dest} via {where} failed {breaker.failures} calls in a row: failing fast ({how})",
+        retry_after=wait,
+    )
+
+
 async def admit_call(
     breaker: CircuitBreaker, stats: SessionStats, dest: FinsAddress, where: str, now: float
 ) -> None:
-    """Let a call to ``dest`` (via ``where``) through an open breaker as the probe at ``now``
-    (the session's clock), or fail it at once with :class:`CircuitOpen` (counted in
-    ``stats.breaker_rejects``)."""
-    wait = breaker.admit(now)
-    if wait:
-        stats.breaker_rejects += 1
-        if wait == math.inf:
-            how = "a probe is testing whether it answers again"
-            wait = 0.0
-        else:
-            how = f"the next probe in {wait:.2f} s"
-        await raise_after_a_turn(
-            CircuitOpen(
-                f"{dest} via {where} failed {breaker.failures} calls in a row: "
-                f"failing fast ({how})",
-                retry_after=wait,
-            )
-        )
+    """Let a call through the breaker, or fail it (see :func:`rejection`) after a turn of
+    the event loop."""
+    error = rejection(breaker, stats, dest, where, now)
+    if error is not None:
+        await raise_after_a_turn(error)
 
 
 def call_answered(breaker: CircuitBreaker, where: str) -> None:

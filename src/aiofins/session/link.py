@@ -201,21 +201,11 @@ class Link:
         """
         if self.transport.is_open:
             return
-        state = self.state
-        if state is LinkState.SHUT:
-            raise ConnectionLost(f"session to {self.transport.description} is closed")
-        background = self.background
-        if background is None:
+        if self.state is not LinkState.SHUT and self.background is None:
             raise RuntimeError("Session is not running: use 'async with Session(...)'")
-        if state is LinkState.OPEN:  # the transport ended without telling us
-            self.set_state(LinkState.CLOSED)
-        elif state is LinkState.BACKOFF:
-            wait = self.retry_at - self.clock()
-            if wait > 0:  # fail fast: no call waits out the backoff beyond its own deadline
-                raise InBackoff(
-                    f"cannot connect to {self.transport.description}: the last attempt failed; "
-                    f"the next one in {wait:.2f} s (reconnect backoff)"
-                )
+        self.may_connect()
+        background = self.background
+        assert background is not None
         attempt = self.connecting
         if attempt is None:
             attempt = self.connecting = _Attempt()
@@ -234,6 +224,68 @@ class Link:
                     "it succeeds)"
                 )
         attempt.check()
+
+    def may_connect(self) -> None:
+        """Before a connection attempt (the transport is closed): raise
+        :class:`ConnectionLost` if the link is shut, :class:`InBackoff` while the backoff
+        after a failed attempt runs (calls fail fast: none waits it out beyond its own
+        deadline); a link still ``OPEN`` (the transport ended without telling us) is
+        ``CLOSED`` now."""
+        state = self.state
+        if state is LinkState.SHUT:
+            raise ConnectionLost(f"session to {self.transport.description} is closed")
+        if state is LinkState.OPEN:  # the transport ended without telling us
+            self.set_state(LinkState.CLOSED)
+        elif state is LinkState.BACKOFF:
+            wait = self.retry_at - self.clock()
+            if wait > 0:
+                raise InBackoff(
+                    f"cannot connect to {self.transport.description}: the last attempt failed; "
+                    f"the next one in {wait:.2f} s (reconnect backoff)"
+                )
+
+    def opened(self) -> None:
+        """The transport is open (``on_open`` ran and accepted it): counted, logged, the
+        SID space made fresh if it is, the link ``OPEN``. The success of every connection
+        attempt, the event-loop one's (:meth:`_connect`) and a blocking driver's."""
+        transport = self.transport
+        where = transport.description
+        self.backoff = 0.0
+        self.stats.connects += 1
+        if transport.local_node is not None:
+            logger.info(
+                "%s allocated us FINS node %d (its own node: %s)",
+                where,
+                transport.local_node,
+                transport.remote_node,
+                extra={"endpoint": where, "node": transport.local_node},
+            )
+        if transport.fresh_sid_space:  # nothing late can reach a new connection
+            self.on_fresh()
+        self.set_state(LinkState.OPEN)
+
+    def open_failed(self, error: FinsError, exc: BaseException) -> None:
+        """A connection attempt failed with ``exc`` (``error``: as the callers get it; the
+        transport is closed): unless the link is shut, counted, logged, and the link in
+        ``BACKOFF`` for the next, jittered, doubling wait. The failure of every connection
+        attempt, the event-loop one's (:meth:`_connect`) and a blocking driver's."""
+        if self.state is LinkState.SHUT:
+            return
+        where = self.transport.description
+        self.stats.connect_failures += 1
+        low, high = self.reconnect_backoff
+        self.backoff = min(high, max(low, self.backoff * 2))
+        wait = self.backoff * random.uniform(0.5, 1.0)  # no lockstep after an outage
+        self.retry_at = self.clock() + wait
+        self.set_state(LinkState.BACKOFF)
+        logger.warning(
+            "%s; next attempt in %.2f s",
+            # The error names the endpoint already, or is prefixed with it.
+            error if where in str(error) else f"cannot connect to {where}: {error}",
+            wait,
+            exc_info=not isinstance(exc, (OSError, FinsError)),
+            extra={"endpoint": where},
+        )
 
     async def _connect(self, attempt: _Attempt) -> None:
         """Run one connection attempt: a background task ending at a boundary. Whatever goes
@@ -259,21 +311,8 @@ class Link:
                 await transport.aclose()
             if self.connecting is attempt:
                 self.connecting = None
-            if isinstance(exc, Exception) and self.state is not LinkState.SHUT:
-                self.stats.connect_failures += 1
-                low, high = self.reconnect_backoff
-                self.backoff = min(high, max(low, self.backoff * 2))
-                wait = self.backoff * random.uniform(0.5, 1.0)  # no lockstep after an outage
-                self.retry_at = self.clock() + wait
-                self.set_state(LinkState.BACKOFF)
-                logger.warning(
-                    "%s; next attempt in %.2f s",
-                    # The error names the endpoint already, or is prefixed with it.
-                    error if where in str(error) else f"cannot connect to {where}: {error}",
-                    wait,
-                    exc_info=not isinstance(exc, (OSError, FinsError)),
-                    extra={"endpoint": where},
-                )
+            if isinstance(exc, Exception):
+                self.open_failed(error, exc)
             attempt.finish(error)
             if not isinstance(exc, Exception):
                 raise
@@ -285,17 +324,5 @@ class Link:
                 await transport.aclose()
             attempt.finish(ConnectionLost(f"session to {where} is closed"))
             return
-        self.backoff = 0.0
-        self.stats.connects += 1
-        if transport.local_node is not None:
-            logger.info(
-                "%s allocated us FINS node %d (its own node: %s)",
-                where,
-                transport.local_node,
-                transport.remote_node,
-                extra={"endpoint": where, "node": transport.local_node},
-            )
-        if transport.fresh_sid_space:  # nothing late can reach a new connection
-            self.on_fresh()
-        self.set_state(LinkState.OPEN)
+        self.opened()
         attempt.finish(None)

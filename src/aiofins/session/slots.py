@@ -175,6 +175,37 @@ class EventPending(Pending):
         return result
 
 
+class HeldPending(Pending):
+    """Keeps its reply (or its failure) in :attr:`result` for a caller that reads it there
+    itself: a driver without an event loop, which waits on its socket (see
+    :mod:`aiofins.sync`), not on a future or an event. Made bare, ``HeldPending()``:
+    :meth:`Session.start` sets the other fields."""
+
+    __slots__ = ("result",)
+
+    def __init__(self) -> None:
+        self.fut = None
+        self.slots = None
+        #: The reply frame, or the error the request ended with; ``None`` until then.
+        self.result: bytes | BaseException | None = None
+
+    def wake(self, frame: bytes) -> None:
+        if self.result is None:
+            self.result = frame
+
+    def fail(self, exc: BaseException) -> None:
+        if self.result is None:
+            self.result = exc
+
+    async def wait(self) -> bytes:
+        result = self.result
+        if isinstance(result, BaseException):
+            raise result
+        if result is None:
+            raise RuntimeError("a held request is read once it has ended")
+        return result
+
+
 class SlotTimeout(FinsTimeout):
     """No request slot (or no free SID) became free in time: the destination's queue did not
     drain, or all 256 of its SIDs are in flight, quarantined or lingering.

@@ -152,7 +152,7 @@ class _TcpProtocol(asyncio.Protocol):
             return
         try:
             events = self.conn.receive_data(data, self.received)
-            error = _deliver(self.owner, events, self.sink) if events else None
+            error = deliver(self.owner, events, self.sink) if events else None
         except FrameError as exc:
             error = exc
         if error is not None:
@@ -160,7 +160,7 @@ class _TcpProtocol(asyncio.Protocol):
 
     def before_handshake(self, data: bytes) -> None:
         try:
-            nodes, early = _handshake_step(self.owner, self.conn, data)
+            nodes, early = handshake_step(self.owner, self.conn, data)
         except FrameError as exc:
             self.fail(exc)
             return
@@ -168,7 +168,7 @@ class _TcpProtocol(asyncio.Protocol):
             return
         if not self.handshake.done():  # (cancelled: the connect gave up and closes us)
             self.handshake.set_result(nodes)
-        error = _deliver(self.owner, early, self.sink)
+        error = deliver(self.owner, early, self.sink)
         if error is not None:
             self.fail(error)
 
@@ -189,8 +189,8 @@ class _TcpProtocol(asyncio.Protocol):
         self.fail(lost)
 
 
-def _handshake_step(
-    owner: TcpTransport, conn: TcpClientConnection, data: bytes
+def handshake_step(
+    owner: Transport, conn: TcpClientConnection, data: bytes
 ) -> tuple[tuple[int, int] | None, list[TcpEvent]]:
     """Feed bytes read during the handshake to ``conn``: ``(client node, server node)`` once
     assigned (else ``None``) and the events that followed the assignment in ``data``.
@@ -211,7 +211,7 @@ def _handshake_step(
     return None, []
 
 
-def _deliver(owner: TcpTransport, events: Sequence[TcpEvent], sink: FrameSink) -> FrameError | None:
+def deliver(owner: Transport, events: Sequence[TcpEvent], sink: FrameSink) -> FrameError | None:
     """Hand the events after the handshake to the sink, in order; the error that ends the
     connection, if any.
 
@@ -359,7 +359,7 @@ class TcpTransport(Transport):
                 return
             try:
                 events = conn.receive_data(data, received)
-                error = _deliver(self, events, sink) if events else None
+                error = deliver(self, events, sink) if events else None
             except FrameError as exc:
                 error = exc
             if error is not None:
@@ -397,13 +397,13 @@ class TcpTransport(Transport):
         exc: BaseException | None = None
         received = sink.frame_received
         try:
-            error = _deliver(self, early, sink)
+            error = deliver(self, early, sink)
             if error is not None:
                 raise error
             while True:
                 events = conn.receive_data(await stream.receive(), received)
                 if events:
-                    error = _deliver(self, events, sink)
+                    error = deliver(self, events, sink)
                     if error is not None:
                         raise error
         except FrameError as err:
@@ -514,7 +514,7 @@ class TcpTransport(Transport):
         followed the assignment in the same read (the anyio pump of the handshake)."""
         await stream.send(conn.start())
         while True:
-            nodes, early = _handshake_step(self, conn, await stream.receive())
+            nodes, early = handshake_step(self, conn, await stream.receive())
             if nodes is not None:
                 self.local_node, self.remote_node = nodes
                 return early
@@ -530,7 +530,7 @@ class TcpTransport(Transport):
         exc: BaseException | None = None
         received = sink.frame_received
         try:
-            error = _deliver(self, early, sink)
+            error = deliver(self, early, sink)
             if error is not None:
                 raise error
             # The socket itself, not stream.receive(): that tries a recv() before waiting,
@@ -547,7 +547,7 @@ class TcpTransport(Transport):
                     raise anyio.EndOfStream
                 events = conn.receive_data(data, received)
                 if events:
-                    error = _deliver(self, events, sink)
+                    error = deliver(self, events, sink)
                     if error is not None:
                         raise error
         except FrameError as err:  # FinsTcpError included: the stream is unusable now

@@ -54,6 +54,33 @@ _RECV_SIZE = 4096
 _BATCH = 64
 
 
+def udp_socket(
+    family: int, remote: Any, local_host: str | None, local_port: int, rcvbuf: int
+) -> socket.socket:
+    """A non-blocking UDP socket of ``family`` with a receive buffer of ``rcvbuf`` asked
+    for, bound to ``local_host:local_port`` (any address, an ephemeral port by default) and
+    connected to ``remote`` (an address as ``getaddrinfo`` gives it), so the kernel drops
+    datagrams from anyone else. Every UDP transport opens its socket here."""
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.setblocking(False)
+        # Best effort: Linux caps it at net.core.rmem_max without complaint.
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        local = local_host or ("::" if family == socket.AF_INET6 else "0.0.0.0")
+        if local_port:
+            # A fixed port (the FINS port, for PLCs that answer to it) is shared by the
+            # sockets to several PLCs: each is connected to its PLC, and the kernel hands a
+            # datagram to the socket connected to its sender.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((local, local_port))
+        sock.connect(remote)
+    except BaseException:
+        sock.close()
+        raise
+    return sock
+
+
 def _drain(recv: Any, sink: FrameSink, awaited: Sized) -> OSError | None:
     """Hand the datagrams queued on the socket (up to :data:`_BATCH`) to the sink.
 
@@ -319,24 +346,7 @@ class UdpTransport(Transport):
         """A non-blocking UDP socket, bound to an ephemeral port and connected to the PLC."""
         infos = await anyio.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)
         family, _, _, _, remote = infos[0]
-        sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            sock.setblocking(False)
-            # Best effort: Linux caps it at net.core.rmem_max without complaint.
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.rcvbuf)
-            local = self.local_host or ("::" if family == socket.AF_INET6 else "0.0.0.0")
-            if self.local_port:
-                # A fixed port (the FINS port, for PLCs that answer to it) is shared by the
-                # sockets to several PLCs: each is connected to its PLC, and the kernel
-                # hands a datagram to the socket connected to its sender.
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.bind((local, self.local_port))
-            sock.connect(remote)
-        except BaseException:
-            sock.close()
-            raise
-        return sock
+        return udp_socket(family, remote, self.local_host, self.local_port, self.rcvbuf)
 
     async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
         if self.is_open:
