@@ -15,7 +15,7 @@ from .hooks import (
     ScanDone,
     SidSpaceChanged,
 )
-from .poller import Poller, Quality, ScanState, Snapshot
+from .poller import Poller, PollerState, Quality, ScanState, Snapshot
 from .pool import Pool, PoolFull
 from .protocol.areas import MemoryAddress
 from .protocol.arrays import array_to_words, words_to_array
@@ -66,6 +66,7 @@ __all__ = [
     "MemoryAddress",
     "MemoryTransport",
     "Poller",
+    "PollerState",
     "Pool",
     "PoolFull",
     "Quality",

@@ -118,6 +118,25 @@ class Snapshot:
         return {name: r.value for name, r in readings.items()}
 
 
+class PollerState(Enum):
+    """Where a :class:`Poller` is in its life (:attr:`Poller.state`)."""
+
+    #: Made, not entered: groups may be added; they start when it is entered.
+    NEW = "new"
+    #: Entered (``async with``): its timer runs and its groups scan.
+    RUNNING = "running"
+    #: Left: its groups stopped, its iteration ended. A poller runs once.
+    CLOSED = "closed"
+
+
+#: The transitions :meth:`Poller._become` allows.
+_POLLER_NEXT: dict[PollerState, frozenset[PollerState]] = {
+    PollerState.NEW: frozenset({PollerState.RUNNING}),
+    PollerState.RUNNING: frozenset({PollerState.CLOSED}),
+    PollerState.CLOSED: frozenset(),
+}
+
+
 class ScanState(Enum):
     """Where a scan group is in its cycle (:attr:`ScanGroup.state`)."""
 
@@ -233,6 +252,7 @@ class Poller:
         self._hooks = None if hooks is None else hooks.or_none()
         self.changes_only = changes_only
         self.groups: dict[str, ScanGroup] = {}
+        self.state = PollerState.NEW
         self._channel: Channel[Snapshot] = Channel(buffer)
         self._tg: TaskGroup | None = None
         self._now = anyio.current_time
@@ -299,7 +319,21 @@ class Poller:
             else:
                 self._timer_wake.set()
 
+    def _become(self, state: PollerState) -> None:
+        """The one place the poller changes state."""
+        if state not in _POLLER_NEXT[self.state]:
+            raise RuntimeError(
+                f"the poller is {self.state.name.lower()}"
+                + (
+                    ": a poller runs once, make a new one"
+                    if self.state is not PollerState.NEW
+                    else ""
+                )
+            )
+        self.state = state
+
     async def __aenter__(self) -> Poller:
+        self._become(PollerState.RUNNING)
         self._now = event_loop_clock()
         self._sleep = backend_sleep()
         self._channel.bind()
@@ -338,6 +372,7 @@ class Poller:
                 if group.state is not ScanState.STOPPED:
                     group._enter(ScanState.STOPPED)
             self._channel.close()
+            self._become(PollerState.CLOSED)
 
     def __aiter__(self) -> AsyncIterator[Snapshot]:
         return self._channel

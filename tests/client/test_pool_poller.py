@@ -9,7 +9,7 @@ import anyio
 import pytest
 
 from aiofins.connection import connect
-from aiofins.poller import Poller, Quality, ScanState, TagReading
+from aiofins.poller import Poller, PollerState, Quality, ScanState, TagReading
 from aiofins.pool import Pool
 from aiofins.protocol.errors import (
     AddressError,
@@ -475,3 +475,18 @@ async def test_poller_groups_run_on_one_timer_with_states(sim: Simulator) -> Non
             # One schedule entry per group; the next slow scan ~10 s after its first.
             assert sorted(g.name for _, _, g in poller._schedule) == ["fast", "slow"]
         assert (fast.state, slow.state) == (ScanState.STOPPED, ScanState.STOPPED)
+
+
+async def test_a_poller_runs_once_and_says_where_it_is() -> None:
+    async with Pool() as pool:
+        poller = Poller(pool)
+        assert poller.state is PollerState.NEW
+        async with poller:
+            assert poller.state is PollerState.RUNNING
+            with pytest.raises(RuntimeError, match="the poller is running"):
+                await poller.__aenter__()
+        assert poller.state is PollerState.CLOSED
+        with pytest.raises(RuntimeError, match="a poller runs once, make a new one"):
+            async with poller:
+                pass
+        assert poller.state is PollerState.CLOSED
