@@ -276,7 +276,7 @@ class BlockingDriver:
         while frame is None:  # every SID of the destination taken
             left = end - now
             if left <= 0:
-                raise no_free_sid(session, state, timeout)
+                raise no_free_sid(session.sids, state, timeout)
             transport.receive(min(_SID_WAIT, left))
             now = self.clock()
             frame = session.start(p, state, mrc, src, params, retries, now, end, cap)
@@ -331,7 +331,9 @@ class BlockingDriver:
         if p is not None:
             session.abandon(p, timeout, isinstance(exc, FinsTimeout))
             if isinstance(exc, Expired):
-                exc = no_response(session, dest, p.mrc, p.src, timeout, p.attempts)
+                exc = no_response(
+                    session.transport, session.source, dest, p.mrc, p.src, timeout, p.attempts
+                )
         session.tell_breaker(exc, timeout)
         return exc
 

@@ -145,7 +145,7 @@ async def test_an_idle_space_is_closed_and_its_node_cools() -> None:
             hooks=EventHooks(sid_space_changed=[events.append]),
         ) as session,
     ):
-        session._spaces.idle_after = 0.2
+        session.spaces.idle_after = 0.2
         good, wrong, errors = await run_readers(session, 10, 300)
         assert (good, wrong, errors) == (300, 0, [])
         assert session.sid_spaces == 2
@@ -183,7 +183,7 @@ async def test_a_second_fins_tcp_connection_gets_its_node_from_the_plc() -> None
             good, wrong, errors = await run_readers(session, 20, 700, timeout=10.0)
             assert (good, wrong, errors) == (700, 0, [])
             assert session.stats.sid_spaces_opened == 1 and session.sid_spaces == 2
-            (space,) = session._spaces.extra
+            (space,) = session.spaces.extra
             assert space.source is not None and space.source.node != session.source.node
             assert space.transport.local_node == space.source.node
 

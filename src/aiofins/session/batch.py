@@ -19,7 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, NoReturn
+from typing import Any, NoReturn, Protocol
 
 import anyio
 import anyio.lowlevel
@@ -28,17 +28,17 @@ from ..protocol.endcodes import EndCode
 from ..protocol.errors import (
     CommandError,
     ConnectionLost,
+    FinsError,
     FinsTimeout,
 )
 from ..protocol.frames import check_command, check_commands, end_code_error
 from ..protocol.header import FinsAddress
+from ..transport.base import Transport
 from .messages import no_free_sid, no_response
-from .response import Response
+from .response import Response, SessionStats
+from .sids import SidSpace
 from .slots import DestState, Pending
-
-if TYPE_CHECKING:
-    from .core import Session
-    from .spaces import ExtraSpace
+from .spaces import ExtraSpace
 
 _NORMAL = EndCode(0)
 _DEBUG = logging.DEBUG
@@ -52,6 +52,86 @@ Command = tuple[int, int, bytes]
 OnResponse = Callable[[int, Response], object]
 
 __all__ = ["check_command", "end_code_error", "raise_after_a_turn", "request_many"]
+
+
+class Batching(Protocol):
+    """What a batch uses of its session (a :class:`~aiofins.session.Session`): the request
+    path's steps, its settings and counters."""
+
+    @property
+    def transport(self) -> Transport: ...
+
+    @property
+    def source(self) -> FinsAddress: ...
+
+    @property
+    def dest(self) -> FinsAddress: ...
+
+    @property
+    def timeout(self) -> float: ...
+
+    @property
+    def retries(self) -> int: ...
+
+    @property
+    def sids(self) -> SidSpace: ...
+
+    @property
+    def stats(self) -> SessionStats: ...
+
+    @property
+    def loop(self) -> Any: ...
+
+    @property
+    def on_asyncio(self) -> bool: ...
+
+    def clock(self) -> float: ...
+
+    def log_frames_now(self) -> None: ...
+
+    async def ensure_open(self, timeout: float | None = None) -> None: ...
+
+    def dest_state(self, dest: FinsAddress) -> DestState: ...
+
+    def start(
+        self,
+        p: Pending,
+        state: DestState,
+        mrc: int,
+        src: int,
+        params: bytes,
+        retries: int,
+        now: float,
+        end: float,
+        cap: float | None,
+        space: ExtraSpace | None = None,
+    ) -> bytes | None: ...
+
+    def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None: ...
+
+    def response(self, frame: bytes, end_code: int) -> Response | None: ...
+
+    def busy_pause(self, frame: bytes, busy: int) -> float | None: ...
+
+    def end_code_failure(self, frame: bytes, mrc: int, src: int) -> FinsError: ...
+
+    def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None: ...
+
+    def requests_in_flight(self) -> list[Pending]: ...
+
+    async def request(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        attempt_timeout: float | None = None,
+        _in_call: bool = False,
+    ) -> Response: ...
 
 
 async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
@@ -164,7 +244,7 @@ class Batch:
 
     def __init__(
         self,
-        session: Session,
+        session: Batching,
         commands: Sequence[Command],
         state: DestState,
         timeout: float,
@@ -275,7 +355,7 @@ class Batch:
             session.stats.sid_exhausted += 1
         left = since + self.timeout - now
         if left <= 0.0:
-            self.finish(no_free_sid(session, state, self.timeout))
+            self.finish(no_free_sid(session.sids, state, self.timeout))
             return
         # The last look is at the deadline itself, not at the first SID_WAIT past it.
         self.later(min(_SID_WAIT, left), index)
@@ -343,7 +423,10 @@ class Batch:
         if self.fut.done():
             return
         if isinstance(exc, FinsTimeout):
-            exc = no_response(self.session, self.dest, p.mrc, p.src, self.timeout, p.attempts)
+            s = self.session
+            exc = no_response(
+                s.transport, s.source, self.dest, p.mrc, p.src, self.timeout, p.attempts
+            )
         self.finish(exc)
 
     # -- ending -------------------------------------------------------------------------
@@ -384,7 +467,7 @@ class Batch:
 
 
 async def request_many(
-    session: Session,
+    session: Batching,
     commands: Sequence[Command],
     *,
     dest: FinsAddress | None,
@@ -441,7 +524,7 @@ async def request_many(
 
 
 async def _concurrent(
-    session: Session,
+    session: Batching,
     commands: Sequence[Command],
     dest: FinsAddress,
     timeout: float,

@@ -30,13 +30,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from typing import Protocol
 
 from ..protocol.errors import FinsTimeout
 from ..protocol.frames import ERROR_BITS
 from ..protocol.header import FinsAddress
-from .batch import Batch, Command
+from .batch import Batch, Batching, Command
 from .breaker import BreakerState
-from .core import Session
 from .messages import no_response
 from .response import Response
 from .slots import DestState, Pending
@@ -55,6 +55,20 @@ _CLOSED = BreakerState.CLOSED
 _OPEN = LinkState.OPEN
 
 
+class Calling(Batching, Protocol):
+    """What :func:`start_requests` uses of the session (a :class:`~aiofins.session.Session`)
+    besides what its batch does: whether the call may start at once, and the breaker to
+    tell how it ended."""
+
+    @property
+    def link_state(self) -> LinkState: ...
+
+    @property
+    def breaker_state(self) -> BreakerState: ...
+
+    def tell_breaker(self, error: BaseException | None, timeout: float) -> None: ...
+
+
 class CallbackBatch(Batch):
     """A batch whose end calls ``done`` instead of waking an awaiting task.
 
@@ -64,6 +78,7 @@ class CallbackBatch(Batch):
 
     __slots__ = ("done", "starting")
 
+    session: Calling
     done: Done | None
     starting: bool
 
@@ -111,7 +126,7 @@ class CallbackBatch(Batch):
 
 
 def start_requests(
-    session: Session,
+    session: Calling,
     commands: Sequence[Command],
     done: Done,
     *,
@@ -171,7 +186,7 @@ class CallbackPending(Pending):
 
     __init__ = object.__init__
 
-    session: Session
+    session: Calling
     #: The destination's state (address, slots).
     target: DestState
     timeout: float
@@ -219,9 +234,11 @@ class CallbackPending(Pending):
         if self.done_with is None:
             return
         if isinstance(exc, FinsTimeout):
+            s = self.session
             exc = no_response(
-                self.session, self.target.address, self.mrc, self.src, self.timeout, self.attempts
-            )
+                s.transport, s.source, self.target.address, self.mrc, self.src, self.timeout,
+                self.attempts,
+            )  # fmt: skip
         self._end(exc)
 
     def _end(self, error: BaseException) -> None:
@@ -247,7 +264,7 @@ class CallbackPending(Pending):
 
 
 def _call(
-    session: Session, done: FrameDone, frame: bytes | None, error: BaseException | None
+    session: Calling, done: FrameDone, frame: bytes | None, error: BaseException | None
 ) -> None:
     try:
         done(frame, error)
@@ -281,7 +298,7 @@ def _busy_batch(p: CallbackPending, pause: float) -> CallbackBatch:
 
 
 def start_request(
-    session: Session,
+    session: Calling,
     command: Command,
     done: FrameDone,
     *,

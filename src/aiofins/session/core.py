@@ -196,7 +196,7 @@ class Session:
         self.clock: Clock = monotonic if clock is None else clock
         #: Whether retransmissions follow the measured RTO: not over a reliable stream
         #: (FINS/TCP), which loses nothing; there the call's own schedule alone.
-        self._adaptive = not transport.reliable
+        self.adaptive = not transport.reliable
         limit = transport.max_in_flight
         self.max_in_flight = min(max_in_flight, limit) if limit else max_in_flight
         #: One request on the line at a time across all destinations (serial links).
@@ -237,7 +237,7 @@ class Session:
         self.replies_awaited = self._pending
         #: The link: its state, connection attempts, the reconnect backoff.
         #: The SID spaces opened when the transport's own are all taken (see .spaces).
-        self._spaces = SidSpaces(
+        self.spaces = SidSpaces(
             transport,
             max_sid_spaces,
             min_linger,
@@ -249,7 +249,7 @@ class Session:
             fail=self._fail_space,
             prefix=self._prefix_from,
         )
-        in_flight.spaces = self._spaces.extra
+        in_flight.spaces = self.spaces.extra
         self._link = Link(
             transport,
             self,
@@ -281,12 +281,12 @@ class Session:
     @property
     def max_sid_spaces(self) -> int:
         """SID spaces (sockets or connections) the session opens at most, its own included."""
-        return self._spaces.limit
+        return self.spaces.limit
 
     @property
     def sid_spaces(self) -> int:
         """SID spaces open now (or opening), the session's own included."""
-        return 1 + len(self._spaces.extra)
+        return 1 + len(self.spaces.extra)
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -305,7 +305,7 @@ class Session:
         self._tg = tg
         background = Background(tg, self._link.background_failed, self._watcher.from_task)
         self._background = self._link.background = self._watcher.background = background
-        self._spaces.background = background
+        self.spaces.background = background
         try:
             background.start_soon(self._watcher.run)
             await self._link.ensure_open()
@@ -341,7 +341,7 @@ class Session:
             self._background.cancel_all()
         with anyio.CancelScope(shield=True):
             await self.transport.aclose()
-            await self._spaces.aclose()
+            await self.spaces.aclose()
 
     def _use_clock(self, clocks: Clocks) -> None:
         """The one place the session's clock is set: every part reads ``clocks.session``,
@@ -349,7 +349,7 @@ class Session:
         clock = self.clock = clocks.session
         self.sids.clock = clock
         self._link.clock = clock
-        self._spaces.clock = clock
+        self.spaces.clock = clock
         self._watcher.clock = clock
         self._watcher.timer_clock = clocks.timer
         self._watcher.direct = clocks.direct
@@ -368,7 +368,7 @@ class Session:
             self.sids.ours = address_bits(self.source.network, self.source.node, self.source.unit)
             for state in self._dests.values():
                 state.prefix = self._prefix(state.address)
-        self._spaces.primary_opened(self.source.node)
+        self.spaces.primary_opened(self.source.node)
 
     # ----------------------------------------------------------------- transport sink
 
@@ -397,7 +397,16 @@ class Session:
             if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
                 p = match_relay_error(pending, frame)
             if p is None:
-                log_unmatched(self, key, frame, sids, raw >= RELAY_ERROR_BIT)
+                self._linger_logged = log_unmatched(
+                    self.transport.description,
+                    self.stats,
+                    self.spaces,
+                    sids,
+                    key,
+                    frame,
+                    raw >= RELAY_ERROR_BIT,
+                    self._linger_logged,
+                )
                 return
             key = p.key
             del pending[key]
@@ -428,7 +437,7 @@ class Session:
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
         else:
             if not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
-                r.sample(latency, self.rto_bounds if self._adaptive else None)
+                r.sample(latency, self.rto_bounds if self.adaptive else None)
             linger = sids.linger
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
@@ -479,7 +488,7 @@ class Session:
         if same_address(to, self.sids.ours):
             found = True
         else:
-            owner = next((s for s in self._spaces.extra if same_address(to, s.sids.ours)), None)
+            owner = next((s for s in self.spaces.extra if same_address(to, s.sids.ours)), None)
             found = owner is not None
         if logger.isEnabledFor(_DEBUG):
             where = self.transport.description
@@ -531,7 +540,7 @@ class Session:
         """Fail every request in flight on the session's own transport with ``exc`` (the
         link failed or the session closes), their SIDs quarantined."""
         self.sids.fail_all(exc, self.quarantine_until)
-        if not self._spaces.extra:  # (else their requests' deadlines stay)
+        if not self.spaces.extra:  # (else their requests' deadlines stay)
             self._deadlines.clear()
 
     def _fail_space(self, space: ExtraSpace, exc: BaseException) -> None:
@@ -859,7 +868,9 @@ class Session:
         where = self.transport.description
         if isinstance(exc, Expired):
             assert p is not None
-            error = no_response(self, dest, p.mrc, p.src, timeout, p.attempts)
+            error = no_response(
+                self.transport, self.source, dest, p.mrc, p.src, timeout, p.attempts
+            )
             if not in_call:
                 call_ended(self._breaker, error, timeout, where, self.clock())
             raise error from None
@@ -996,22 +1007,22 @@ class Session:
         """For a batch that found no free SID of the transport's own: one of an open extra
         space, and the space. A batch cannot wait for a space to open: if none has a free
         SID, one is opened in the background (if allowed) for its next try."""
-        spaces = self._spaces
+        spaces = self.spaces
         got = spaces.take(state, now) or spaces.allocate(state)
         if got is None and spaces.may_open(now):
             # (from the deadline watcher's task: a batch runs in receive callbacks, where
             # no task can be started)
-            self._watcher.from_task(lambda: spaces.open_soon(self.source, self._nodes_in_use()))
+            self._watcher.from_task(lambda: spaces.open_soon(self.source, self.nodes_in_use()))
         return got
 
     def requests_in_flight(self) -> list[Pending]:
         """Every request in flight, on every SID space."""
         out = list(self.sids.pending.values())
-        for space in self._spaces.extra:
+        for space in self.spaces.extra:
             out.extend(space.sids.pending.values())
         return out
 
-    def _nodes_in_use(self) -> set[int]:
+    def nodes_in_use(self) -> set[int]:
         """Nodes an extra space's socket may not take as its source: ours and those of
         the destinations we address."""
         return {self.source.node, *(d.node for d in self._dests)}

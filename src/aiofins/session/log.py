@@ -5,14 +5,12 @@ normal reply unless DEBUG logging is on.)"""
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
 
 from ..protocol.endcodes import CPU_ERROR_FLAGS
 from ..protocol.frames import MRC, SID, SRC
+from .response import SessionStats
 from .sids import SidSpace
-
-if TYPE_CHECKING:
-    from .core import Session
+from .spaces import SidSpaces
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
@@ -60,24 +58,28 @@ def cpu_flags_seen(where: str, end_code: int, logged: int) -> int:
 
 
 def log_unmatched(
-    session: Session, key: int, frame: bytes, sids: SidSpace, relay_error: bool = False
-) -> None:
-    """A reply ``frame`` no request of ``session`` waits for (SID space ``sids``, reply
-    key ``key``):
-    counted (late, duplicate or unsolicited; see :meth:`SidSpace.unmatched`), and logged
-    when it says something about the link (a duplicate that lengthens the linger, late
-    replies at 2, 4, 8 ...)."""
-    kind, lateness = sids.unmatched(session.stats, key, frame, relay_error)
-    where = session.transport.description
+    where: str,
+    stats: SessionStats,
+    spaces: SidSpaces,
+    sids: SidSpace,
+    key: int,
+    frame: bytes,
+    relay_error: bool,
+    logged: float,
+) -> float:
+    """A reply ``frame`` no request waits for (SID space ``sids``, reply key ``key``) came via
+    ``where``: counted in ``stats`` (late, duplicate or unsolicited; see
+    :meth:`SidSpace.unmatched`), and logged when it says something about the link (a
+    duplicate that lengthens the linger, late replies at 2, 4, 8 ...). ``spaces``: the
+    session's SID spaces (what a duplicate teaches holds for every socket to the peer);
+    ``logged``: the linger last logged (logged again once doubled). Returns the linger
+    logged now."""
+    kind, lateness = sids.unmatched(stats, key, frame, relay_error)
     if kind == "duplicate":
-        spaces = session._spaces
         if spaces.extra:  # what the peer shows holds for every socket to it
             spaces.share_linger(sids)
-        if lateness:
-            linger = sids.linger
-            if linger < 2 * session._linger_logged:
-                return
-            session._linger_logged = linger
+        linger = sids.linger
+        if lateness and linger >= 2 * logged:
             logger.warning(
                 "%s: a duplicate reply came %.3f s after its request was answered; "
                 "SIDs now linger %.3f s after a reply",
@@ -86,20 +88,27 @@ def log_unmatched(
                 linger,
                 extra={"endpoint": where, "sid": key & 0xFF},
             )
+            return linger
     elif kind == "late":
-        late = session.stats.late_replies
-        if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
-            logger.warning(
-                "%s: %d late replies so far (each came after its request was given up "
-                "on): the timeout is too short for this PLC or route",
-                where,
-                late,
-                extra={"endpoint": where, "sid": key & 0xFF},
-            )
-        elif logger.isEnabledFor(_DEBUG):
-            logger.debug(
-                "%s: late reply for SID %d (its request was given up on)",
-                where,
-                key & 0xFF,
-                extra={"endpoint": where, "sid": key & 0xFF},
-            )
+        _log_late(where, stats.late_replies, key)
+    return logged
+
+
+def _log_late(where: str, late: int, key: int) -> None:
+    """A late reply (``late`` so far) to SID ``key & 0xFF``: a WARNING at 2, 4, 8 ...,
+    else DEBUG."""
+    if late >= 2 and not late & (late - 1):  # 2, 4, 8, ...: repeated, rarely logged
+        logger.warning(
+            "%s: %d late replies so far (each came after its request was given up "
+            "on): the timeout is too short for this PLC or route",
+            where,
+            late,
+            extra={"endpoint": where, "sid": key & 0xFF},
+        )
+    elif logger.isEnabledFor(_DEBUG):
+        logger.debug(
+            "%s: late reply for SID %d (its request was given up on)",
+            where,
+            key & 0xFF,
+            extra={"endpoint": where, "sid": key & 0xFF},
+        )

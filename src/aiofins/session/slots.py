@@ -6,16 +6,31 @@ import asyncio
 import contextlib
 from collections import deque
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import anyio
 
 from ..protocol.errors import FinsTimeout
 from ..protocol.header import FinsAddress
+from ..transport.base import Transport
 from .states import RequestState
 
-if TYPE_CHECKING:
-    from .spaces import ExtraSpace
+
+class Registry(Protocol):
+    """Where a request is registered (a :class:`~aiofins.session.sids.SidSpace`)."""
+
+    def abandon(self, p: Pending, until: float) -> None: ...
+
+
+class Space(Protocol):
+    """An extra SID space as a request on it sees it (a
+    :class:`~aiofins.session.spaces.ExtraSpace`): its SIDs and its transport."""
+
+    @property
+    def sids(self) -> Registry: ...
+
+    @property
+    def transport(self) -> Transport: ...
 
 
 class Retransmission:
@@ -86,7 +101,7 @@ class Pending:
         self.rtt: DestState | None = None
         self.abandoned = False
         #: The extra SID space it went out on (``None``: the session's own transport).
-        self.space: ExtraSpace | None = None
+        self.space: Space | None = None
         #: The in-flight slot it holds (``None``: none, or given back: see
         #: :meth:`free_slot`).
         self.slots: SlotQueue | None = None

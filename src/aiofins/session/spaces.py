@@ -25,7 +25,7 @@ import enum
 import logging
 from collections.abc import Callable
 from time import monotonic
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import anyio
 
@@ -38,12 +38,9 @@ from .background import Background
 from .clock import Clock
 from .messages import no_free_sid
 from .nodes import SOURCE_NODES
+from .response import SessionStats
 from .sids import SHORTAGE_EPISODE, SID_WAIT, SidSpace
 from .slots import DestState, EventPending, Pending
-
-if TYPE_CHECKING:
-    from .core import Session
-    from .response import SessionStats
 
 logger = logging.getLogger("aiofins.session")
 
@@ -477,8 +474,52 @@ class SidSpaces:
         self._capped = False
 
 
+class SidUser(Protocol):
+    """What a request waiting for a free SID uses of its session (a
+    :class:`~aiofins.session.Session`): :func:`sid_anywhere`, :func:`evidence_probe`,
+    :func:`start_when_free`."""
+
+    @property
+    def transport(self) -> Transport: ...
+
+    @property
+    def source(self) -> FinsAddress: ...
+
+    @property
+    def sids(self) -> SidSpace: ...
+
+    @property
+    def spaces(self) -> SidSpaces: ...
+
+    @property
+    def stats(self) -> SessionStats: ...
+
+    @property
+    def timeout(self) -> float: ...
+
+    def clock(self) -> float: ...
+
+    def nodes_in_use(self) -> set[int]: ...
+
+    def start(
+        self,
+        p: Pending,
+        state: DestState,
+        mrc: int,
+        src: int,
+        params: bytes,
+        retries: int,
+        now: float,
+        end: float,
+        cap: float | None,
+        space: ExtraSpace | None = None,
+    ) -> bytes | None: ...
+
+    def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None: ...
+
+
 async def sid_anywhere(
-    session: Session, state: DestState, end: float, timeout: float
+    session: SidUser, state: DestState, end: float, timeout: float
 ) -> tuple[int, ExtraSpace | None]:
     """A free SID (and the extra space it belongs to, ``None``: the session's own) when
     the next one of the session's own space is taken: another of its own, one of an
@@ -486,14 +527,14 @@ async def sid_anywhere(
     wait for the first to come free in any space, up to the call's deadline ``end``
     (then :class:`SlotTimeout`). Running out is counted and logged (once until SIDs
     are free again)."""
-    sids, spaces, clock = session.sids, session._spaces, session.clock
+    sids, spaces, clock = session.sids, session.spaces, session.clock
     key = sids.allocate(state)
     if key is not None:
         spaces.enough()
         return key, None
     got = spaces.allocate(state)
     while got is None and spaces.may_open(clock()):
-        if not await spaces.open(session.source, session._nodes_in_use(), end - clock()):
+        if not await spaces.open(session.source, session.nodes_in_use(), end - clock()):
             break
         got = spaces.allocate(state)
     if got is not None:
@@ -533,7 +574,7 @@ async def sid_anywhere(
                     return got
                 now = clock()
                 if spaces.may_open(now):
-                    await spaces.open(session.source, session._nodes_in_use(), end - now)
+                    await spaces.open(session.source, session.nodes_in_use(), end - now)
                     continue
                 if now >= probe_at and state.base in sids.given_up:
                     probe_at = now + session.timeout
@@ -541,7 +582,7 @@ async def sid_anywhere(
                     continue
                 wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
                 await anyio.sleep(wait)
-    raise no_free_sid(session, state, timeout)
+    raise no_free_sid(session.sids, state, timeout)
 
 
 #: The commands an evidence probe sends (a harmless read of the CPU Unit's status, or of
@@ -549,7 +590,7 @@ async def sid_anywhere(
 PROBES = ((0x06, 0x01), (0x05, 0x01))
 
 
-async def evidence_probe(session: Session, state: DestState, end: float) -> None:
+async def evidence_probe(session: SidUser, state: DestState, end: float) -> None:
     """Every SID of ``state``'s destination is taken and some are quarantined for requests
     given up on: ask the destination whether it answers, under the SID given up on
     longest ago, with a command other than that request's (so a late reply to it is
@@ -597,7 +638,7 @@ async def evidence_probe(session: Session, state: DestState, end: float) -> None
 
 
 async def start_when_free(
-    session: Session,
+    session: SidUser,
     p: Pending,
     state: DestState,
     command: tuple[int, int, bytes],

@@ -16,7 +16,7 @@ import logging
 import math
 from collections.abc import Callable
 from time import monotonic
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import anyio
 
@@ -24,13 +24,13 @@ from ..hooks import EventHooks, RequestRetried, RequestTimedOut
 from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout
 from ..protocol.frames import key_address
 from ..protocol.header import FinsAddress
+from ..transport.base import Transport
 from .background import Background
 from .breaker import CircuitBreaker
 from .deadlines import Deadlines
+from .response import SessionStats
+from .sids import SidSpace
 from .slots import Pending, Retransmission
-
-if TYPE_CHECKING:
-    from .core import Session
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
@@ -40,10 +40,37 @@ class Expired(FinsTimeout):
     """A request's deadline passed after every transmission (the caller words the message)."""
 
 
+class Watched(Protocol):
+    """What the watcher uses of the session it serves (a :class:`~aiofins.session.Session`)."""
+
+    @property
+    def transport(self) -> Transport: ...
+
+    @property
+    def sids(self) -> SidSpace: ...
+
+    @property
+    def stats(self) -> SessionStats: ...
+
+    @property
+    def rto_bounds(self) -> tuple[float, float]: ...
+
+    @property
+    def adaptive(self) -> bool: ...
+
+    def quarantine_until(self, now: float, timeout: float) -> float: ...
+
+    def emit(
+        self, handlers: list[Any], event: Callable[..., Any], p: Pending, *more: Any
+    ) -> None: ...
+
+    def fail_all(self, exc: BaseException) -> None: ...
+
+
 class DeadlineWatcher:
     """Retransmits or gives up the requests of ``session`` whose deadline is due."""
 
-    def __init__(self, session: Session, breaker: CircuitBreaker, hooks: EventHooks | None) -> None:
+    def __init__(self, session: Watched, breaker: CircuitBreaker, hooks: EventHooks | None) -> None:
         self.session = session
         self.breaker = breaker
         self.hooks = hooks
@@ -247,7 +274,7 @@ class DeadlineWatcher:
         p.attempts += 1
         p.rtt = None  # Karn: a reply can no longer be timed
         wait = 2 * resend.wait
-        if session._adaptive and wait > session.rto_bounds[1]:  # (a stream: the call's plan)
+        if session.adaptive and wait > session.rto_bounds[1]:  # (a stream: the call's plan)
             wait = session.rto_bounds[1]
         cap = resend.cap
         if cap is not None and wait > cap:
