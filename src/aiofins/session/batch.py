@@ -539,18 +539,18 @@ async def _concurrent(
     (it may be the probe) and tells it how the call ended, so the commands do neither (a
     probe's own commands turned away by its probe kept the breaker from ever closing)."""
     results: list[Response | None] = [None] * len(commands)
+
+    async def one(i: int) -> Response:
+        mrc, src, params = commands[i]
+        response = results[i] = await session.request(
+            mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent,
+            retries=retries, _in_call=True,
+        )  # fmt: skip
+        return response
+
     if width == 1:
-        for i, (mrc, src, params) in enumerate(commands):
-            response = results[i] = await session.request(
-                mrc,
-                src,
-                params,
-                dest=dest,
-                timeout=timeout,
-                idempotent=idempotent,
-                retries=retries,
-                _in_call=True,
-            )
+        for i in range(len(commands)):
+            response = await one(i)
             if on_response is not None:
                 on_response(i, response)
         return results  # type: ignore[return-value]
@@ -560,17 +560,7 @@ async def _concurrent(
     async def worker(scope: anyio.CancelScope) -> None:
         try:
             for i in cursor:
-                mrc, src, params = commands[i]
-                response = results[i] = await session.request(
-                    mrc,
-                    src,
-                    params,
-                    dest=dest,
-                    timeout=timeout,
-                    idempotent=idempotent,
-                    retries=retries,
-                    _in_call=True,
-                )
+                response = await one(i)
                 if on_response is not None and not errors:  # none after the first error
                     on_response(i, response)
         except Exception as exc:

@@ -540,23 +540,7 @@ async def sid_anywhere(
     if got is not None:
         spaces.enough()
         return got
-    session.stats.sid_exhausted += 1
-    now = clock()
-    new_episode = now - sids.short_at >= SHORTAGE_EPISODE
-    sids.short_at = now
-    if spaces.limit > 1:
-        spaces.short(state.address, new_episode)
-    elif new_episode:
-        logger.warning(
-            "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
-            "%d lingering): requests wait for one; lower the rate or the linger",
-            session.transport.description,
-            state.address,
-            len(sids.pending),
-            len(sids.quarantine),
-            len(sids.lingering),
-            extra={"endpoint": session.transport.description, "dest": str(state.address)},
-        )
+    _ran_out(session, state)
     # One waiter at a time looks for a SID (a scan of 256 is not free); the others queue
     # behind it, first come first served.
     lock = state.sid_lock
@@ -583,6 +567,30 @@ async def sid_anywhere(
                 wait = min(SID_WAIT, sids.free_in(state, now), spaces.free_in(state, now))
                 await anyio.sleep(wait)
     raise no_free_sid(session.sids, state, timeout)
+
+
+def _ran_out(session: SidUser, state: DestState) -> None:
+    """Every SID of ``state``'s destination is taken in every space the session may have:
+    counted, and said (a WARNING once per shortage episode, see :data:`SHORTAGE_EPISODE`;
+    with extra spaces allowed, by :meth:`SidSpaces.short`)."""
+    sids, spaces = session.sids, session.spaces
+    session.stats.sid_exhausted += 1
+    now = session.clock()
+    new_episode = now - sids.short_at >= SHORTAGE_EPISODE
+    sids.short_at = now
+    if spaces.limit > 1:
+        spaces.short(state.address, new_episode)
+    elif new_episode:
+        logger.warning(
+            "%s: all 256 SIDs of %s are taken (%d in flight, %d quarantined, "
+            "%d lingering): requests wait for one; lower the rate or the linger",
+            session.transport.description,
+            state.address,
+            len(sids.pending),
+            len(sids.quarantine),
+            len(sids.lingering),
+            extra={"endpoint": session.transport.description, "dest": str(state.address)},
+        )
 
 
 #: The commands an evidence probe sends (a harmless read of the CPU Unit's status, or of
