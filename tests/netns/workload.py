@@ -87,7 +87,10 @@ async def tcp_link_drops() -> dict[str, dict[str, int]]:
         breaker_threshold=0,
         reconnect_backoff=(0.05, 0.5),
     ) as plc:
-        await plc.write("D0", list(range(500, 510)))
+        # The set-up write is not what is counted: a generous deadline, so that a few lost
+        # segments in a row (TCP's retransmissions back off: 0.2, 0.4, 0.8 s, ...) on a
+        # busy machine cannot fail the scenario before it starts.
+        await plc.write("D0", list(range(500, 510)), timeout=20.0)
         expected = list(range(500, 510))
         counts: Counter[str] = Counter()
         await _count(plc, counts, expected, TCP_ROUNDS)
