@@ -126,6 +126,10 @@ class EntryState(enum.Enum):
     #: The session is closed and its task has ended.
     CLOSED = "closed"
 
+    #: Members are singletons: hash them by identity in C (Enum's own hash is a Python
+    #: call, paid per scan by a Poller's lending, ``state in _LENDABLE``).
+    __hash__ = object.__hash__
+
 
 _TRANSITIONS: dict[EntryState, frozenset[EntryState]] = {
     EntryState.CONNECTING: frozenset({EntryState.READY, EntryState.FAILED}),
