@@ -1,17 +1,19 @@
-"""The simulation's network: UDP over :mod:`aiofins.memnet` under the real
-:class:`~aiofins.transport.UdpTransport`, FINS/TCP over a stream model of its own.
+"""The simulation's network: :mod:`aiofins.memnet` under the real
+:class:`~aiofins.transport.UdpTransport` and :class:`~aiofins.transport.TcpTransport`.
 
-Datagrams: every session's socket is a real ``UdpTransport`` on the shared in-memory
-network (``network=``), so the transport's own code runs; each unit listens on its
-``10.0.0.K:9600`` socket there (:class:`UnitPort`), and :meth:`Network.fate` (the network's
-fault hook) applies the schedule's link faults: loss, duplication of replies (up to 0.3 s
-late), delay (and so reordering). A step of the simulation is one frame put on the wire.
+Every client socket and connection is a real transport on the shared in-memory network
+(``network=``), so the transports' own code runs (FINS/TCP's handshake and framing
+included). Each unit listens on ``10.0.0.K:9600`` there, for datagrams (:class:`UnitPort`)
+and for FINS/TCP connections (:class:`TcpPort`, one :class:`TcpClient` per connection: the
+node-address handshake, then each FINS frame to the unit and its replies back, in order).
+:meth:`Network.fate` (memnet's fault hook) applies the schedule's link faults: loss,
+duplication of replies (up to 0.3 s late), delay (and so reordering); over FINS/TCP, delay
+and frames split in pieces; resets come from the schedule (``tcp_reset``, ``restart``). A
+step of the simulation is one datagram or FINS/TCP message put on the wire.
 
-FINS/TCP: :class:`SimStream` keeps the FINS/TCP transport's contract (the handshake assigns
-our node, each connection a fresh SID space, in order, a reset ends it) over
-:class:`StreamConnection`, a model with the same faults as the units' (resets, refused
-handshakes); the real ``TcpTransport`` over memnet's streams would need the units behind the
-simulator's FINS/TCP server, which keeps no history: a next step.
+Where a UDP reply goes is the unit's address conversion
+(:class:`~aiofins.simulator.EthernetUnit`, the simulator's and ``aiofins doctor``'s model),
+decided when the reply is sent.
 
 Commands are never duplicated by the network: a duplicated command would execute twice and
 no client could keep a write at most once; duplicated *replies* are.
@@ -23,19 +25,29 @@ import asyncio
 import random
 import struct
 import zlib
+from collections import deque
 from collections.abc import Callable, Sequence
 
-from aiofins.memnet import DatagramSocket, MemoryNetwork, Packet
-from aiofins.protocol.errors import ConnectionLost
-from aiofins.transport.base import FrameSink, TaskSpawner, Transport
+import anyio
 
-from .plant import FINS_PORT, Address, Unit
+from aiofins.memnet import DatagramSocket, MemoryNetwork, MemoryStream, Packet, StreamListener
+from aiofins.protocol.tcp import (
+    TcpCommand,
+    TcpDecoder,
+    TcpErrorCode,
+    encode_message,
+    encode_node_response,
+)
+
+from .plant import Address, Unit
 
 #: Every frame takes at least this long, plus up to ``JITTER`` (seconds).
 BASE_DELAY = 0.0005
 JITTER = 0.002
 #: A duplicated reply comes up to this much later than the first.
 DUPLICATE_LAG = 0.3
+#: The share of FINS/TCP messages split in two pieces on the wire (while a fault is on).
+SPLIT = 0.2
 
 
 class Network:
@@ -49,43 +61,63 @@ class Network:
         self.on_step = on_step
         self.units: dict[Address, Unit] = {}
         self.ports: dict[Address, UnitPort] = {}
-        self.streams: set[StreamConnection] = set()
+        self.listeners: dict[Address, TcpPort] = {}
+        self.memnet: MemoryNetwork | None = None
         self.digest = 0
-        #: Counters that must add up: sent = delivered + lost + nowhere + in flight.
+        #: Datagrams and FINS/TCP messages put on the wire, and those the hook lost.
         self.sent = 0
-        #: FINS/TCP frames: sent = delivered + flushed + in flight.
-        self.streams_sent = 0
-        self.delivered = 0
         self.lost = 0
-        self.nowhere = 0
-        self.flushed = 0
-        self.in_flight = 0
-        #: Bumped to drop every frame in flight (the schedule's faults end).
+        #: UDP replies the unit's address conversion had no address for.
+        self.unaddressed = 0
+        #: Bumped to drop every late reply not yet sent (the schedule's faults end).
         self.epoch = 0
 
     def add_unit(self, unit: Unit) -> None:
         self.units[unit.address] = unit
 
-    def attach(self, memnet: MemoryNetwork) -> None:
-        """Bind every unit's FINS port on ``memnet``."""
+    async def attach(self, memnet: MemoryNetwork, tg: anyio.abc.TaskGroup) -> None:
+        """Bind every unit's FINS port (UDP and TCP) on ``memnet``."""
+        self.memnet = memnet
         for address, unit in self.units.items():
             self.ports[address] = UnitPort(memnet.datagram_socket(*address), unit, self)
+            port = self.listeners[address] = TcpPort(memnet.listen(*address), unit, self)
+            tg.start_soon(port.serve)
 
-    # -- datagrams (on memnet) ---------------------------------------------------------
+    def close(self) -> None:
+        for port in self.ports.values():
+            port.sock.close()
+        for listener in self.listeners.values():
+            listener.listener.close()
+
+    def reset(self, unit: Unit) -> None:
+        """Reset every FINS/TCP connection of ``unit`` (a TCP reset, a restart)."""
+        if self.memnet is None:  # (not running yet: no connection)
+            return
+        for stream in list(self.memnet.streams):
+            if stream.local == unit.address:
+                self.memnet.reset(stream)
+
+    # -- the fault hook ------------------------------------------------------------------
 
     def fate(self, packet: Packet) -> Sequence[float]:
-        """memnet's fault hook: the delays of a datagram's copies (none: lost)."""
+        """memnet's fault hook: the delays of a datagram's copies (none: lost), of a
+        FINS/TCP message's pieces, of a connection request."""
         self.digest = zlib.crc32(
             struct.pack("<dq", self.loop.time(), packet.number) + packet.data, self.digest
         )
-        if packet.kind != "datagram":
-            return [0.0]
         to_unit = self.units.get(packet.dest)
         unit = to_unit or self.units.get(packet.source)
-        self.sent += 1
-        self.on_step()
         faults = unit.faults if unit is not None else {}
         rng = self.rng
+        if packet.kind == "connect":
+            return [] if "silence" in faults else [self._delay(faults)]
+        self.sent += 1
+        self.on_step()
+        if packet.kind == "stream":
+            delay = self._delay(faults)
+            if faults and len(packet.data) > 1 and rng.random() < SPLIT:
+                return [delay, delay + rng.random() * JITTER]
+            return [delay]
         if faults and "loss" in faults and rng.random() < faults["loss"]:
             self.lost += 1
             return []
@@ -94,31 +126,44 @@ class Network:
             return [delay, delay + rng.random() * DUPLICATE_LAG]
         return [delay]
 
-    def reply(self, unit: Unit, to: Address | object, frame: bytes, late: float = 0.0) -> None:
-        """A reply from ``unit`` to a socket address or a stream connection."""
-        if isinstance(to, StreamConnection):
-            to.to_client(frame, late)
-            return
-        assert isinstance(to, tuple)
-        port = self.ports[unit.address]
-        if late:
-            self.loop.call_later(late, port.send, frame, to, self.epoch)
-        else:
-            port.send(frame, to, self.epoch)
-
     def _delay(self, faults: dict[str, float]) -> float:
         d = BASE_DELAY + self.rng.random() * JITTER
         if faults and "delay" in faults:
             d += self.rng.random() * faults["delay"]
         return d
 
+    # -- replies -------------------------------------------------------------------------
+
+    def reply(self, unit: Unit, to: object, frame: bytes, late: float = 0.0) -> None:
+        """A reply from ``unit`` to a UDP command (``to``: where it came from) or over a
+        FINS/TCP connection (``to``: the :class:`TcpClient`), ``late`` seconds from now."""
+        if late:
+            self.loop.call_later(late, self._send, unit, to, frame, self.epoch)
+        else:
+            self._send(unit, to, frame, self.epoch)
+
+    def _send(self, unit: Unit, to: object, frame: bytes, epoch: int) -> None:
+        if epoch != self.epoch:
+            return
+        if isinstance(to, TcpClient):
+            to.send(frame)
+            return
+        dest = unit.ethernet.destination(frame)  # decided now, as a unit does
+        if dest is None:
+            self.unaddressed += 1
+            return
+        port = self.ports[unit.address]
+        if not port.sock.closed:
+            port.sock.sendto(frame, dest)
+
     def flush(self) -> None:
-        """Drop every reply not yet sent late, and every stream frame in flight."""
+        """Drop every reply not yet sent late."""
         self.epoch += 1
 
 
 class UnitPort:
-    """A unit's UDP port on memnet: each datagram to the unit, its replies back."""
+    """A unit's UDP port on memnet: each datagram to the unit (its address conversion
+    learns the sender), the replies back (see :meth:`Network.reply`)."""
 
     def __init__(self, sock: DatagramSocket, unit: Unit, network: Network) -> None:
         self.sock = sock
@@ -133,126 +178,82 @@ class UnitPort:
                 frame, source = sock.recvfrom(4096)
             except (BlockingIOError, OSError):
                 return
+            unit.ethernet.received(frame, source)
             unit.receive(frame, source)
 
-    def send(self, frame: bytes, to: Address, epoch: int) -> None:
-        if epoch == self.network.epoch and not self.sock.closed:
-            self.sock.sendto(frame, to)
 
+class TcpPort:
+    """A unit's FINS/TCP port on memnet: accepts connections, serves each."""
 
-class StreamConnection:
-    """One FINS/TCP connection between a :class:`SimStream` and a unit: in order, no loss;
-    a reset ends it for both sides."""
-
-    def __init__(self, network: Network, unit: Unit, client: SimStream) -> None:
-        self.network = network
+    def __init__(self, listener: StreamListener, unit: Unit, network: Network) -> None:
+        self.listener = listener
         self.unit = unit
-        self.client: SimStream | None = client
-        self.last_at = 0.0
-        network.streams.add(self)
-
-    def _at(self, extra: float) -> float:
-        net = self.network
-        at = max(self.last_at, net.loop.time() + net._delay(self.unit.faults) + extra)
-        self.last_at = at
-        return at
-
-    def to_unit(self, frame: bytes) -> None:
-        net = self.network
-        net.streams_sent += 1
-        net.in_flight += 1
-        net.loop.call_at(self._at(0.0), self._arrive, True, frame)
-
-    def to_client(self, frame: bytes, late: float) -> None:
-        net = self.network
-        net.streams_sent += 1
-        net.in_flight += 1
-        net.loop.call_at(self._at(late), self._arrive, False, frame)
-
-    def _arrive(self, to_unit: bool, frame: bytes) -> None:
-        net = self.network
-        net.in_flight -= 1
-        if self.client is None:
-            net.flushed += 1
-            return
-        net.delivered += 1
-        if to_unit:
-            self.unit.receive(frame, self)
-        else:
-            self.client.stream_frame(frame)
-        net.on_step()
-
-    def reset(self) -> None:
-        """The connection ends (a TCP reset, a restart of the unit)."""
-        client, self.client = self.client, None
-        self.network.streams.discard(self)
-        if client is not None:
-            client.reset()
-
-
-class SimStream(Transport):
-    """A FINS/TCP connection on :class:`Network` (the FINS/TCP transport's contract): the
-    handshake assigns our node, every connection starts a fresh SID space."""
-
-    reconnectable = True
-    fresh_sid_space = True
-    reliable = True
-    default_sid_spaces = 2
-
-    def __init__(self, network: Network, unit: Unit) -> None:
         self.network = network
+
+    async def serve(self) -> None:
+        async with anyio.create_task_group() as tg:
+            while True:
+                try:
+                    stream = await self.listener.accept()
+                except anyio.ClosedResourceError:
+                    return
+                tg.start_soon(TcpClient(stream, self.unit).run)
+
+
+class TcpClient:
+    """The unit's end of one FINS/TCP connection: the node-address handshake (refused while
+    the schedule says ``bad_handshake``, unanswered while the unit is silent), then FINS
+    frames to the unit and its replies back in order."""
+
+    def __init__(self, stream: MemoryStream, unit: Unit) -> None:
+        self.stream = stream
         self.unit = unit
-        self.conn: StreamConnection | None = None
-        self._sink: FrameSink | None = None
+        self.outbox: deque[bytes] = deque()
+        self.ready = asyncio.Event()
+        self.open = False
+        self.closed = False
 
-    @property
-    def is_open(self) -> bool:
-        return self._sink is not None
+    def send(self, frame: bytes) -> None:
+        if self.open and not self.closed:
+            self.outbox.append(encode_message(TcpCommand.FRAME, frame))
+            self.ready.set()
 
-    @property
-    def description(self) -> str:
-        return f"tcp://{self.unit.ip}:{FINS_PORT}"
+    async def run(self) -> None:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(self._write)
+            try:
+                await self._read()
+            except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
+                pass
+            finally:
+                self.closed = True
+                tg.cancel_scope.cancel()
+                self.stream.close()
 
-    async def open(self, sink: FrameSink, task_group: TaskSpawner) -> None:
-        if self._sink is not None:
-            return
-        await asyncio.sleep(0.001)  # the handshake's round trip
-        if "silence" in self.unit.faults or "bad_handshake" in self.unit.faults:
-            raise ConnectionLost(f"{self.description}: FINS/TCP handshake refused")
-        self.local_node = self.unit.assign_tcp_node()
-        self.remote_node = self.unit.number
-        self.conn = StreamConnection(self.network, self.unit, self)
-        self._sink = sink
-        self.fast_send = self._send
+    async def _read(self) -> None:
+        decoder = TcpDecoder()
+        unit = self.unit
+        while True:
+            for message in decoder.feed(await self.stream.receive()):
+                if message.command == TcpCommand.FRAME and self.open:
+                    unit.receive(message.payload, self)
+                elif message.command == TcpCommand.NODE_ADDRESS_REQUEST and not self.open:
+                    if "silence" in unit.faults:
+                        continue  # a unit that is off answers nothing
+                    if "bad_handshake" in unit.faults:
+                        code = TcpErrorCode.NO_NODE_AVAILABLE
+                        await self.stream.send(encode_node_response(0, unit.number, code))
+                        return
+                    node = unit.assign_tcp_node()
+                    await self.stream.send(encode_node_response(node, unit.number))
+                    self.open = True
 
-    def _send(self, frame: bytes) -> None:
-        if self._sink is None or self.conn is None:
-            raise ConnectionLost(f"{self.description} is closed")
-        self.conn.to_unit(frame)
-
-    async def send(self, frame: bytes, timeout: float | None = None) -> None:
-        self._send(frame)
-
-    def stream_frame(self, frame: bytes) -> None:
-        if self._sink is not None:
-            self._sink.frame_received(frame)
-
-    def reset(self) -> None:
-        sink = self._sink
-        self._close()
-        if sink is not None:
-            sink.connection_lost(ConnectionLost(f"{self.description}: connection reset"))
-
-    def another(self) -> SimStream:
-        return SimStream(self.network, self.unit)
-
-    def _close(self) -> None:
-        conn, self.conn = self.conn, None
-        self._sink = None
-        self.fast_send = None
-        if conn is not None:
-            conn.client = None
-            self.network.streams.discard(conn)
-
-    async def aclose(self) -> None:
-        self._close()
+    async def _write(self) -> None:
+        try:
+            while True:
+                await self.ready.wait()
+                self.ready.clear()
+                while self.outbox:
+                    await self.stream.send(self.outbox.popleft())
+        except (anyio.BrokenResourceError, anyio.ClosedResourceError):
+            pass  # reset: the reader sees it too

@@ -6,14 +6,14 @@ with its CPU (a :class:`~aiofins.simulator.VirtualPLC`) and, on some units, a re
 network 2 where more CPUs sit (so one session talks to several destinations through one
 relay, and relay errors come from the relay's address, not the destination's).
 
-Address conversion (:class:`Conversion`): ``DYNAMIC`` replies to the address a request
-came from; ``FIXED_PORT`` (an IP address table or static conversion) replies to the FINS
-port 9600 of the requester's host, whichever socket sent the request.
+Address conversion is the simulator's model, :class:`~aiofins.simulator.EthernetUnit`
+(:func:`ethernet`): automatic dynamic conversion replies to the address a request came from;
+a unit with a fixed reply port (an IP address table, dynamic changes prohibited) replies to
+the FINS port 9600 of its one client host, whichever socket sent the request.
 """
 
 from __future__ import annotations
 
-import enum
 import random
 import struct
 from collections.abc import Callable
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from aiofins.protocol.header import FinsAddress
-from aiofins.simulator import VirtualPLC
+from aiofins.simulator import AddressConversion, EthernetUnit, VirtualPLC
 
 #: The network behind the relays, and the FINS port every unit listens on.
 REMOTE_NETWORK = 2
@@ -38,19 +38,27 @@ RELAY_ERROR = 0x8205
 Address = tuple[str, int]
 
 
-class Conversion(enum.Enum):
-    """How an Ethernet unit picks the address a reply goes to."""
-
-    #: Replies to the IP address and port the request came from.
-    DYNAMIC = "dynamic"
-    #: Replies to port 9600 of the requester's IP address (IP address table).
-    FIXED_PORT = "fixed"
+def ethernet(number: int, fixed_host: str | None) -> EthernetUnit:
+    """Unit ``number``'s address conversion at ``10.0.0.{number}``: automatic, dynamic;
+    or (``fixed_host``) an IP address table sending every node's replies to port 9600 of
+    ``fixed_host``, never changed by what arrives (unit version 1.3's "dynamic changes
+    prohibited")."""
+    ip = f"10.0.0.{number}"
+    if fixed_host is None:
+        return EthernetUnit(ip)
+    return EthernetUnit(
+        ip,
+        conversion=AddressConversion.IP_ADDRESS_TABLE,
+        ip_table={n: fixed_host for n in range(1, 255) if n != number},
+        change_dynamically=False,
+        node=number,
+    )
 
 
 class Wire(Protocol):
     """What a unit sends its replies through (the network)."""
 
-    def reply(self, unit: Unit, to: Address | object, frame: bytes, late: float = 0.0) -> None: ...
+    def reply(self, unit: Unit, to: object, frame: bytes, late: float = 0.0) -> None: ...
 
 
 @dataclass(slots=True)
@@ -121,7 +129,7 @@ class Unit:
         self,
         number: int,
         targets: dict[tuple[int, int], Target],
-        conversion: Conversion,
+        ethernet: EthernetUnit,
         rng: random.Random,
         clock: Callable[[], float],
         wire: Wire,
@@ -132,7 +140,10 @@ class Unit:
         self.fins = FinsAddress(0, number, 0)
         #: (network, node) -> target; network 0 and the unit's own node is its CPU.
         self.targets = targets
-        self.conversion = conversion
+        #: The unit's address conversion (where a UDP reply goes).
+        self.ethernet = ethernet
+        #: Its replies go to one fixed port (the client binds port 9600).
+        self.fixed = ethernet.conversion is not AddressConversion.AUTOMATIC_DYNAMIC
         self.rng = rng
         self.clock = clock
         self.wire = wire
@@ -149,8 +160,9 @@ class Unit:
             return self.targets.get((0, da1)) if da1 == self.number else None
         return self.targets.get((dna, da1))
 
-    def receive(self, frame: bytes, sender: Address | object) -> None:
-        """One command frame arrived from ``sender`` (an address, or a TCP connection)."""
+    def receive(self, frame: bytes, sender: object) -> None:
+        """One command frame arrived from ``sender`` (an address, or a FINS/TCP
+        connection): replies go back by the same way (:class:`Wire`)."""
         self.frames += 1
         faults = self.faults
         if "silence" in faults or len(frame) < 12:
@@ -159,9 +171,7 @@ class Unit:
         if target is None:
             return
         rng = self.rng
-        to: Address | object = sender
-        if self.conversion is Conversion.FIXED_PORT and isinstance(sender, tuple):
-            to = (sender[0], FINS_PORT)
+        to = sender
         if faults:
             remote = frame[3] == REMOTE_NETWORK
             if remote and "relay" in faults and rng.random() < faults["relay"]:

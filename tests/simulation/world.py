@@ -1,11 +1,11 @@
 """One seeded world: units, a faulty network, clients on every path, invariants checked.
 
 ``run(seed, steps)`` builds the world the seed describes (:class:`Config`), runs it on a
-virtual-time asyncio loop until ``steps`` steps have happened (a step is one frame delivered
-or one client operation started), then ends the faults, lets every path recover, stops the
-clients, and checks that nothing leaked. The first violated invariant ends the run; the
-:class:`Result` says which, at which step and virtual time, and carries the schedule so far
-as a one-line reproducer.
+virtual-time asyncio loop until ``steps`` steps have happened (a step is one datagram or
+FINS/TCP message put on the wire, or one client operation started), then ends the faults,
+lets every path recover, stops the clients, and checks that nothing leaked. The first
+violated invariant ends the run; the :class:`Result` says which, at which step and virtual
+time, and carries the schedule so far as a one-line reproducer.
 
 Invariants (docs/session.md, "Guarantees"):
 
@@ -22,8 +22,8 @@ Invariants (docs/session.md, "Guarantees"):
   ``2 x timeout + longest breaker cooldown`` (+ the reconnect backoff on FINS/TCP, + one
   interval for a scan), every call and scan to it succeeds;
 * nothing leaks: after quiescence no request in flight, no slot taken or waited for, no
-  probe out, every socket and connection closed, no task left, the network's counters add
-  up.
+  probe out, every socket and connection closed, no task left, the network lost nothing to
+  errors.
 """
 
 from __future__ import annotations
@@ -48,18 +48,20 @@ from aiofins.protocol.errors import EndCodeError, FinsError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.breaker import BreakerState
-from aiofins.transport import UdpTransport
+from aiofins.transport import TcpTransport, UdpTransport
 
 from .clock import session_clock
 from .loop import VirtualTimeLoop, WorldStuck
-from .network import DUPLICATE_LAG, Network, SimStream
-from .plant import DM, REMOTE_NETWORK, WINDOW, Conversion, Target, Unit
+from .network import DUPLICATE_LAG, Network
+from .plant import DM, FINS_PORT, REMOTE_NETWORK, WINDOW, Target, Unit, ethernet
 
 #: A call must have ended this long (virtual seconds) after its deadline.
 DEADLINE_SLACK = 1e-6
 #: The session's default breaker cooldown ceiling and reconnect backoff ceiling.
 BREAKER_COOLDOWN_MAX = 2.0
 RECONNECT_BACKOFF_MAX = 5.0
+#: Seconds a FINS/TCP connection attempt (connect and handshake) may take in the world.
+TCP_CONNECT_TIMEOUT = 1.0
 #: Fault kinds of the schedule, and the kinds that act per frame with a probability.
 KINDS = (
     "loss",
@@ -260,7 +262,7 @@ class World:
         self.main: asyncio.Task[None] | None = None
         c = self.config
         self.bound_udp = 2 * c.timeout + BREAKER_COOLDOWN_MAX
-        self.bound_tcp = self.bound_udp + RECONNECT_BACKOFF_MAX
+        self.bound_tcp = self.bound_udp + RECONNECT_BACKOFF_MAX + TCP_CONNECT_TIMEOUT
 
     # -- the plant ---------------------------------------------------------------------
 
@@ -269,7 +271,7 @@ class World:
         index = 0
         for n in range(1, c.units + 1):
             targets: dict[tuple[int, int], Target] = {}
-            conversion = Conversion.FIXED_PORT if n in c.fixed else Conversion.DYNAMIC
+            conversion = ethernet(n, fixed_host(n) if n in c.fixed else None)
             unit = Unit(n, targets, conversion, self.rng_units, self.now, self.net)
             unit.late_after = 1.5 * c.timeout
             targets[(0, n)] = t = Target(index, FinsAddress(0, n, 0), self.now)
@@ -296,7 +298,7 @@ class World:
 
     def step(self) -> None:
         self.steps += 1
-        self.digest = zlib.crc32(struct.pack("<dq", self.now(), self.net.delivered), self.digest)
+        self.digest = zlib.crc32(struct.pack("<dq", self.now(), self.net.sent), self.digest)
         if self.steps >= self.budget and not self.budget_spent.is_set():
             self.budget_spent.set()
 
@@ -343,8 +345,7 @@ class World:
         self.active[episode.unit].append(episode)
         self._apply(unit)
         if episode.kind in ("restart", "tcp_reset"):
-            for conn in [s for s in self.net.streams if s.unit is unit]:
-                conn.reset()
+            self.net.reset(unit)
         self.loop.call_at(episode.start + episode.duration, self._end, episode)
         if self.replay is None:
             self._next_episode(episode.start + episode.duration)
@@ -612,15 +613,18 @@ class World:
             for _ in range(count):
                 tg.start_soon(loop)
 
+    def _connect_unit(self, number: int) -> Unit:
+        units = list(self.units)
+        return self.units[units[number % len(units)]]
+
     async def _connect_path(self, number: int, ready: Callable[[], Awaitable[None]]) -> None:
         c = self.config
-        units = list(self.units)
-        unit = self.units[units[number % len(units)]]
-        transport = UdpTransport(
+        unit = self._connect_unit(number)
+        transport = UdpTransport(  # a fixed reply port: the table's host, bound to 9600
             unit.ip,
             unit.address[1],
-            local_host=self._host(),
-            local_port=9600 if unit.conversion is Conversion.FIXED_PORT else 0,
+            local_host=fixed_host(unit.number) if unit.fixed else self._host(),
+            local_port=FINS_PORT if unit.fixed else 0,
             network=self.memnet,
         )
         async with aiofins.connect(
@@ -641,8 +645,15 @@ class World:
         unit = self.units[1]
         while True:  # connect() fails while the unit refuses handshakes: try again, as apps do
             try:
+                transport = TcpTransport(
+                    unit.ip,
+                    FINS_PORT,
+                    network=self.memnet,
+                    local_host=self._host(),
+                    connect_timeout=TCP_CONNECT_TIMEOUT,
+                )
                 async with aiofins.connect(
-                    transport=SimStream(self.net, unit),
+                    transport=transport,
                     dest=FinsAddress(0, unit.number, 0),
                     timeout=c.timeout,
                     retries=c.retries,
@@ -744,7 +755,13 @@ class World:
             await closed.wait()
 
         paths: list[Callable[[], Coroutine[Any, Any, None]]] = []
+        fixed_taken: set[int] = set()
         for i in range(c.connect_sessions):
+            unit = self._connect_unit(i)
+            if unit.fixed:  # one client host per table: one session on its port 9600
+                if unit.number in fixed_taken:
+                    continue
+                fixed_taken.add(unit.number)
             paths.append(lambda i=i: self._connect_path(i, ready))  # type: ignore[misc]
         if c.tcp_sessions:
             paths.append(lambda: self._tcp_path(ready))
@@ -752,13 +769,16 @@ class World:
             paths.append(lambda: self._pool_path(ready))
         if not paths:
             paths.append(lambda: self._connect_path(0, ready))
-        async with MemoryNetwork(fate=self.net.fate, default_host="10.9.0.254") as memnet:
+        async with (
+            MemoryNetwork(fate=self.net.fate, default_host="10.9.0.254") as memnet,
+            anyio.create_task_group() as units,
+        ):
             self.memnet = memnet
-            self.net.attach(memnet)
+            await self.net.attach(memnet, units)
             await self._run_paths(paths)
+            await asyncio.sleep(1.0)  # the units see their connections end
             self.check_closed()
-            for port in self.net.ports.values():
-                port.sock.close()
+            self.net.close()
 
     async def _run_paths(self, paths: list[Callable[[], Coroutine[Any, Any, None]]]) -> None:
         async with anyio.create_task_group() as tg:
@@ -807,13 +827,11 @@ class World:
         bound = sorted(a for a in memnet._datagram if a not in net.ports)
         if bound:
             self.fail("nothing leaks", f"sockets still bound: {bound}")
-        if net.streams:
-            self.fail("nothing leaks", f"{len(net.streams)} FINS/TCP connections still open")
+        if memnet.streams:
+            self.fail("nothing leaks", f"FINS/TCP connections still open: {memnet.streams}")
         stats = memnet.stats
         if stats.hook_errors or stats.callback_errors or stats.overflows:
             self.fail("nothing leaks", f"the network lost frames to errors: {stats}")
-        if net.streams_sent != net.delivered + net.flushed + net.in_flight:
-            self.fail("nothing leaks", "the stream counters do not add up")
         ended = sum(op.end is not None for op in self.ops)
         if ended != len(self.ops):
             self.fail("nothing leaks", f"{len(self.ops) - ended} operations never ended")
@@ -902,6 +920,11 @@ class World:
             config=self.config,
             command=self.command,
         )
+
+
+def fixed_host(unit: int) -> str:
+    """The one client host of a unit with a fixed reply port (its IP address table's)."""
+    return f"10.8.0.{unit}"
 
 
 def run(seed: int, steps: int, schedule: list[Episode] | None = None) -> Result:
