@@ -137,6 +137,18 @@ _POLLER_NEXT: dict[PollerState, frozenset[PollerState]] = {
 }
 
 
+class TimerState(Enum):
+    """Where the poller's one timer is (see :meth:`Poller._timer`)."""
+
+    #: No scan time on the schedule: the next group added wakes it.
+    IDLE = "idle"
+    #: Waiting for the earliest scan time (``Poller._timer_at``): an earlier one moves it.
+    ARMED = "armed"
+    #: Starting the groups that are due, and planning their next scan times: nothing need
+    #: wake it.
+    STARTING = "starting"
+
+
 class ScanState(Enum):
     """Where a scan group is in its cycle (:attr:`ScanGroup.state`)."""
 
@@ -260,7 +272,8 @@ class Poller:
         #: (next scan time, order added, group): the one timer's schedule.
         self._schedule: list[tuple[float, int, ScanGroup]] = []
         self._added = 0
-        self._timer_at = math.inf  # when the timer task wakes next
+        self._timer_state = TimerState.IDLE
+        self._timer_at = math.inf  # when it fires next (-inf: starting; inf: idle)
         self._timer_scope: anyio.CancelScope | None = None
         self._timer_wake = Wake()
         #: Under asyncio: the running loop and the timer's next run (see _tick).
@@ -311,7 +324,7 @@ class Poller:
     def _plan_scan(self, when: float, group: ScanGroup) -> None:
         self._added += 1
         heapq.heappush(self._schedule, (when, self._added, group))
-        if when < self._timer_at:  # earlier than the timer sleeps: wake it
+        if when < self._timer_at:  # earlier than the timer fires (idle: never): move it
             if self._loop is not None:  # (asyncio: an event-loop timer)
                 self._arm(when)
             elif self._timer_scope is not None:  # (the timer task sleeps in a scope)
@@ -359,7 +372,7 @@ class Poller:
         finally:
             self._tg = None
             self._schedule.clear()
-            self._timer_at = math.inf
+            self._timer_to(TimerState.IDLE)
             for group in self.groups.values():
                 scan = group._scan
                 if scan is not None:  # a scan on the callback path: given up
@@ -396,19 +409,19 @@ class Poller:
         wake = self._timer_wake
         while True:
             if not schedule:
-                self._timer_at = math.inf
+                self._timer_to(TimerState.IDLE)
                 await wake.wait()
                 continue
             now = clock()
             when = schedule[0][0]
             if when > now + _TIMER_SLACK:
-                self._timer_at = when
+                self._timer_to(TimerState.ARMED, when)
                 with anyio.CancelScope() as scope:
                     self._timer_scope = scope
                     await sleep(when - now)
                 self._timer_scope = None
                 continue
-            self._timer_at = -math.inf  # (awake: nothing need wake it)
+            self._timer_to(TimerState.STARTING)
             self._start_due(now + _TIMER_SLACK, None)
 
     def _tick(self) -> None:
@@ -419,22 +432,31 @@ class Poller:
         schedule = self._schedule
         try:
             if schedule and schedule[0][0] <= self._now() + _TIMER_SLACK:
-                self._timer_at = -math.inf  # (running: nothing need re-arm it)
+                self._timer_to(TimerState.STARTING)
                 self._start_due(self._now() + _TIMER_SLACK, self._scan_soon)
         except Exception:  # a bug: logged, and the timer goes on
             logger.exception("the poller's timer failed")
         finally:
-            self._timer_at = math.inf
             if schedule:
                 self._arm(schedule[0][0])
+            else:
+                self._timer_to(TimerState.IDLE)
 
     def _arm(self, when: float) -> None:
         """(asyncio) Run :meth:`_tick` at ``when`` instead of when it was due to run."""
         assert self._loop is not None
         if self._tick_handle is not None:
             self._tick_handle.cancel()
-        self._timer_at = when
+        self._timer_to(TimerState.ARMED, when)
         self._tick_handle = self._loop.call_at(when, self._tick)
+
+    def _timer_to(self, state: TimerState, at: float = math.inf) -> None:
+        """The one place the timer changes state (``at``: when an ARMED timer fires)."""
+        self._timer_state = state
+        if state is TimerState.ARMED:
+            self._timer_at = at
+        else:
+            self._timer_at = math.inf if state is TimerState.IDLE else -math.inf
 
     def _start_due(self, now: float, scan_soon: Callable[[ScanGroup], bool] | None) -> None:
         """Start every group whose scan time is ``now`` or earlier (from ``scan_soon`` if it

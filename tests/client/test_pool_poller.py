@@ -6,10 +6,11 @@ import math
 from collections.abc import AsyncIterator, Callable
 
 import anyio
+import anyio.lowlevel
 import pytest
 
 from aiofins.connection import connect
-from aiofins.poller import Poller, PollerState, Quality, ScanState, TagReading
+from aiofins.poller import Poller, PollerState, Quality, ScanState, TagReading, TimerState
 from aiofins.pool import Pool
 from aiofins.protocol.errors import (
     AddressError,
@@ -494,3 +495,25 @@ async def test_a_poller_runs_once_and_says_where_it_is() -> None:
             async with poller:
                 pass
         assert state_of(poller) is PollerState.CLOSED
+
+
+def timer_of(poller: Poller) -> tuple[TimerState, float]:
+    return poller._timer_state, poller._timer_at
+
+
+async def test_the_timer_is_idle_without_groups_and_armed_for_the_next_scan_time(
+    sim: Simulator,
+) -> None:
+    url = f"udp://127.0.0.1:{sim.udp_port}"
+    async with Pool() as pool, Poller(pool) as poller:
+        await anyio.lowlevel.checkpoint()  # (the timer's task starts)
+        assert timer_of(poller) == (TimerState.IDLE, math.inf)
+        group = poller.add_group("g", url, {"a": "D0"}, interval=60.0)
+        async for snap in poller:
+            assert snap.scan == 1
+            break
+        state, at = timer_of(poller)
+        assert state is TimerState.ARMED
+        assert 59.0 < at - anyio.current_time() <= 60.0  # the next scan time, a minute on
+        assert group.state is ScanState.IDLE
+    assert timer_of(poller) == (TimerState.IDLE, math.inf)
