@@ -102,7 +102,7 @@ def pypi_fins_sequential(port: int, seconds: float) -> float:
 
 
 def sync_sequential(port: int, seconds: float) -> float:
-    """``aiofins.sync``: ``plc.read("D100", 1)`` from this thread (the loop in its own)."""
+    """``aiofins.sync``: ``plc.read("D100", 1)`` run in this thread on a blocking socket."""
     with aiofins.sync.connect(f"udp://127.0.0.1:{port}?node=1") as plc:
         read = plc.read
         assert read("D100", 1) == [100]

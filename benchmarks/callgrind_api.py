@@ -11,7 +11,10 @@ space only). Cases (uvloop unless named; sequential unless named):
   request), per request; ``bare-stock``: the same on stock asyncio;
 - ``read``: ``plc.read("D100", 1)``; ``read-stock``: the same on stock asyncio;
 - ``fins``: PyPI ``fins``' ``memory_area_read`` of 1 word and its decode (synchronous);
-- ``sync``: ``aiofins.sync``'s ``plc.read("D100", 1)`` (callgrind counts both threads);
+- ``sync``: ``aiofins.sync``'s ``plc.read("D100", 1)``, run in the calling thread on a
+  blocking socket; ``sync-tcp``: the same over FINS/TCP; ``sync-loop``: with
+  ``backend="asyncio"``, each call sent to the private loop's thread (callgrind counts both
+  threads);
 - ``tasks``: 50 tasks x ``plc.read("D100", 1)`` on one client, per read;
 - ``dm`` / ``dmarray``: ``plc.read("D0", 32768)`` / ``plc.read_array("D0", 32768)``, per
   frame (33 per read);
@@ -49,7 +52,9 @@ COUNTS: dict[str, tuple[int, int, int]] = {
     "read": (500, 3_000, 1),
     "read-stock": (500, 3_000, 1),
     "fins": (500, 3_000, 1),
-    "sync": (300, 1_800, 1),
+    "sync": (500, 3_000, 1),
+    "sync-tcp": (500, 3_000, 1),
+    "sync-loop": (300, 1_800, 1),
     "tasks": (1_000, 4_000, 1),
     "dm": (3, 13, 33),
     "dmarray": (3, 13, 33),
@@ -114,10 +119,11 @@ def _fins(port: int, n: int) -> None:
         int.from_bytes(read(area, b"\x00\x64\x00", 1)[-2:], "big")
 
 
-def _sync(port: int, n: int) -> None:
+def _sync(port: int, n: int, scheme: str = "udp", backend: str | None = None) -> None:
     import aiofins.sync
 
-    with aiofins.sync.connect(f"udp://127.0.0.1:{port}?node=1") as plc:
+    url = f"udp://127.0.0.1:{port}?node=1" if scheme == "udp" else f"tcp://127.0.0.1:{port}"
+    with aiofins.sync.connect(url, backend=backend) as plc:
         read = plc.read
         for _ in range(n):
             read("D100", 1)
@@ -125,7 +131,7 @@ def _sync(port: int, n: int) -> None:
 
 def _workload(case: str, ports: list[int], n: int) -> None:
     uv: dict[str, Any] = {}
-    if not case.endswith("stock") and case not in ("fins", "sync"):
+    if not case.endswith("stock") and case != "fins" and not case.startswith("sync"):
         import uvloop
 
         uv = {"loop_factory": uvloop.new_event_loop}
@@ -135,6 +141,10 @@ def _workload(case: str, ports: list[int], n: int) -> None:
         _fins(ports[0], n)
     elif case == "sync":
         _sync(ports[0], n)
+    elif case == "sync-tcp":
+        _sync(ports[0], n, "tcp")
+    elif case == "sync-loop":
+        _sync(ports[0], n, backend="asyncio")
     elif case == "daemon":
         from bench_api import hand_written_daemon
 

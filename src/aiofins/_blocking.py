@@ -268,7 +268,7 @@ class BlockingDriver:
         runs at a time, and a batch keeps to the destination's cap itself.)"""
         session = self.session
         transport = self.transport
-        if not transport.is_open:
+        if transport.fast_send is None:  # (set while open)
             self.open(end - now)
             now = self.clock()
         p = HeldPending()
