@@ -200,7 +200,6 @@ class BlockingDriver:
         state = session.dest_state(dest)
         end = now + timeout
         receive = self.transport.receive
-        expire = session._watcher.expire
         p: HeldPending | None = None
         busy = 0
         try:
@@ -212,7 +211,7 @@ class BlockingDriver:
                     if wait > 0:
                         receive(wait)
                     else:
-                        expire(now)
+                        session._watcher.expire(now)
                 if type(reply) is not bytes:
                     raise reply  # type: ignore[misc]  # (an exception)
                 response = session.response(reply, p.end_code)
