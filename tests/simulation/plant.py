@@ -76,6 +76,12 @@ class History:
     writes: dict[bytes, list[float]] = field(default_factory=dict)
     #: (time, end code, the request's source node) of every error end code answered for it
     errors: list[tuple[float, int, int]] = field(default_factory=list)
+    #: (time, data) of every reply sent under a wrong SID, and (time, word) of its words: a
+    #: reply the PLC sends under a SID that is another request's in flight (same command)
+    #: is that request's reply to the client (FINS has nothing else to match it by), so
+    #: those words are the PLC's fault, not the client's.
+    spoiled: list[tuple[float, bytes]] = field(default_factory=list)
+    spoiled_words: list[tuple[float, int]] = field(default_factory=list)
     counter: int = WINDOW
 
     def next_value(self) -> int:
@@ -189,6 +195,15 @@ class Unit:
             return
         if faults:
             reply = self._spoil(reply, faults)
+            if reply[9:10] != frame[9:10]:  # sent under a wrong SID
+                now, data = self.clock(), bytes(reply[14:])
+                h = target.history
+                h.spoiled.append((now, data))
+                if frame[10:12] == b"\x01\x04":  # (area, word) triples
+                    words = [data[i + 1 : i + 3] for i in range(0, len(data) - 2, 3)]
+                else:
+                    words = [data[i : i + 2] for i in range(0, len(data) - 1, 2)]
+                h.spoiled_words += [(now, int.from_bytes(w, "big")) for w in words]
         self.wire.reply(self, to, reply)
 
     def _spoil(self, reply: bytes, faults: dict[str, float]) -> bytes:
