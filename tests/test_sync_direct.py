@@ -9,6 +9,7 @@ it or to answer "busy" (2604). Exact counts; no sleeps, no wall-clock bounds.
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -20,6 +21,7 @@ import aiofins
 import aiofins.sync
 from aiofins._blocking import run_to_end
 from aiofins.hooks import EventHooks
+from aiofins.protocol.tcp import TcpDecoder, encode_frame, encode_node_response
 from aiofins.session.states import LinkState
 from aiofins.simulator import VirtualPLC, run_simulator
 
@@ -248,3 +250,63 @@ def test_backend_keeps_calls_on_the_loop_thread(sim: Any) -> None:
         assert loops() == 1
         assert plc.read("D0", 1) == sim.plc.read("D0", 1)
     assert loops() == 0
+
+
+class TwoConnections:
+    """A FINS/TCP peer on loopback in a thread: its virtual PLC answers one command on the
+    first connection, which it then ends (``reset``: with a reset, once the next command has
+    come; else it closes it at once), and every command on the second."""
+
+    def __init__(self, reset: bool) -> None:
+        self.reset = reset
+        self.plc = VirtualPLC()
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port: int = self.server.getsockname()[1]
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        for node, commands in ((9, 1), (10, None)):
+            conn, _ = self.server.accept()
+            with conn:
+                decoder = TcpDecoder()
+                conn.recv(100)  # the node address request
+                conn.sendall(encode_node_response(node, 1))
+                answered = 0
+                while commands is None or answered < commands:
+                    data = conn.recv(4096)
+                    if not data:
+                        break
+                    for message in decoder.feed(data):
+                        reply = self.plc.handle_frame(message.payload)
+                        assert reply is not None
+                        conn.sendall(encode_frame(reply))
+                        answered += 1
+                if self.reset and commands is not None:
+                    conn.recv(4096)  # the next command: then a reset (no linger)
+                    conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+
+    def close(self) -> None:
+        self.thread.join(10)
+        self.server.close()
+
+
+@pytest.mark.parametrize("reset", [False, True], ids=["closed", "reset"])
+def test_fins_tcp_connects_again_after_the_plc_ended_the_connection(reset: bool) -> None:
+    peer = TwoConnections(reset)
+    states: list[str] = []
+    hooks = EventHooks(connection_state_changed=[lambda event: states.append(event.new)])
+    with aiofins.sync.connect(f"tcp://127.0.0.1:{peer.port}", hooks=hooks) as plc:
+        assert plc.read("D0") == [0]
+        assert plc.async_client.session.source.node == 9
+        # The close is found by the next call (nothing reads between calls): it fails (the
+        # end of the stream, or a reset if our frame reached the peer before its close) ...
+        with pytest.raises(aiofins.ConnectionLost):
+            plc.read("D0")
+        # ... and the call after it connects again, by the link's rules.
+        assert plc.read("D0") == [0]
+        session = plc.async_client.session
+        assert session.source.node == 10
+        assert (session.stats.connects, session.stats.disconnects) == (2, 1)
+    assert states == ["CONNECTING", "OPEN", "CLOSED", "CONNECTING", "OPEN", "SHUT"]
+    peer.close()

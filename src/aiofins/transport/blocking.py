@@ -154,6 +154,15 @@ class BlockingTransport(Transport):
             return ConnectionLost(f"{self.description} was closed")
         return wrap_os_error(exc, doing or self.description)
 
+    def _lost(self, error: FinsError) -> None:
+        """The link ended with ``error``: the socket closed and the sink told (not after
+        :meth:`interrupt`: the owner is closing it)."""
+        sink = self._sink
+        interrupted = self._interrupted
+        self.close()
+        if sink is not None and not interrupted:
+            sink.connection_lost(error)
+
     def receive(self, wait: float) -> None:
         """Wait at most ``wait`` seconds for what the peer sends and hand every whole frame
         to the sink (nothing when the time passes; it may also return early, having read
@@ -247,7 +256,9 @@ class BlockingUdpTransport(BlockingTransport):
                 if self._sink is not None:
                     self._sink.frame_dropped(f"socket error: {exc}")
                 return
-            raise self._failure(exc) from exc
+            error = self._failure(exc)
+            self._lost(error)
+            raise error from exc
         if self._interrupted:
             raise self._failure(None)
         if self._sink is not None:
@@ -331,8 +342,7 @@ class BlockingTcpTransport(BlockingTransport):
                 sendall(encode_frame(frame))
             except OSError as exc:
                 error = self._failure(exc, f"cannot send to {description}")
-                self.close()  # part of a frame may have gone out: the stream is unusable
-                sink.connection_lost(error)
+                self._lost(error)  # part of a frame may have gone out: the stream is unusable
                 raise error from exc
 
         self.fast_send = send
@@ -355,15 +365,17 @@ class BlockingTcpTransport(BlockingTransport):
                 return list(early)
 
     def receive(self, wait: float) -> None:
-        data = self._read(wait, _STREAM_SIZE)
+        try:
+            data = self._read(wait, _STREAM_SIZE)
+        except FinsError as exc:  # a socket error (a reset), or closed by interrupt()
+            self._lost(exc)
+            raise
         if data is None:
             return
         sink, conn = self._sink, self._conn
         assert sink is not None and conn is not None
         if not data:
-            error: BaseException | None = ConnectionLost(
-                f"{self.description} closed the connection"
-            )
+            error: FinsError | None = ConnectionLost(f"{self.description} closed the connection")
         else:
             try:
                 events = conn.receive_data(data, sink.frame_received)
@@ -371,9 +383,8 @@ class BlockingTcpTransport(BlockingTransport):
             except FrameError as exc:
                 error = exc
         if error is not None:
-            self.close()
-            sink.connection_lost(error)
-            raise error if isinstance(error, FinsError) else ConnectionLost(str(error))
+            self._lost(error)
+            raise error
 
     def close(self) -> None:
         conn, self._conn = self._conn, None
