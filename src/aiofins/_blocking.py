@@ -202,9 +202,21 @@ class BlockingDriver:
         receive = self.transport.receive
         p: HeldPending | None = None
         busy = 0
+        transport = self.transport
         try:
             while True:
-                p = self._start(state, mrc, src, params, retries, cap, now, end, timeout)
+                send = transport.fast_send
+                fresh = HeldPending()
+                frame = (
+                    None
+                    if send is None
+                    else session.start(fresh, state, mrc, src, params, retries, now, end, cap)
+                )
+                if frame is None:  # the link to open, or no free SID: the long way
+                    p = self._start(state, mrc, src, params, retries, cap, now, end, timeout)
+                else:  # (_start(), inlined: once per call; a failed send: see _failed())
+                    p = fresh
+                    send(frame)  # type: ignore[misc]  # (not None: a frame was made)
                 while (reply := p.result) is None:  # (_wait(), inlined: once per call)
                     now = clock()
                     wait = p.deadline - now
