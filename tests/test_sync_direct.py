@@ -24,6 +24,7 @@ from aiofins.hooks import EventHooks
 from aiofins.protocol.tcp import TcpDecoder, encode_frame, encode_node_response
 from aiofins.session.states import LinkState
 from aiofins.simulator import VirtualPLC, run_simulator
+from tests.conftest import PTY_8N1, PTY_LINE
 
 
 @pytest.fixture(scope="module")
@@ -310,3 +311,18 @@ def test_fins_tcp_connects_again_after_the_plc_ended_the_connection(reset: bool)
         assert (session.stats.connects, session.stats.disconnects) == (2, 1)
     assert states == ["CONNECTING", "OPEN", "CLOSED", "CONNECTING", "OPEN", "SHUT"]
     peer.close()
+
+
+def test_a_serial_line_runs_on_the_loop_thread(pty_pair: tuple[str, str]) -> None:
+    plc_side, host_side = pty_pair
+    url = f"serial://{host_side}?baudrate=115200&unit=0&{PTY_8N1}"
+    with (
+        start_blocking_portal() as portal,
+        portal.wrap_async_context_manager(
+            run_simulator(VirtualPLC(), serial=plc_side, serial_settings=PTY_LINE)
+        ),
+        aiofins.sync.connect(url, timeout=10.0) as plc,
+    ):
+        assert sum(thread.name == "aiofins.sync" for thread in threading.enumerate()) == 1
+        plc.write("D50", [4, 5])
+        assert plc.read("D50", 2) == [4, 5]
