@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 import anyio
 
+from .._compiling import python_class
 from ..hooks import EventHooks, RequestRetried, RequestTimedOut
 from ..protocol.errors import ConnectionLost, FinsError, FinsTimeout
 from ..protocol.frames import key_address
@@ -36,6 +37,7 @@ logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
 
+@python_class
 class Expired(FinsTimeout):
     """A request's deadline passed after every transmission (the caller words the message)."""
 
@@ -97,6 +99,8 @@ class DeadlineWatcher:
         self._fire = self.fire  # (bound once: arm() passes it to every timer)
         #: Work a receive callback asked to be done from a task (see :meth:`from_task`).
         self.chores: list[Callable[[], None]] = []
+        #: Passes its task has made over the deadlines (each wake-up of the task is one).
+        self.passes = 0
 
     def from_task(self, chore: Callable[[], None]) -> None:
         """Run ``chore`` from the watcher's task at its next wake-up, which this causes:
@@ -142,6 +146,7 @@ class DeadlineWatcher:
         loop = self.loop
         while True:
             try:
+                self.passes += 1
                 if self.chores:
                     self._run_chores()
                 self.expire(self.clock())
