@@ -106,6 +106,29 @@ UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]
         2000,
         (6,),
     ),
+    "defect 5 (a late duplicate taken for a new reply)": (
+        "one space, 2 sessions x 32 tasks, timeout 0.1 s: replies delayed up to 2 x the"
+        " timeout, then 5 % of replies duplicated up to 0.3 s late: a read returns other"
+        " reads' words (soak seed 30263; each episode alone: no violation)",
+        replace(
+            BASE,
+            timeout=0.1,
+            max_sid_spaces=1,
+            connect_sessions=2,
+            connect_tasks=32,
+            poller_groups=1,
+            think=0.003,
+            mean_gap=0.01,
+            storm=True,
+        ),
+        [
+            Episode(0.052, 0.415, 1, "delay", 0.2),
+            Episode(0.487, 0.393, 1, "delay", 0.1),
+            Episode(0.691, 0.314, 1, "dup", 0.05),
+        ],
+        20000,
+        (30263,),
+    ),
 }
 # (The "no free SID after the faults" family's world, soak seed 20047's: fixed by a598f59,
 # only a copy of a SID's last reply teaches the linger; tests/session/test_duplicates.py.)

@@ -1013,6 +1013,7 @@ SIGNS = (
 UNFIXED: frozenset[str] = frozenset(
     {
         "defect 3 (a relay error reaches another request)",
+        "defect 5 (a late duplicate taken for a new reply)",
     }
 )  # (the "no free SID after the faults" family: fixed by a598f59)
 
