@@ -14,6 +14,16 @@ from aiofins.simulator import VirtualPLC
 from aiofins.transport import MemoryTransport
 
 from ..virtual_time import on_virtual_time
+from .test_session_lifecycle import expected
+from .test_session_udp import (
+    Handler,
+    Reply,
+    read_params,
+    reply,
+    session_for,
+    udp_responder,
+    word_data,
+)
 
 
 def read_d(word: int) -> bytes:
@@ -60,3 +70,98 @@ async def test_a_reply_with_a_wrong_sid_is_no_duplicate_and_teaches_no_linger() 
         stats = session.stats
         assert (stats.duplicates, stats.unsolicited, stats.completed) == (0, 1, 556)
         assert session.sids.linger == 0.0 and stats.sid_exhausted == 0
+
+
+def copies_of_the_first_reply(
+    late: float, rtt_of_256: float, same_data: bool = False, taught: float = 0.0
+) -> Handler:
+    """A peer whose first reply (word 0, SID 0) the network copies ``late`` s later; the
+    reply to the 257th read (word 256, SID 0 again) comes ``rtt_of_256`` s after it; with
+    ``same_data`` it holds word 0's data, and its retransmissions are answered at once
+    (else not at all). With ``taught``, the second reply (word 1) is copied that late.
+    """
+    seen: set[bytes] = set()
+
+    def handler(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        data = word_data(cmd)
+        if word == 0:
+            good = reply(cmd, 0, data)
+            return [(0.0, good), (late, good)]
+        if word == 1 and taught:  # an early duplicate: the link duplicates replies
+            good = reply(cmd, 0, data)
+            return [(0.0, good), (taught, good)]
+        if word == 256:
+            if same_data:
+                data = word_data(cmd[:13] + b"\x00\x00" + cmd[15:])
+            if cmd in seen:  # a retransmission: answered at once if the data is the same
+                return [(0.0, reply(cmd, 0, data))] if same_data else []
+            seen.add(cmd)
+            return [(rtt_of_256, reply(cmd, 0, data))]
+        return [(0.0, reply(cmd, 0, data))]
+
+    return handler
+
+
+@on_virtual_time
+async def test_a_copy_of_a_sid_s_old_reply_never_answers_the_request_that_reused_it() -> None:
+    """Issue #22, defect 5: the link has shown a duplicate 0.15 s late (the SIDs linger
+    0.3 s); the first reply's copy comes 0.5 s late, after SID 0 was reused for the read of
+    word 256, whose reply takes 0.6 s: the copy comes first. It is byte for byte the reply
+    the SID was last answered with, to a request that asked something else, within twice
+    the linger: held back, and the read's own reply answers it (the copy then teaches the
+    linger: 1 s)."""
+    async with (
+        udp_responder(copies_of_the_first_reply(0.5, 0.6, taught=0.15)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0) as session,
+    ):
+        for word in range(257):
+            if word == 2:
+                await anyio.sleep(0.2)  # the duplicate of word 1's reply comes
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[256][9] == peer.received[0][9] == 0  # SID 0 again
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (257, 2, 0)
+        assert session.sids.linger == pytest.approx(1.0)
+
+
+@on_virtual_time
+async def test_a_new_reply_the_same_bytes_as_the_sid_s_last_answers_after_a_resend() -> None:
+    """The read of word 256 under SID 0 gets, at once, the same bytes as SID 0's last reply
+    (word 0's data; as if both words held the same value). Nothing tells it from a late
+    copy (a linger of 0.05 s: a duplicate may come): held back, and the read sent again
+    at once (same frame and SID); the reply to that answers it, without waiting for a
+    retransmission timeout. No linger learnt."""
+    async with (
+        udp_responder(copies_of_the_first_reply(9.0, 0.0, same_data=True)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, min_linger=0.05) as session,
+    ):
+        for word in range(256):
+            await session.request(0x01, 0x01, read_params(word), idempotent=True)
+        start = anyio.current_time()
+        r = await session.request(0x01, 0x01, read_params(256), idempotent=True)
+        assert r.data == expected(0)
+        assert [c for c in peer.received if c[13:15] == b"\x01\x00"] == [peer.received[256]] * 2
+        # (SID 0 free after its linger, 0.05 s; sent again at once where the transport
+        # sends synchronously, else at the first retransmission timeout)
+        assert anyio.current_time() - start <= 0.05 + session.rto_bounds[0] + 1e-9
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.retries) == (257, 1, 1)
+        assert session.sids.linger == 0.05
+
+
+@on_virtual_time
+async def test_the_same_question_under_a_reused_sid_is_answered_at_once() -> None:
+    """512 reads of one word (the same frame under each SID the second time round, the
+    same reply): a poll of values that did not change is not held back."""
+    async with (
+        udp_responder() as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, min_linger=0.001) as session,
+    ):
+        for _ in range(512):
+            r = await session.request(0x01, 0x01, read_params(7), idempotent=True)
+            assert r.data == expected(7)
+        assert len(peer.received) == 512
+        assert (session.stats.completed, session.stats.duplicates) == (512, 0)

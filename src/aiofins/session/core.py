@@ -59,7 +59,7 @@ from .batch import raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, call_ended
 from .clock import Clock, Clocks, backend_clocks
 from .link import Link
-from .log import cpu_flags_seen, log_frame, log_unmatched
+from .log import cpu_flags_seen, log_duplicate, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
 from .messages import no_response
 from .options import check_options
@@ -418,11 +418,25 @@ class Session:
             pending[key] = p
             self.stats.malformed += 1
             return
+        answers = sids.answers
+        plan = p.plan
+        if (
+            plan is not None
+            and sids.linger  # (the link has shown duplicates, or min_linger)
+            and answers.get(key) == frame
+            and self._hold_copy(p, key, sids)
+        ):
+            pending[key] = p  # (a copy of the SID's last reply: see _hold_copy)
+            return
         p.done = True
         p.end_code = raw
         now = self.clock()
+        if sids.held:
+            self._copy_resolved(sids, key, frame)
         sids.recent[key] = now
-        sids.answers[key] = frame
+        answers[key] = frame
+        if sids.linger:  # (what it asked: read by _hold_copy, which runs only then)
+            sids.asked[key] = plan
         latency = now - p.sent_at
         if sids.given_up:  # an outage's quarantines end now that the destination answers
             sids.answered_after(key, p.sent_at, now)
@@ -471,6 +485,51 @@ class Session:
                 self._deadlines.prune(len(pending))
         if self._heap:
             self._deadlines.prune(len(pending))
+
+    def _hold_copy(self, p: Pending, key: int, sids: SidSpace) -> bool:
+        """A reply to ``p`` (a request that may be sent again) is a copy, byte for byte,
+        of the reply its SID was last answered with: whether it is held back (``p`` waits
+        on; counted as a duplicate) rather than answer ``p``. The duplicate rule of
+        docs/session.md ("SIDs: quarantine and linger").
+
+        It is that reply's late duplicate, or ``p``'s own reply holding the same bytes;
+        nothing in it tells which (a one-byte SID). A request asking the same thing again
+        (a poll of values that did not change) takes it. Else, on a link that has shown
+        duplicates (a linger), within :data:`~.sids.HOLD_WINDOW` (1 s) or twice the linger
+        of that reply (:meth:`SidSpace.hold
+        <aiofins.session.sids.SidSpace.hold>`), it is held, and ``p`` is sent again at once
+        (same frame and SID, where the transport sends synchronously; else at its next
+        retransmission): its next reply answers it, whatever it holds."""
+        plan = p.plan
+        sent = plan[0] if isinstance(plan, tuple) else getattr(plan, "frame", None)
+        old = sids.asked.get(key)
+        if old is not None and sent == (old[0] if isinstance(old, tuple) else old.frame):
+            return False  # the same question: the same answer is no surprise
+        if not sids.hold(key, self.clock()):
+            return False
+        self.stats.duplicates += 1
+        transport = self.transport if p.space is None else p.space.transport
+        fast_send = transport.fast_send
+        if fast_send is not None and sent is not None:
+            p.rtt = None  # Karn: the reply can no longer be timed
+            p.attempts += 1
+            self.stats.retries += 1
+            try:  # noqa: SIM105 (as in frame_received: no context manager)
+                fast_send(sent)
+            except Exception:  # (its retransmissions or its deadline follow)
+                pass
+        return True
+
+    def _copy_resolved(self, sids: SidSpace, key: int, frame: bytes) -> None:
+        """The request under ``key`` is answered with ``frame`` after a copy of its SID's
+        last reply was held back (see :meth:`_hold_copy`): if ``frame`` differs, that copy
+        was a late duplicate of the old reply, and teaches the linger."""
+        lateness = sids.held.pop(key, None)
+        if lateness is not None and frame != sids.answers.get(key):
+            grew = sids.learn(lateness, self.clock())
+            self._linger_logged = log_duplicate(
+                self.transport.description, self.spaces, sids, key, grew, self._linger_logged
+            )
 
     def _misdirected(self, frame: bytes, to: int, sids: SidSpace) -> bool:
         """Whether a reply received on SID space ``sids`` is for another of our addresses

@@ -76,21 +76,32 @@ def log_unmatched(
     logged now."""
     kind, lateness = sids.unmatched(stats, key, frame, relay_error)
     if kind == "duplicate":
-        if spaces.extra:  # what the peer shows holds for every socket to it
-            spaces.share_linger(sids)
-        linger = sids.linger
-        if lateness and linger >= 2 * logged:
-            logger.warning(
-                "%s: a duplicate reply came %.3f s after its request was answered; "
-                "SIDs now linger %.3f s after a reply",
-                where,
-                lateness,
-                linger,
-                extra={"endpoint": where, "sid": key & 0xFF},
-            )
-            return linger
-    elif kind == "late":
+        return log_duplicate(where, spaces, sids, key, lateness, logged)
+    if kind == "late":
         _log_late(where, stats.late_replies, key)
+    return logged
+
+
+def log_duplicate(
+    where: str, spaces: SidSpaces, sids: SidSpace, key: int, lateness: float, logged: float
+) -> float:
+    """SID space ``sids`` saw a duplicate under ``key`` (``lateness``: how late it came if
+    it made the linger grow, else 0.0): what the peer shows holds for every socket to it
+    (``spaces``); a linger at least twice the one last logged (``logged``) is logged.
+    Returns the linger logged now."""
+    if spaces.extra:
+        spaces.share_linger(sids)
+    linger = sids.linger
+    if lateness and linger >= 2 * logged:
+        logger.warning(
+            "%s: a duplicate reply came %.3f s after its request was answered; "
+            "SIDs now linger %.3f s after a reply",
+            where,
+            lateness,
+            linger,
+            extra={"endpoint": where, "sid": key & 0xFF},
+        )
+        return linger
     return logged
 
 

@@ -27,13 +27,17 @@ from time import monotonic
 from .clock import Clock
 from .matching import LATE_REPLY_GRACE, count_unmatched
 from .response import SessionStats
-from .slots import DestState, Pending
+from .slots import DestState, Pending, Plan, Retransmission
 
 _NONE: frozenset[int] = frozenset()
 #: A duplicate reply seen ``x`` seconds after its request completed makes SIDs linger
 #: ``LINGER_FACTOR x x`` after a completion from then on (at most :data:`MAX_LINGER`).
 LINGER_FACTOR = 2.0
 MAX_LINGER = 5.0
+#: On a link that has shown duplicates, a copy of a SID's last reply that comes to the SID's
+#: next request (which asked something else) within this many seconds of that reply, or
+#: LINGER_FACTOR times the linger, is held back (see :meth:`SidSpace.hold`).
+HOLD_WINDOW = 1.0
 #: Longest pause between two looks for a free SID while all 256 are taken.
 SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
@@ -50,8 +54,10 @@ class SidSpace:
 
     __slots__ = (
         "answers",
+        "asked",
         "clock",
         "given_up",
+        "held",
         "linger",
         "linger_resent",
         "lingering",
@@ -82,6 +88,12 @@ class SidSpace:
         #: SID key -> the reply its last request was answered with: a duplicate is a copy
         #: of it, byte for byte (at most one frame per key: 256 per destination).
         self.answers: dict[int, bytes] = {}
+        #: SID key -> the retransmission plan (its frame: what it asked) of the request
+        #: that reply answered (``None``: one that could not be sent again).
+        self.asked: dict[int, Plan | Retransmission | None] = {}
+        #: SID key -> how late after the SID's previous reply a copy of that reply came
+        #: to its new request, held back (see :meth:`hold`).
+        self.held: dict[int, float] = {}
         #: The linger after a completion the link has shown necessary (late duplicates).
         self.linger = min_linger
         #: The same after a retransmission (learnt from replies to earlier transmissions).
@@ -183,6 +195,8 @@ class SidSpace:
         p.abandoned = True
         self.pending.pop(p.key, None)
         key = p.key
+        if self.held:
+            self.held.pop(key, None)
         self.quarantine[key] = until
         mine = self.given_up.get(key & ~0xFF)
         if mine is None:
@@ -235,6 +249,7 @@ class SidSpace:
         self.quarantine.clear()
         self.given_up.clear()
         self.lingering.clear()
+        self.held.clear()
 
     def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:
         """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
@@ -265,13 +280,37 @@ class SidSpace:
                 if linger > self.linger_resent:
                     self.linger_resent = linger
             elif done_at is not None:  # the network duplicated a reply
-                lateness = now - done_at
-                linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
-                if linger > self.linger:
-                    self.linger = linger
-                    self.extend_lingers(now)
-                    return kind, lateness
+                return kind, self.learn(now - done_at, now)
         return kind, 0.0
+
+    def learn(self, lateness: float, now: float) -> float:
+        """A duplicate came ``lateness`` seconds after the reply it copies: the linger
+        grows to :data:`LINGER_FACTOR` times that (at most :data:`MAX_LINGER`) if longer.
+        Returns ``lateness`` if it grew, else 0.0."""
+        linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
+        if linger <= self.linger:
+            return 0.0
+        self.linger = linger
+        self.extend_lingers(now)
+        return lateness
+
+    def hold(self, key: int, now: float) -> bool:
+        """A reply under ``key`` that is a copy, byte for byte, of the reply the SID was
+        last answered with came to the SID's new request, which asked something else:
+        whether it is held back rather than answer it (noted in :attr:`held`; see the
+        session's ``_hold_copy``). Held when it is the first such copy for that request
+        and came within :data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR` times the linger, of
+        that reply (later than the linger, a duplicate may find the SID reused)."""
+        if key in self.held:
+            return False  # the second: it answers
+        done_at = self.recent.get(key)
+        if done_at is None:
+            return False
+        lateness = now - abs(done_at)
+        if lateness >= HOLD_WINDOW and lateness >= LINGER_FACTOR * self.linger:
+            return False
+        self.held[key] = lateness
+        return True
 
     def extend_lingers(self, now: float) -> None:
         """The linger grew (a duplicate came later than it): the SIDs answered within the
