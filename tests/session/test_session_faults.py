@@ -595,6 +595,36 @@ async def test_relay_errors_for_requests_in_flight_to_several_destinations_each_
         assert (stats.completed, stats.end_code_errors) == (1, 2)
 
 
+@on_virtual_time
+async def test_a_late_relay_error_to_a_first_transmission_reaches_no_other_destination() -> None:
+    """A read to 2.21.0 is sent again after its first transmission got no answer; the relay
+    answers the second at once with a relay error, and the first one's relay error comes
+    only later, just before the reply to the next read, to 2.22.0. The answered SID
+    lingered for 2.21.0 alone, and the read to 2.22.0 took it: the late relay error was
+    raised to it (the simulation's relay family, seed 19). A lingering SID now stays
+    taken for every destination too while the session addresses several."""
+    errors: list[bytes] = []
+
+    def relay(cmd: bytes) -> list[Reply]:
+        error = reply(cmd, 0x8205, trailer=b"\x02\x01")  # 0205: forwarding failed
+        error = error[:6] + bytes((1, 9, 0)) + error[9:]  # from the relay 1.9
+        if cmd[4] == 21:
+            errors.append(error)
+            return [] if len(errors) == 1 else [(0.0, error)]  # the 2nd transmission's
+        return [(0.0, errors[0]), (0.0, reply(cmd, 0, word_data(cmd)))]
+
+    async with udp_responder(relay) as peer, session_for(peer, timeout=1.0) as session:
+        with pytest.raises(RelayError):
+            await session.request(
+                0x01, 0x01, read_params(1), dest=FinsAddress(2, 21, 0), idempotent=True
+            )
+        assert session.stats.retries == 1
+        response = await session.request(0x01, 0x01, read_params(2), dest=FinsAddress(2, 22, 0))
+        assert response.data == word_data(peer.received[2])
+        assert peer.received[2][9] != peer.received[0][9]  # another SID
+        assert (session.stats.completed, session.stats.end_code_errors) == (1, 1)
+
+
 @on_virtual_time  # the answered read after the timeout has 0.1 s: not on a loaded wall clock
 async def test_a_late_relay_error_never_reaches_a_request_to_another_destination() -> None:
     """A relay error (bit 15) comes from the relay point, with the relay's address, and is

@@ -80,32 +80,6 @@ def run_defect(number: int) -> Result:
 #: strict xfail. Pinned configurations and schedules (found by the soak), so that a change
 #: of the generator leaves them alone.
 UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]]] = {
-    "defect 3 (a relay error reaches another request)": (
-        "a SID storm through a relay (one space, 32 tasks, replies delayed 2 x the timeout,"
-        " relay errors half of them late, duplicated replies): a late relay error of one"
-        " request reaches a newer request to another destination under the same SID"
-        " (the configuration and schedule of random seed 1; random seeds 19 and 1 of the"
-        " slice show it too)",
-        replace(
-            BASE,
-            relays=frozenset({1}),
-            fixed=frozenset({1}),
-            timeout=0.1,
-            max_sid_spaces=1,
-            connect_tasks=32,
-            poller_groups=1,
-            think=0.001,
-            mean_gap=0.01,
-            storm=True,
-        ),
-        [
-            Episode(0.011, 0.230, 1, "delay", 0.2),
-            Episode(0.132, 0.367, 1, "relay", 0.1),
-            Episode(0.322, 0.377, 1, "dup", 1.0),
-        ],
-        2000,
-        (6,),
-    ),
     "defect 5 (a late duplicate taken for a new reply)": (
         "one space, 2 sessions x 32 tasks, timeout 0.1 s: replies delayed up to 2 x the"
         " timeout, then 5 % of replies duplicated up to 0.3 s late: a read returns other"

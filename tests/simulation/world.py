@@ -1012,10 +1012,9 @@ SIGNS = (
 #: removes the kind here and its world there.
 UNFIXED: frozenset[str] = frozenset(
     {
-        "defect 3 (a relay error reaches another request)",
         "defect 5 (a late duplicate taken for a new reply)",
     }
-)  # (the "no free SID after the faults" family: fixed by a598f59)
+)  # (fixed: "no free SID after the faults", the relay family: dup, issue #22)
 
 
 def suspect(result: Result) -> str:

@@ -136,13 +136,17 @@ class SidSpace:
         return any(k & 0xFF == sid for k in self.pending) or sid in self.relay_taken(self.clock())
 
     def relay_taken(self, now: float) -> set[int]:
-        """The SIDs quarantined now for any destination, which a request to another may
-        not take while the session addresses several (:attr:`routed`). A relay error comes
-        from the relay point, not the destination, and is matched by SID and command code
-        alone (:func:`~.matching.match_relay_error`); a late one for a request given up on
-        must not find a newer request to another destination (routed through that relay,
-        perhaps: the session does not know the routes) under the same SID."""
-        return {k & 0xFF for k, until in self.quarantine.items() if until > now}
+        """The SIDs quarantined or lingering now for any destination, which a request to
+        another may not take while the session addresses several (:attr:`routed`). A relay
+        error comes from the relay point, not the destination, and is matched by SID and
+        command code alone (:func:`~.matching.match_relay_error`); a late one for a request
+        given up on, or for an earlier transmission of one answered (a relay error to its
+        first attempt after its retransmission was answered), must not find a newer
+        request to another destination (routed through that relay, perhaps: the session
+        does not know the routes) under the same SID."""
+        taken = {k & 0xFF for k, until in self.quarantine.items() if until > now}
+        taken.update(k & 0xFF for k, until in self.lingering.items() if until > now)
+        return taken
 
     def is_free(self, key: int, now: float, taken: AbstractSet[int]) -> bool:
         """Whether ``key`` may carry a new request now: not in flight (``taken``: the SIDs in
