@@ -21,6 +21,7 @@ from aiofins.session.breaker import BreakerState
 from aiofins.session.callback import CallbackBatch, start_requests
 from aiofins.transport.base import is_asyncio
 
+from ..virtual_time import on_virtual_time
 from .test_request_many import assert_idle, expected, key_of, reads
 from .test_session_udp import Reply, answer, read_params, reply, session_for, udp_responder
 
@@ -107,6 +108,7 @@ async def test_a_dropped_request_is_sent_again_with_the_same_frame() -> None:
         assert_idle(s)
 
 
+@on_virtual_time  # short timeouts, silent or late peer (uvloop: its clock cannot be virtual)
 async def test_no_reply_fails_as_a_timeout_and_quarantines_the_sid() -> None:
     async with (
         on_asyncio_only(),
@@ -124,6 +126,7 @@ async def test_no_reply_fails_as_a_timeout_and_quarantines_the_sid() -> None:
         assert_idle(s)
 
 
+@on_virtual_time  # short timeouts, silent or late peer (uvloop: its clock cannot be virtual)
 async def test_a_late_reply_is_dropped_and_counted() -> None:
     async with (
         on_asyncio_only(),
@@ -179,6 +182,7 @@ async def test_an_end_code_fails_with_its_error_and_the_breaker_stays_closed() -
         assert_idle(s)
 
 
+@on_virtual_time  # short timeouts, silent or late peer (uvloop: its clock cannot be virtual)
 async def test_failures_open_the_breaker_and_then_it_declines() -> None:
     async with (
         on_asyncio_only(),
