@@ -163,6 +163,32 @@ class BlockingDriver:
 
     # ----------------------------------------------------------------- one request
 
+    def begin(self, *args: Any, **kwargs: Any) -> None:
+        """The async client's first step of a request (:meth:`Session.begin`): ``None``
+        here, so every request of the client takes :meth:`call`, which runs it from the
+        calling thread."""
+        return None
+
+    async def call(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        cap: float | None = None,
+        in_call: bool = False,
+        after: object = None,
+    ) -> bytes:
+        """:meth:`Session.call` for the async client: :meth:`request`'s reply frame."""
+        response = await self.request(
+            mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent,
+            retries=retries, attempt_timeout=cap,
+        )  # fmt: skip
+        return response.frame
+
     async def request(
         self,
         mrc: int,

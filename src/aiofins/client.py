@@ -66,6 +66,7 @@ from .protocol.values import (
     words_to_values,
 )
 from .session import Response, Session
+from .session.response import end_code_of, response_of
 from .tags import ReadPlan, compile_tags
 from .transport.base import is_asyncio
 
@@ -453,22 +454,25 @@ class Client(CommandMethods):
             _check_read_only(mrc, src, params)
         target = self._target(dest)
         check_command(self.limits if dest is None else self.route_to(target), mrc, src, params)
-        try:
-            response = await self.session.request(
-                mrc,
-                src,
-                params,
-                dest=target,
-                timeout=timeout,
-                idempotent=idempotent,
-                retries=retries,
-            )
+        session = self.session
+        try:  # the session's request path: begin, one await, finish (see Session.begin)
+            p = session.begin(mrc, src, params, target, timeout, idempotent, retries)
+            if p is not None:
+                try:
+                    frame = await (p.fut or p.wait())
+                except BaseException as exc:
+                    await session.failed(p, exc, timeout)
+            if p is None or not session.finish(p, frame):  # a wait first, or busy
+                frame = await session.call(
+                    mrc, src, params, target, timeout, idempotent, retries, after=p
+                )
         except EndCodeError as exc:
             self._add_addressing_hint(exc, target)
             raise
         except FinsTimeout as exc:
-            add_route_hint(exc, target, self.session.source)
+            add_route_hint(exc, target, session.source)
             raise
+        response = response_of(frame)
         self.last_end_code = response.end_code
         return response
 
@@ -602,21 +606,28 @@ class Client(CommandMethods):
             ):  # checked as execute() checks them
                 timeout, retries = _call_options(timeout, retries)
             target = self.dest if dest is None else FinsAddress.of(dest)
-            try:
-                response = await self.session.request(
-                    mrc, src, params, dest=target, timeout=timeout, idempotent=True,
-                    retries=retries,
-                )  # fmt: skip
+            session = self.session
+            try:  # the session's request path: begin, one await, finish (no coroutine)
+                p = session.begin(mrc, src, params, target, timeout, True, retries)
+                if p is not None:
+                    try:
+                        frame = await (p.fut or p.wait())
+                    except BaseException as exc:
+                        await session.failed(p, exc, timeout)
+                if p is None or not session.finish(p, frame):  # a wait first, or busy
+                    frame = await session.call(
+                        mrc, src, params, target, timeout, True, retries, after=p
+                    )
             except EndCodeError as exc:
                 self._add_addressing_hint(exc, target)
                 raise
             except FinsTimeout as exc:
-                add_route_hint(exc, target, self.session.source)
+                add_route_hint(exc, target, session.source)
                 raise
-            self.last_end_code = response.end_code
+            self.last_end_code = end_code_of(frame)
             if progress is not None:
                 progress(count, count)
-            return plan.one(response.data)
+            return plan.one(frame[14:])
         return plan.values(await self._fetch(plan, dest, timeout, retries, progress))
 
     def _read_plan(
@@ -957,15 +968,21 @@ class Client(CommandMethods):
             mrc, src, params, _, _ = plan.run_read(0)
             if timeout is not None and (type(timeout) is not float or not timeout > 0.0):
                 timeout, _ = _call_options(timeout, None)  # checked as execute() checks it
-            try:  # (the session directly: no coroutine of execute() per scan)
-                response = await self.session.request(
-                    mrc, src, params, dest=self.dest, timeout=timeout, idempotent=True
-                )
+            session = self.session
+            try:  # (the session's request path directly: no coroutine per scan)
+                p = session.begin(mrc, src, params, self.dest, timeout, True)
+                if p is not None:
+                    try:
+                        frame = await (p.fut or p.wait())
+                    except BaseException as exc:
+                        await session.failed(p, exc, timeout)
+                if p is None or not session.finish(p, frame):  # a wait first, or busy
+                    frame = await session.call(mrc, src, params, self.dest, timeout, True, after=p)
             except EndCodeError as exc:
                 self._add_addressing_hint(exc, self.dest)
                 raise
-            self.last_end_code = response.end_code
-            return plan.decode((plan.run_words(0, response.data),), (), errors)
+            self.last_end_code = end_code_of(frame)
+            return plan.decode((plan.run_words(0, frame[14:]),), (), errors)
         commands, multiple = plan.scan_commands()
         responses = await self.execute_many(commands, timeout=timeout, idempotent=True)
         run_words = [plan.run_words(i, responses[i].data) for i in range(n_runs)]

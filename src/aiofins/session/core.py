@@ -30,7 +30,6 @@ from ..hooks import (
 )
 from ..protocol.endcodes import CPU_ERROR_FLAGS, END_CODE_MASK, EndCode
 from ..protocol.errors import (
-    CommandError,
     ConnectionLost,
     EndCodeError,
     FinsError,
@@ -44,7 +43,6 @@ from ..protocol.frames import (
     RELAY_ERROR_BIT,
     RESPONSE_ICFS,
     address_bits,
-    check_command,
     end_code_error,
     header_prefix,
     key_address,
@@ -62,7 +60,7 @@ from .link import Link
 from .log import cpu_flags_seen, log_duplicate, log_frame, log_unmatched
 from .matching import match_relay_error, match_wildcard
 from .messages import no_response
-from .options import check_options
+from .options import check_call, check_options
 from .response import (
     RING_MASK,
     Response,
@@ -71,12 +69,14 @@ from .response import (
     _set_data,
     _set_end_code,
     _set_frame,
+    response_of,
 )
 from .sids import SidSpace
 from .slots import (
     AsyncioPending,
     DestState,
     EventPending,
+    HeldPending,
     Pending,
     SlotQueue,
 )
@@ -87,14 +87,21 @@ from .watcher import DeadlineWatcher, Expired
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
-_NORMAL = EndCode(0)
 _CLOSED_BREAKER = BreakerState.CLOSED
 #: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
 _SAMPLE_MASK = 7
+_NORMAL = EndCode(0)
+_ICFS = RESPONSE_ICFS  # (short names for the receive path's one test)
+_RELAY = RELAY_ERROR_BIT
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
 _POLL_MAX_BACKOFF = 64
+
+
+def _event_pending() -> Pending:
+    """A request's record woken through an anyio event (trio, other backends)."""
+    return EventPending(0, 0, 0)
 
 
 class Session:
@@ -188,7 +195,20 @@ class Session:
         self.min_quarantine = min_quarantine
         self.reconnect_backoff = reconnect_backoff
         self.hooks = hooks
-        self._hooks = None if hooks is None else hooks.or_none()
+        self._compose(max_in_flight, max_sid_spaces, breaker_threshold, breaker_cooldown, clock)
+
+    def _compose(
+        self,
+        max_in_flight: int,
+        max_sid_spaces: int,
+        breaker_threshold: int,
+        breaker_cooldown: tuple[float, float],
+        clock: Clock | None,
+    ) -> None:
+        """The session's own state (its clock, SIDs, destinations, the request path's
+        switches), then its parts (:meth:`_compose_parts`)."""
+        transport = self.transport
+        self._hooks = None if self.hooks is None else self.hooks.or_none()
         #: The clock the caller passed (``None``: the event loop's, chosen on entry).
         self._clock_given = clock
         #: The one clock every part of the session reads (see :mod:`.clock`): set on entry
@@ -202,7 +222,8 @@ class Session:
         #: One request on the line at a time across all destinations (serial links).
         self._shared_slots = limit == 1
         #: The SIDs and the requests in flight of the transport (see :mod:`.sids`).
-        self.sids = SidSpace(min_linger, self.clock)
+        self.sids = SidSpace(self.min_linger, self.clock)
+        source = self.source
         self.sids.ours = address_bits(source.network, source.node, source.unit)
         # The space's tables under the names the receive path and tests use.
         self._pending = self.sids.pending
@@ -219,28 +240,37 @@ class Session:
         self._loop: Any = None  # the running asyncio loop, if any
         #: Makes the future a request awaits under asyncio (see __aenter__).
         self._new_future: Any = None
+        #: Makes the request of a session with no asyncio loop (see :meth:`_pending_made`).
+        self._other_pending: Callable[[], Pending] = HeldPending
+        self._flags_logged = 0  # CPU error flags (0040/0080) already logged
+        #: Whether each frame sent and received is logged (DEBUG): asked of logging once per
+        #: call and once per burst of a batch (see :meth:`log_frames`), not per frame.
+        self._log_frames = logger.isEnabledFor(_DEBUG)
+        self._poll_skip = self._poll_backoff = self._poll_streak = 0
+        self._turn_due = False  # the next request yields to the event loop first
+        self._compose_parts(max_sid_spaces, breaker_threshold, breaker_cooldown)
+
+    def _compose_parts(
+        self, max_sid_spaces: int, breaker_threshold: int, breaker_cooldown: tuple[float, float]
+    ) -> None:
+        """The parts the session composes: breaker, deadline watcher, counters, extra SID
+        spaces, link. Each is handed what it needs; none imports this module."""
+        transport = self.transport
         self._breaker = CircuitBreaker(breaker_threshold, breaker_cooldown)
         #: The one timer: retransmits or gives up the requests that are due.
         self._watcher = DeadlineWatcher(self, self._breaker, self._hooks)
         self._deadlines = self._watcher.deadlines
         self._fifo = self._watcher.fifo  # the in-order part, appended to inline
         self._heap = self._deadlines.heap  # the rest (see Deadlines)
-        self._flags_logged = 0  # CPU error flags (0040/0080) already logged
-        #: Whether each frame sent and received is logged (DEBUG): asked of logging once per
-        #: call and once per burst of a batch (see :meth:`log_frames`), not per frame.
-        self._log_frames = logger.isEnabledFor(_DEBUG)
-        self._poll_skip = self._poll_backoff = self._poll_streak = 0
-        self._turn_due = False  # the next polled request yields to the event loop instead
         in_flight = InFlight(self.sids.pending)
         self.stats = SessionStats(in_flight)
         #: Requests awaiting a reply (read by datagram transports to stop draining early).
         self.replies_awaited = self._pending
-        #: The link: its state, connection attempts, the reconnect backoff.
         #: The SID spaces opened when the transport's own are all taken (see .spaces).
         self.spaces = SidSpaces(
             transport,
             max_sid_spaces,
-            min_linger,
+            self.min_linger,
             self.stats,
             self._hooks,
             self.sids,
@@ -250,11 +280,12 @@ class Session:
             prefix=self._prefix_from,
         )
         in_flight.spaces = self.spaces.extra
+        #: The link: its state, connection attempts, the reconnect backoff.
         self._link = Link(
             transport,
             self,
             self.stats,
-            reconnect_backoff,
+            self.reconnect_backoff,
             self._hooks,
             self._adopt_local_node,
             self.sids.forget,
@@ -299,6 +330,8 @@ class Session:
                 # asyncio's own: the same future, made without that method's Python call.
                 self._new_future = partial(asyncio.Future, loop=loop)
             self._watcher.loop = self._loop
+        else:
+            self._other_pending = _event_pending  # woken through an anyio event
         self._use_clock(backend_clocks(self._clock_given))
         tg = anyio.create_task_group()
         await tg.__aenter__()
@@ -375,11 +408,8 @@ class Session:
     def frame_received(
         self, frame: bytes, _addr: object = None, space: ExtraSpace | None = None
     ) -> None:
-        """Called by the transport for each whole frame; never raises. ``space``: the extra
-        SID space whose transport received it (``None``: the session's own).
-
-        (The unused second argument lets asyncio call this as ``datagram_received``.)
-        """
+        """Each whole frame the transport received (``space``: the extra SID space's; the
+        unused 2nd argument: asyncio calls this as ``datagram_received``); never raises."""
         if self._log_frames:
             log_frame(self.transport.description, "received", frame)
         try:
@@ -391,100 +421,124 @@ class Session:
         if to & ADDRESS_MASK != sids.ours and self._misdirected(frame, to, sids):
             return
         pending = sids.pending
-        p = pending.pop(key, None)  # (put back below if the reply is not its)
-        if p is None:
-            p = match_wildcard(pending, key)
-            if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
-                p = match_relay_error(pending, frame)
+        p = pending.pop(key, None)
+        if p is None or mrc != p.mrc or src != p.src or icf not in _ICFS or raw >= _RELAY:
+            p = self._matched(frame, p, key, icf, mrc, src, raw, sids)
             if p is None:
-                self._linger_logged = log_unmatched(
-                    self.transport.description,
-                    self.stats,
-                    self.spaces,
-                    sids,
-                    key,
-                    frame,
-                    raw >= RELAY_ERROR_BIT,
-                    self._linger_logged,
-                )
                 return
             key = p.key
-            del pending[key]
-        if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
-            pending[key] = p
-            self.stats.mismatched += 1
-            return
-        if raw >= RELAY_ERROR_BIT and len(frame) < MIN_RELAY_REPLY_SIZE:
-            pending[key] = p
-            self.stats.malformed += 1
-            return
-        answers = sids.answers
-        plan = p.plan
-        if (
-            plan is not None
-            and sids.linger  # (the link has shown duplicates, or min_linger)
-            and answers.get(key) == frame
-            and self._hold_copy(p, key, sids)
-        ):
-            pending[key] = p  # (a copy of the SID's last reply: see _hold_copy)
-            return
+        if sids.linger and p.plan is not None and self._held(p, key, frame, sids):
+            return  # (a copy of the SID's last reply, held back: see _hold_copy)
         p.done = True
         p.end_code = raw
         now = self.clock()
-        if sids.held:
-            self._copy_resolved(sids, key, frame)
+        if sids.held or sids.given_up:
+            self._answered_after_doubt(sids, key, frame, p.sent_at, now)
         sids.recent[key] = now
-        answers[key] = frame
-        if sids.linger:  # (what it asked: read by _hold_copy, which runs only then)
-            sids.asked[key] = plan
+        sids.answers[key] = frame
         latency = now - p.sent_at
-        if sids.given_up:  # an outage's quarantines end now that the destination answers
-            sids.answered_after(key, p.sent_at, now)
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         n = stats._lat_count
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
+        linger = sids.linger
         r = p.rtt
         if r is None:  # sent again: a reply to another transmission may follow
             linger = sids.resent_linger(p, now, self.rto_bounds[1])
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
-        else:
-            if not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
-                r.sample(latency, self.rto_bounds if self.adaptive else None)
-            linger = sids.linger
+        elif not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
+            r.sample(latency, self.rto_bounds if self.adaptive else None)
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
+            sids.asked[key] = p.plan  # (what it asked: read by _hold_copy)
         fut = p.fut
         if fut is None:
             p.wake(frame)
-        else:
-            try:  # noqa: SIM105 (contextlib.suppress costs a context manager per reply)
-                fut.set_result(frame)
-            except asyncio.InvalidStateError:  # cancelled: the caller cleans up as it resumes
-                pass
+        elif not fut.done():  # (cancelled: the caller cleans up as it resumes)
+            fut.set_result(frame)
         hooks = self._hooks
         if hooks is not None and hooks.response_received:
-            self.emit(
-                hooks.response_received,
-                ResponseReceived,
-                p,
-                raw,
-                latency,
-                p.attempts,
-            )
-        fifo = self._fifo
-        if fifo:
-            if fifo[0].done:
-                popleft = fifo.popleft
-                popleft()
-                while fifo and fifo[0].done:
-                    popleft()
-            elif len(fifo) > 64 + 4 * len(pending):
-                # A slow request at the front keeps answered ones behind it: compact, rarely.
-                self._deadlines.prune(len(pending))
-        if self._heap:
+            self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
+        fifo = self._fifo  # the answered requests at the front of the deadlines dropped
+        while fifo and fifo[0].done:
+            fifo.popleft()
+        if self._heap or len(fifo) > 64 + 4 * len(pending):  # (a slow one keeps others)
             self._deadlines.prune(len(pending))
+
+    def _matched(
+        self,
+        frame: bytes,
+        p: Pending | None,
+        key: int,
+        icf: int,
+        mrc: int,
+        src: int,
+        raw: int,
+        sids: SidSpace,
+    ) -> Pending | None:
+        """The request a reply answers when it is not simply the one under its key
+        (``p``, taken out of ``sids``' pending table, if any): one sent to a wildcard
+        address, or the one a relay error names (see :meth:`_match_other`); ``None`` (put
+        back, counted) when its command code or ICF shows the reply is not its, or a relay
+        error is too short to say where it comes from."""
+        pending = sids.pending
+        if p is None:
+            p = self._match_other(frame, key, raw, sids)
+            if p is None:
+                return None
+            key = p.key
+            del pending[key]
+        if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
+            pending[key] = p
+            self.stats.mismatched += 1
+            return None
+        if raw >= RELAY_ERROR_BIT and len(frame) < MIN_RELAY_REPLY_SIZE:
+            pending[key] = p
+            self.stats.malformed += 1
+            return None
+        return p
+
+    def _match_other(self, frame: bytes, key: int, raw: int, sids: SidSpace) -> Pending | None:
+        """The request a reply whose key ``key`` matches no request of ``sids`` exactly
+        answers: one sent to a wildcard address, or the one a relay error names; none
+        (counted and logged as late, duplicate or unsolicited: see :func:`log_unmatched`)."""
+        pending = sids.pending
+        p = match_wildcard(pending, key)
+        if p is None and raw >= RELAY_ERROR_BIT and len(frame) >= MIN_RELAY_REPLY_SIZE:
+            p = match_relay_error(pending, frame)
+        if p is None:
+            self._linger_logged = log_unmatched(
+                self.transport.description,
+                self.stats,
+                self.spaces,
+                sids,
+                key,
+                frame,
+                raw >= RELAY_ERROR_BIT,
+                self._linger_logged,
+            )
+        return p
+
+    def _held(self, p: Pending, key: int, frame: bytes, sids: SidSpace) -> bool:
+        """On a link with a linger, a reply to ``p`` (which may be sent again) that is a
+        byte-for-byte copy of its SID's last reply: whether it is held back (see
+        :meth:`_hold_copy`; ``p`` put back in the pending table)."""
+        if sids.answers.get(key) == frame and self._hold_copy(p, key, sids):
+            sids.pending[key] = p
+            return True
+        return False
+
+    def _answered_after_doubt(
+        self, sids: SidSpace, key: int, frame: bytes, sent_at: float, now: float
+    ) -> None:
+        """A reply answers the request under ``key`` (first sent at ``sent_at``) while a
+        copy of a reply was held back (:meth:`_copy_resolved`) or SIDs given up on wait
+        for evidence that the destination answers (:meth:`SidSpace.answered_after`)."""
+        if sids.held:
+            self._copy_resolved(sids, key, frame)
+        if sids.given_up:  # an outage's quarantines end now that the destination answers
+            sids.answered_after(key, sent_at, now)
 
     def _hold_copy(self, p: Pending, key: int, sids: SidSpace) -> bool:
         """A reply to ``p`` (a request that may be sent again) is a copy, byte for byte,
@@ -662,19 +716,13 @@ class Session:
     ) -> bytes | None:
         """Put ``p``, command ``mrc src params`` to ``state``'s destination, on the books:
         take a free SID (``p.key``), build the frame, register ``p`` under its SID as sent
-        ``now`` with its first deadline, tell the hooks and the log. Returns the frame for
-        the caller to send, or ``None`` (nothing registered) when all 256 SIDs of the
+        ``now`` with its first deadline (:meth:`_register`). Returns the frame for the
+        caller to send, or ``None`` (nothing registered) when all 256 SIDs of the
         destination are in flight, quarantined or lingering. ``space``: an extra SID space
         to take the SID from and send on (``None``: the session's own transport).
 
         Every field of :class:`Pending` is set here (``p`` may come from ``__new__``
-        alone: the hot path spares itself an ``__init__`` call).
-
-        The first wait: the destination's RTO once measured (never over a reliable stream:
-        its RTO stays unset), else the share of the call's time (until ``end``) that lets
-        every attempt go out, the wait doubling each time;
-        never more than the caller's per-attempt ``cap``. (One call for all of this: a call
-        costs as much as the rest of the steps, and this runs once per request.)"""
+        alone: the hot path spares itself an ``__init__`` call)."""
         if space is None:
             sids = self.sids
             mine = state
@@ -707,10 +755,32 @@ class Session:
         p.src = src
         p.rtt = state
         p.space = space
+        self._register(p, frame, retries, now, end, cap, state.rto)
+        pending[key] = p
+        return frame
+
+    def _register(
+        self,
+        p: Pending,
+        frame: bytes,
+        retries: int,
+        now: float,
+        end: float,
+        cap: float | None,
+        rto: float,
+    ) -> None:
+        """``p``'s plan and first deadline, on the deadline structure (the watcher woken
+        earlier if it is the earliest); the hooks and the log told it is sent.
+
+        The first wait: the destination's RTO (``rto``) once measured (never over a reliable stream:
+        its RTO stays unset), else the share of the call's time (until ``end``) that lets
+        every attempt go out, the wait doubling each time; never more than the caller's
+        per-attempt ``cap``."""
         p.done = p.abandoned = False
         p.attempts = 1
+        p.end = end
         if retries:
-            wait = state.rto or (end - now) / ((2 << retries) - 1)
+            wait = rto or (end - now) / ((2 << retries) - 1)
             if cap is not None and wait > cap:
                 wait = cap
             p.plan = (frame, retries, end, cap, wait)
@@ -724,7 +794,6 @@ class Session:
                 deadline = now + cap
         p.deadline = deadline
         p.sent_at = now
-        pending[key] = p
         fifo = self._fifo
         if not fifo or deadline >= fifo[-1].deadline:
             fifo.append(p)
@@ -738,7 +807,6 @@ class Session:
             self.emit(hooks.request_sent, RequestSent, p)
         if self._log_frames:
             log_frame(self.transport.description, "sent", frame)
-        return frame
 
     def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None:
         """Give up on ``p`` before its reply (cancelled, or its send failed; ``timed_out``:
@@ -753,23 +821,24 @@ class Session:
         else:
             self.stats.cancelled += 1
 
-    def response(self, frame: bytes, end_code: int) -> Response | None:
-        """The response a reply carries if its end code (``end_code``, as the receive path
-        read it: :attr:`Pending.end_code`) is a normal completion (counted; CPU error flags
-        logged), else ``None`` (see :meth:`busy_pause`)."""
+    def completed(self, end_code: int) -> bool:
+        """Whether a reply's end code (``end_code``, as the receive path read it:
+        :attr:`Pending.end_code`) is a normal completion (counted; CPU error flags
+        logged); if not, see :meth:`busy_pause` and :meth:`end_code_failure`."""
         if end_code & ERROR_BITS:
-            return None
+            return False
         self.stats.completed += 1
-        response: Response = _new(Response)  # new_response(), inlined
         if end_code:
             where = self.transport.description
             self._flags_logged = cpu_flags_seen(where, end_code, self._flags_logged)
-            _set_end_code(response, EndCode(end_code))
-        else:
-            _set_end_code(response, _NORMAL)
-        _set_data(response, frame[14:])
-        _set_frame(response, frame)
-        return response
+        return True
+
+    def response(self, frame: bytes, end_code: int) -> Response | None:
+        """The :class:`Response` a reply carries if its end code is a normal completion
+        (see :meth:`completed`), else ``None``."""
+        if not self.completed(end_code):
+            return None
+        return response_of(frame)
 
     def busy_pause(self, frame: bytes, busy: int) -> float | None:
         """For a reply with an error end code: the pause before sending the command again
@@ -802,6 +871,301 @@ class Session:
         """Open the link if it is closed, waiting at most ``timeout`` (see :class:`Link`)."""
         await self._link.ensure_open(timeout)
 
+    # ----------------------------------------------------------------- the request path
+    # A request is begin() (checks, slot, SID, register, send, read-after-send), one await
+    # of its Pending, and finish() (end code, counters, breaker, busy retry decision) or
+    # failure(): plain methods, no coroutine of their own. call() is the same steps with
+    # the waits (link, breaker probe, slot, SID, an awaited send, busy pauses) for a
+    # request begin() cannot start at once. request_many()'s batches (batch.py) use
+    # start() / completed() / busy_pause() / end_code_failure() for each command.
+
+    def begin(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        cap: float | None = None,
+        in_call: bool = False,
+        now: float | None = None,
+    ) -> Pending | None:
+        """Check, take a slot and a SID, register, send (``transport.fast_send``), read
+        right after: the request's :class:`Pending` (then ``await p`` and :meth:`finish`,
+        or :meth:`failure`), or ``None``, nothing done, if it must wait (link, breaker,
+        slot, SID, an awaited send, a fair turn): then :meth:`call`. Options as in
+        :meth:`request` (``cap``: ``attempt_timeout``); ``now``: the session's clock.
+        A bad command or option raises :class:`CommandError` before anything is done."""
+        if dest is None:
+            dest = self.dest
+        if timeout is None:
+            timeout = self.timeout
+        if retries is None:
+            retries = self.retries if idempotent else 0
+        if cap is None:
+            cap = self.attempt_timeout
+        if not (timeout > 0.0 and retries >= 0 and (cap is None or cap > 0.0)) or not (
+            len(params) <= MAX_PARAMETER_SIZE and 0 <= mrc <= 0xFF and 0 <= src <= 0xFF
+        ):
+            check_call(mrc, src, params, timeout, retries, cap)  # raises what is wrong
+        if self._turn_due or (self._breaker.failures and not in_call):
+            return None
+        transport = self.transport
+        send = transport.fast_send
+        state = self._last_state if dest is self._last_dest else self.dest_state(dest)
+        slots = state.slots
+        if send is None or slots.in_flight >= slots.limit or slots.waiters:
+            return None
+        slots.in_flight += 1
+        now = self.clock() if now is None else now
+        self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
+        if self._asyncio:  # (_pending_made(), inlined)
+            p: Pending = AsyncioPending()
+            p.fut = self._new_future()
+        else:
+            p = self._other_pending()
+        p.slots = slots
+        frame = self.start(p, state, mrc, src, params, retries, now, now + timeout, cap)
+        if frame is None:  # no SID free at once: call() waits for one
+            self._slot_back(p)
+            return None
+        try:
+            send(frame)
+        except Exception as exc:
+            return self._unsent(p, exc, timeout)
+        if (poll := transport.poll_now) is not None:
+            self._read_after_send(poll, p)
+        return p
+
+    def _unsent(self, p: Pending, exc: Exception, timeout: float) -> Pending:
+        """:meth:`begin`'s send of ``p`` raised ``exc``: ``p`` given up (its SID
+        quarantined, counted) and failed with ``exc``, which its caller's await raises
+        (then :meth:`failure`: the slot back, the breaker told)."""
+        self.abandon(p, timeout, isinstance(exc, FinsTimeout))
+        p.fail(exc)
+        return p
+
+    def _pending_made(self) -> Pending:
+        """A new request's :class:`Pending` (its fields set by :meth:`start`): on a bare
+        asyncio future under asyncio, else the session's other kind (an anyio event's
+        under trio, a :class:`HeldPending` without an event loop)."""
+        if self._asyncio:
+            p: Pending = AsyncioPending()
+            p.fut = self._new_future()
+            return p
+        p = self._other_pending()
+        return p
+
+    def _slot_back(self, p: Pending) -> None:
+        """Give back the slot ``p`` holds, if the watcher has not already (to the first
+        waiter of the destination, if any)."""
+        slots = p.slots
+        if slots is not None:
+            p.slots = None
+            if slots.waiters:
+                slots.release()
+            else:
+                slots.in_flight -= 1
+
+    def finish(self, p: Pending, frame: bytes, busy: int = 0) -> bool:
+        """``frame`` answered ``p`` (``busy``: the busy replies its call got before):
+        its slot given back; True for a normal completion (counted, CPU error flags
+        logged, the breaker told: the data is ``frame[14:]``); False when the PLC was too
+        busy to execute it (2604/2605) and a retry fits before the call's deadline:
+        :meth:`call` with ``after=p`` sends it again after :meth:`busy_wait`. Any other
+        end code raises its error (the PLC answered: the breaker closes)."""
+        slots = p.slots  # (_slot_back() and completed(), inlined: once per request)
+        if slots is not None:
+            p.slots = None
+            if slots.waiters:
+                slots.release()
+            else:
+                slots.in_flight -= 1
+        end_code = p.end_code
+        if not end_code & ERROR_BITS:
+            self.stats.completed += 1
+            if end_code:
+                where = self.transport.description
+                self._flags_logged = cpu_flags_seen(where, end_code, self._flags_logged)
+            if self._breaker.failures:
+                call_answered(self._breaker, self.transport.description)
+            return True
+        return self._not_completed(p, frame, busy)
+
+    def _not_completed(self, p: Pending, frame: bytes, busy: int) -> bool:
+        """:meth:`finish` of a reply whose end code is not a normal completion: False for
+        a busy one with a retry that fits before the call's deadline, else raised."""
+        pause = self.busy_pause(frame, busy)
+        if pause is not None and pause < p.end - self.clock():
+            self.stats.busy_retries += 1
+            return False
+        if self._breaker.failures:
+            call_answered(self._breaker, self.transport.description)
+        raise self.end_code_failure(frame, p.mrc, p.src)
+
+    def busy_wait(self, busy: int) -> float:
+        """The pause before sending a command again after its ``busy + 1``-th busy reply."""
+        return self.busy_backoff * (1 << busy)
+
+    def failure(
+        self,
+        p: Pending | None,
+        exc: BaseException,
+        timeout: float | None = None,
+        in_call: bool = False,
+    ) -> BaseException:
+        """A call ends with ``exc`` (``p``: its latest request, if it got that far): ``p``
+        given up if unanswered (SID quarantined, counted), its slot given back; the breaker
+        told (unless ``in_call``: the enclosing call tells it); returns the error to raise
+        (a request given up after its deadline: a :class:`FinsTimeout` saying after how
+        many attempts, with what to check)."""
+        if timeout is None:
+            timeout = self.timeout
+        if p is not None:
+            self.abandon(p, timeout, isinstance(exc, FinsTimeout))
+            self._slot_back(p)
+        error = exc
+        if isinstance(exc, Expired):
+            assert p is not None
+            error = no_response(
+                self.transport,
+                self.source,
+                FinsAddress(*key_address(p.key)),
+                p.mrc,
+                p.src,
+                timeout,
+                p.attempts,
+            )
+        if not in_call:
+            call_ended(self._breaker, error, timeout, self.transport.description, self.clock())
+        return error
+
+    async def failed(
+        self,
+        p: Pending | None,
+        exc: BaseException,
+        timeout: float | None = None,
+        in_call: bool = False,
+    ) -> NoReturn:
+        """:meth:`failure`, raised: a lost link after a turn of the event loop (see
+        :func:`raise_after_a_turn`)."""
+        error = self.failure(p, exc, timeout, in_call)
+        if error is not exc:
+            raise error from None
+        if isinstance(error, ConnectionLost):
+            await raise_after_a_turn(error)
+        raise error
+
+    async def call(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        cap: float | None = None,
+        in_call: bool = False,
+        after: Pending | None = None,
+    ) -> bytes:
+        """The request path with its waits: the steps of :meth:`begin`, the await and
+        :meth:`finish`, for a request that has to wait for the event loop's fair turn,
+        the breaker's probe, the link, a slot, a SID or an awaited send, and again after
+        each busy reply (``after``: the request whose reply said busy, once :meth:`finish`
+        returned False for it). Returns the reply frame of a normal completion; raises as
+        :meth:`request`."""
+        if dest is None:
+            dest = self.dest
+        if timeout is None:
+            timeout = self.timeout
+        if retries is None:
+            retries = self.retries if idempotent else 0
+        if cap is None:
+            cap = self.attempt_timeout
+        check_call(mrc, src, params, timeout, retries, cap)
+        if after is None:
+            end = self.clock() + timeout
+            if self._breaker.failures and not in_call:  # (none: the breaker is closed)
+                await self._admitted(dest)  # (turned away: the breaker is told nothing)
+        else:
+            end = after.end
+        p = after
+        try:
+            if after is not None:
+                await anyio.sleep(self.busy_wait(0))
+            busy = 0 if after is None else 1
+            while True:
+                p = await self._sent(mrc, src, params, dest, timeout, retries, cap, end)
+                frame = await (p.fut or p.wait())
+                if self.finish(p, frame, busy):
+                    return frame
+                await anyio.sleep(self.busy_wait(busy))
+                busy += 1
+        except BaseException as exc:
+            await self.failed(p, exc, timeout, in_call)
+
+    async def _admitted(self, dest: FinsAddress) -> None:
+        """Before a call of :meth:`call` starts while the breaker counts failures: its
+        leave (the call may be the probe; :class:`CircuitOpen` otherwise). A call turned
+        away tells the breaker nothing (it would end the probe's turn)."""
+        where = self.transport.description
+        await admit_call(self._breaker, self.stats, dest, where, self.clock())
+
+    async def _sent(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes,
+        dest: FinsAddress,
+        timeout: float,
+        retries: int,
+        cap: float | None,
+        end: float,
+    ) -> Pending:
+        """One request of :meth:`call` on the wire, waiting as it must until ``end``: for
+        the link, a slot of ``dest``, a SID (see :func:`start_when_free`), the send; then
+        the transport read right after, or the event loop's fair turn if it is due (see
+        :meth:`_read_after_send`)."""
+        transport = self.transport
+        if transport.fast_send is None and not transport.is_open:
+            await self._link.ensure_open(end - self.clock(), call_timeout=timeout)
+        self._log_frames = logger.isEnabledFor(_DEBUG)
+        state = self.dest_state(dest)
+        slots = state.slots
+        if not slots.try_acquire():
+            await slots.acquire(max(end - self.clock(), 0.0), f"{dest}")
+        p = self._pending_made()
+        p.slots = slots
+        try:
+            now = self.clock()
+            frame = self.start(p, state, mrc, src, params, retries, now, end, cap)
+            if frame is None:  # no free SID at hand: wait for one (none taken if not)
+                command = (mrc, src, params)
+                frame, transport, now = await start_when_free(
+                    self, p, state, command, retries, end, cap, timeout
+                )
+        except BaseException:
+            self._slot_back(p)
+            raise
+        try:
+            if (fast_send := transport.fast_send) is not None:
+                fast_send(frame)
+            else:
+                await transport.send(frame, end - now)
+        except BaseException as exc:  # given up (SID quarantined), the slot given back
+            self.abandon(p, timeout, isinstance(exc, FinsTimeout))
+            self._slot_back(p)
+            raise
+        if self._turn_due:  # (asyncio only)
+            self._turn_due = False
+            await asyncio.sleep(0)  # a bare yield, after the send: see _read_after_send
+        elif (poll := transport.poll_now) is not None:
+            self._read_after_send(poll, p)
+        return p
+
     async def request(
         self,
         mrc: int,
@@ -826,138 +1190,31 @@ class Session:
         :class:`FinsTimeout` when no reply came in time (saying after how many attempts),
         :class:`ConnectionLost` when the link failed or the session closed,
         :class:`CircuitOpen` while the destination's breaker is open.
+
+        The request path (see :meth:`begin`): ``begin``, one ``await``, ``finish``.
         """
-        if dest is None:
-            dest = self.dest
-        if timeout is None:
-            timeout = self.timeout
-        elif timeout <= 0:
-            raise CommandError(f"timeout {timeout} must be positive")
-        if retries is None:
-            retries = self.retries if idempotent else 0
-        elif retries < 0:
-            raise CommandError(f"retries {retries} must not be negative")
-        if attempt_timeout is None:
-            attempt_timeout = self.attempt_timeout
-        elif attempt_timeout <= 0:
-            raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
-        if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
-            check_command(mrc, src, params)  # raises the error that says which
-        clock = self.clock
-        end = (now := clock()) + timeout  # (now: read again after any wait below)
-        self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
-        if self._breaker.failures and not _in_call:  # (none: the breaker is closed)
-            await admit_call(self._breaker, self.stats, dest, self.transport.description, now)
-            now = clock()
-        p: Pending | None = None
-        busy = 0
-        try:
-            while True:
-                transport = self.transport
-                if transport.fast_send is None and not transport.is_open:
-                    await self._link.ensure_open(end - clock(), call_timeout=timeout)
-                    now = clock()
-                state = self._last_state if dest is self._last_dest else self.dest_state(dest)
-                slots = state.slots
-                if slots.in_flight < slots.limit and not slots.waiters:
-                    slots.in_flight += 1
-                else:
-                    await slots.acquire(max(end - clock(), 0.0), f"{dest}")
-                    now = clock()
-                fut: asyncio.Future[bytes] | None
-                if self._asyncio:
-                    p = AsyncioPending()  # start() sets every field
-                    p.fut = fut = self._new_future()
-                else:
-                    p = EventPending(0, mrc, src)
-                    fut = None
-                p.slots = slots  # given back when no longer useful (see the watcher)
-                try:
-                    frame = self.start(
-                        p, state, mrc, src, params, retries, now, end, attempt_timeout
-                    )
-                    if frame is None:  # no free SID at hand: wait for one (none taken if not)
-                        command = (mrc, src, params)
-                        frame, transport, now = await start_when_free(
-                            self, p, state, command, retries, end, attempt_timeout, timeout
-                        )
-                    try:
-                        if (fast_send := transport.fast_send) is not None:
-                            fast_send(frame)
-                        else:
-                            await transport.send(frame, end - now)
-                        if (poll := transport.poll_now) is not None and self._read_after_send(
-                            poll, p
-                        ):
-                            await asyncio.sleep(0)  # a fair turn
-                        frame = await (p.wait() if fut is None else fut)
-                    except BaseException as exc:  # cancelled, or the send failed or timed out
-                        self.abandon(p, timeout, isinstance(exc, FinsTimeout))  # (if unanswered)
-                        raise
-                finally:
-                    if p.slots is not None:  # (else given back already: see the watcher)
-                        if slots.waiters:
-                            slots.release()  # hands the slot to the first waiter
-                        else:
-                            slots.in_flight -= 1
-                response = self.response(frame, p.end_code)
-                if response is not None:
-                    if self._breaker.failures:
-                        call_answered(self._breaker, self.transport.description)
-                    return response
-                await self._busy_pause_or_raise(frame, busy, end, mrc, src)
-                busy += 1
-                now = clock()
-        except BaseException as exc:
-            await self._call_failed(exc, p, dest, timeout, _in_call)
-
-    async def _call_failed(
-        self,
-        exc: BaseException,
-        p: Pending | None,
-        dest: FinsAddress,
-        timeout: float,
-        in_call: bool = False,
-    ) -> NoReturn:
-        """A call of :meth:`request` ends with ``exc`` (``p``: its latest request): the
-        breaker learns it (unless ``in_call``: the enclosing call tells it); a request given
-        up after its deadline is raised as a :class:`FinsTimeout` saying after how many
-        attempts; a lost link after a turn of the event loop (see
-        :func:`raise_after_a_turn`)."""
-        where = self.transport.description
-        if isinstance(exc, Expired):
-            assert p is not None
-            error = no_response(
-                self.transport, self.source, dest, p.mrc, p.src, timeout, p.attempts
+        p = self.begin(
+            mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call
+        )
+        if p is not None:
+            try:
+                frame = await (p.fut or p.wait())  # (the bare future under asyncio)
+            except BaseException as exc:
+                await self.failed(p, exc, timeout, _in_call)
+        if p is None or not self.finish(p, frame):  # a wait first, or busy: a pause first
+            frame = await self.call(
+                mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call, p
             )
-            if not in_call:
-                call_ended(self._breaker, error, timeout, where, self.clock())
-            raise error from None
-        if not in_call:
-            call_ended(self._breaker, exc, timeout, where, self.clock())
-        if isinstance(exc, ConnectionLost):
-            await raise_after_a_turn(exc)
-        raise exc
+        raw = (frame[12] << 8) | frame[13]
+        response: Response = _new(Response)  # (response_of(), inlined: once per request)
+        _set_end_code(response, EndCode(raw) if raw else _NORMAL)
+        _set_data(response, frame[14:])
+        _set_frame(response, frame)
+        return response
 
-    async def _busy_pause_or_raise(
-        self, frame: bytes, busy: int, end: float, mrc: int, src: int
-    ) -> None:
-        """A reply with an error end code: pause before sending the command again if the
-        PLC was too busy (see :meth:`busy_pause`) and the call's deadline ``end`` leaves
-        time, else raise the end code's error (the PLC answered: the breaker closes)."""
-        pause = self.busy_pause(frame, busy)
-        if pause is not None and pause < end - self.clock():
-            self.stats.busy_retries += 1
-            await anyio.sleep(pause)
-            return
-        if self._breaker.failures:
-            call_answered(self._breaker, self.transport.description)
-        raise self.end_code_failure(frame, mrc, src)
-
-    def _read_after_send(self, poll: Callable[[], None], p: Pending) -> bool:
+    def _read_after_send(self, poll: Callable[[], None], p: Pending) -> None:
         """Read the transport right after sending ``p`` if it is alone in flight (``poll``:
-        the transport's ``poll_now``); whether the caller yields to the event loop instead
-        (a fair turn is due).
+        the transport's ``poll_now``).
 
         A peer on the same core often answers during the send itself: the request then
         completes without an event-loop pass. Adaptive: after one miss the next request tries
@@ -969,8 +1226,9 @@ class Session:
         its round trips one after another while the others, woken, wait to send theirs
         together (50 tasks over FINS/TCP on one core fell from 55-87k to 29k req/s). Fair:
         after :data:`_POLL_STREAK` requests
-        completed this way in a row, the next request yields to the event loop after its send
-        instead, so other tasks, timers and cancellation run. The yield is a bare one, not a
+        completed this way in a row, the next request yields to the event loop after its
+        send instead (:meth:`begin` leaves that request to :meth:`call`), so other tasks,
+        timers and cancellation run. The yield is a bare one, not a
         wait for that request's reply: under uvloop a reply already queued is read before the
         pass that runs anyio's cancellation retry, which then finds the task about to wake
         with a result and leaves it alone, turn after turn. (With many in flight the replies
@@ -980,14 +1238,11 @@ class Session:
         """
         if len(self._pending) != 1:  # concurrent callers
             self._poll_skip = _POLL_MAX_BACKOFF
-            return False
+            return
         if self._poll_skip:
             self._poll_skip -= 1
             self._poll_streak = 0
-            return False
-        if self._turn_due:  # (asyncio only)
-            self._turn_due = False
-            return True
+            return
         poll()
         if p.done:  # answered
             self._poll_backoff = 0
@@ -1001,7 +1256,6 @@ class Session:
             self._poll_skip = backoff
             self._poll_backoff = min(2 * backoff or 1, _POLL_MAX_BACKOFF)
             self._poll_streak = 0
-        return False
 
     async def request_many(
         self,

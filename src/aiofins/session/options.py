@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from ..protocol.errors import CommandError
+from ..protocol.frames import check_command
 from .sids import MAX_LINGER
 
 
@@ -68,3 +69,18 @@ def check_options(
     if not 0 < low <= high < math.inf:
         raise CommandError(f"rto_bounds {rto_bounds} must be (min, max), 0 < min <= max")
     return max_sid_spaces
+
+
+def check_call(
+    mrc: int, src: int, params: bytes, timeout: float, retries: int, cap: float | None
+) -> None:
+    """Refuse a call's options (``cap``: its ``attempt_timeout``) or a command no FINS
+    frame can carry, before anything is done (what :meth:`Session.begin` calls only when
+    its one comparison found something wrong)."""
+    if not timeout > 0:
+        raise CommandError(f"timeout {timeout} must be positive")
+    if retries < 0:
+        raise CommandError(f"retries {retries} must not be negative")
+    if cap is not None and not cap > 0:
+        raise CommandError(f"attempt_timeout {cap} must be positive")
+    check_command(mrc, src, params)

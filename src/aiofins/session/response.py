@@ -171,3 +171,23 @@ class SessionStats:
 #: The names of :class:`SessionStats`' counters (what a Pool sums per endpoint and the
 #: Prometheus collector exports).
 SESSION_COUNTERS = tuple(n for n in SessionStats.__slots__ if not n.startswith("_"))
+
+
+_NORMAL = EndCode(0)
+
+
+def response_of(frame: bytes) -> Response:
+    """The :class:`Response` of a normal-completion reply ``frame`` (its end code read
+    from bytes 12-13), made as :func:`new_response` makes one."""
+    raw = (frame[12] << 8) | frame[13]
+    response: Response = _new(Response)
+    _set_end_code(response, EndCode(raw) if raw else _NORMAL)
+    _set_data(response, frame[14:])
+    _set_frame(response, frame)
+    return response
+
+
+def end_code_of(frame: bytes) -> EndCode:
+    """The end code of a reply ``frame`` (bytes 12-13)."""
+    raw = (frame[12] << 8) | frame[13]
+    return EndCode(raw) if raw else _NORMAL

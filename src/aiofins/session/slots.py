@@ -5,8 +5,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections import deque
+from collections.abc import Generator
 from types import TracebackType
-from typing import Protocol
+from typing import Any, Protocol
 
 import anyio
 
@@ -76,6 +77,7 @@ class Pending:
         "attempts",
         "deadline",
         "done",
+        "end",
         "end_code",
         "fut",
         "key",
@@ -94,6 +96,8 @@ class Pending:
         self.src = src
         self.done = False
         self.deadline = 0.0
+        #: The call's deadline: no transmission after it, no busy retry past it.
+        self.end = 0.0
         self.sent_at = 0.0
         self.fut: asyncio.Future[bytes] | None = None
         self.attempts = 1
@@ -131,6 +135,10 @@ class Pending:
     async def wait(self) -> bytes:
         raise NotImplementedError
 
+    def __await__(self) -> Generator[Any, None, bytes]:
+        """``frame = await p``: the reply frame (or the request's error raised)."""
+        return self.wait().__await__()
+
 
 class AsyncioPending(Pending):
     """Waits on a bare asyncio future: the cheapest wake-up asyncio has.
@@ -154,6 +162,9 @@ class AsyncioPending(Pending):
 
     async def wait(self) -> bytes:
         return await self.fut
+
+    def __await__(self) -> Generator[Any, None, bytes]:
+        return self.fut.__await__()  # the future itself: no coroutine of ours
 
 
 class EventPending(Pending):
