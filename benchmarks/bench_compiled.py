@@ -40,7 +40,10 @@ def variant(python: str) -> str:
 def one_round(python: str, seconds: float, skip: str) -> dict[str, float]:
     command = [python, str(HERE / "bench_targets.py"), "--rounds", "1", "--seconds", str(seconds)]
     command += ["--skip", ",".join(filter(None, ["poll1000", skip]))]
-    out = subprocess.run(command, capture_output=True, text=True, check=True, cwd=ROOT).stdout
+    run = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
+    if run.returncode:
+        raise SystemExit(f"{' '.join(command)} failed:\n{run.stdout[-2000:]}{run.stderr[-3000:]}")
+    out = run.stdout
     rows: dict[str, float] = {}
     table = out.split("\nrow ", 1)[1].splitlines()[1:]
     for line in table:
