@@ -32,12 +32,13 @@ from collections.abc import Callable, Coroutine, Sequence
 from typing import Any, TypeVar
 
 from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
-from .protocol.frames import check_command, check_commands
-from .protocol.header import MAX_PARAMETER_SIZE, FinsAddress
+from .protocol.frames import check_commands
+from .protocol.header import FinsAddress
 from .session import Response, Session
 from .session.breaker import rejection
 from .session.clock import Clocks
 from .session.messages import no_free_sid, no_response
+from .session.response import response_of
 from .session.slots import DestState, HeldPending
 from .session.states import LinkState
 from .session.watcher import Expired
@@ -182,12 +183,73 @@ class BlockingDriver:
         in_call: bool = False,
         after: object = None,
     ) -> bytes:
-        """:meth:`Session.call` for the async client: :meth:`request`'s reply frame."""
-        response = await self.request(
-            mrc, src, params, dest=dest, timeout=timeout, idempotent=idempotent,
-            retries=retries, attempt_timeout=cap,
-        )  # fmt: skip
-        return response.frame
+        """:meth:`Session.call` run from the calling thread (completes without
+        suspending): the session's :meth:`~Session.begin` (or, when it must wait first,
+        :meth:`_begin_waiting`), the reply read from the socket while the deadline
+        watcher's rules resend or give up, :meth:`~Session.finish` (a busy PLC: the
+        session's pause, then again), :meth:`~Session.failure`. Returns the reply frame of
+        a normal completion. (``after``: the request a busy reply ended; never made here,
+        as :meth:`begin` hands the client no request.)"""
+        session = self.session
+        clock = self.clock
+        receive = self.transport.receive
+        now = clock()
+        p: HeldPending | None = None
+        busy = 0
+        try:
+            while True:
+                p = session.begin(  # type: ignore[assignment]  # (a HeldPending: no loop)
+                    mrc, src, params, dest, timeout, idempotent, retries, cap, in_call, now
+                )
+                if p is None:  # the link to open, the breaker, a SID: the long way
+                    p = self._begin_waiting(
+                        mrc, src, params, dest, timeout, idempotent, retries, cap, in_call, now
+                    )
+                while (reply := p.result) is None:  # (_wait(), inlined: once per call)
+                    now = clock()
+                    wait = p.deadline - now
+                    if wait > 0:
+                        receive(wait)
+                    else:
+                        session._watcher.expire(now)
+                if type(reply) is not bytes:
+                    raise reply  # type: ignore[misc]  # (an exception)
+                if session.finish(p, reply, busy):
+                    return reply
+                time.sleep(session.busy_wait(busy))  # busy (2604/2605): again after a pause
+                busy += 1
+                now = clock()
+        except BaseException as exc:
+            raise session.failure(p, exc, timeout, in_call) from None
+
+    def _begin_waiting(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes,
+        dest: FinsAddress | None,
+        timeout: float | None,
+        idempotent: bool,
+        retries: int | None,
+        cap: float | None,
+        in_call: bool,
+        now: float,
+    ) -> HeldPending:
+        """:meth:`Session.begin` for a request that must wait first (the session's
+        :meth:`Session.call` waits the same things on its event loop): the breaker asked
+        (a :class:`CircuitOpen` raised, or this call is the probe), the link opened, a free
+        SID waited for; then registered and sent (:meth:`_start`)."""
+        session = self.session
+        if dest is None:
+            dest = session.dest
+        timeout, retries, cap = self._options(timeout, idempotent, retries, cap)
+        breaker = session._breaker
+        if breaker.failures and not in_call:
+            refused = rejection(breaker, session.stats, dest, self.transport.description, now)
+            if refused is not None:
+                raise refused
+        state = session.dest_state(dest)
+        return self._start(state, mrc, src, params, retries, cap, now, now + timeout, timeout)
 
     async def request(
         self,
@@ -201,67 +263,12 @@ class BlockingDriver:
         retries: int | None = None,
         attempt_timeout: float | None = None,
     ) -> Response:
-        """Send one command and return its normal response, as :meth:`Session.request`
-        does (its options, errors, retransmissions, busy retries, breaker), waiting on the
-        socket; completes without suspending."""
-        session = self.session
-        if dest is None:
-            dest = session.dest
-        if timeout is None and retries is None and attempt_timeout is None:  # (the usual)
-            timeout = session.timeout
-            retries = session.retries if idempotent else 0
-            cap = session.attempt_timeout
-        else:
-            timeout, retries, cap = self._options(timeout, idempotent, retries, attempt_timeout)
-        if len(params) > MAX_PARAMETER_SIZE or not (0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
-            check_command(mrc, src, params)  # raises the error that says which
-        clock = self.clock
-        now = clock()
-        session.log_frames_now()
-        breaker = session._breaker
-        if breaker.failures:
-            refused = rejection(breaker, session.stats, dest, self.transport.description, now)
-            if refused is not None:
-                raise refused
-        state = session.dest_state(dest)
-        end = now + timeout
-        receive = self.transport.receive
-        p: HeldPending | None = None
-        busy = 0
-        transport = self.transport
-        try:
-            while True:
-                send = transport.fast_send
-                fresh = HeldPending()
-                frame = (
-                    None
-                    if send is None
-                    else session.start(fresh, state, mrc, src, params, retries, now, end, cap)
-                )
-                if frame is None:  # the link to open, or no free SID: the long way
-                    p = self._start(state, mrc, src, params, retries, cap, now, end, timeout)
-                else:  # (_start(), inlined: once per call; a failed send: see _failed())
-                    p = fresh
-                    send(frame)  # type: ignore[misc]  # (not None: a frame was made)
-                while (reply := p.result) is None:  # (_wait(), inlined: once per call)
-                    now = clock()
-                    wait = p.deadline - now
-                    if wait > 0:
-                        receive(wait)
-                    else:
-                        session._watcher.expire(now)
-                if type(reply) is not bytes:
-                    raise reply  # type: ignore[misc]  # (an exception)
-                response = session.response(reply, p.end_code)
-                if response is not None:
-                    if breaker.failures:
-                        session.tell_breaker(None, timeout)
-                    return response
-                self._pause_or_raise(reply, busy, end, mrc, src)
-                busy += 1
-                now = clock()
-        except BaseException as exc:
-            raise self._failed(exc, p, dest, timeout) from None
+        """:meth:`Session.request` (its options, errors, retransmissions, busy retries,
+        breaker), run from the calling thread: :meth:`call`'s reply as a response."""
+        frame = await self.call(
+            mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout
+        )
+        return response_of(frame)
 
     def _options(
         self,
