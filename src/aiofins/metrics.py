@@ -143,31 +143,30 @@ class FinsMetrics(Collector):
         return f"{self.namespace}_{name}"
 
     def _collect_pools(self) -> Iterator[Metric]:
+        """The pools' counters, then gauges, per endpoint: one family at a time (a scrape
+        rendered in steps, as the gateway's, holds the loop for one family, not all)."""
         if not self._pools:
             return
-        counters: dict[str, CounterMetricFamily] = {}
-        gauges: dict[str, GaugeMetricFamily] = {}
-        for f in fields(EndpointStats):
-            if f.name.startswith("latency"):
-                continue
-            if f.name in _POOL_GAUGES:
-                gauges[f.name] = GaugeMetricFamily(
-                    self._name(f"pool_{f.name}"), _POOL_GAUGES[f.name], labels=("endpoint",)
-                )
-            else:
-                counters[f.name] = CounterMetricFamily(
-                    self._name(f"pool_{f.name}"),
-                    f"Pool counter {f.name} per endpoint (see EndpointStats)",
+        stats = [(key, s) for pool in list(self._pools) for key, s in pool.stats().items()]
+        names = [f.name for f in fields(EndpointStats) if not f.name.startswith("latency")]
+        for name in names:
+            if name not in _POOL_GAUGES:
+                counter = CounterMetricFamily(
+                    self._name(f"pool_{name}"),
+                    f"Pool counter {name} per endpoint (see EndpointStats)",
                     labels=("endpoint",),
                 )
-        for pool in self._pools:
-            for key, stats in pool.stats().items():
-                for name, family in counters.items():
-                    family.add_metric((key,), getattr(stats, name))
-                for name, gauge in gauges.items():
-                    gauge.add_metric((key,), getattr(stats, name))
-        yield from counters.values()
-        yield from gauges.values()
+                for key, each in stats:
+                    counter.add_metric((key,), getattr(each, name))
+                yield counter
+        for name in names:
+            if name in _POOL_GAUGES:
+                gauge = GaugeMetricFamily(
+                    self._name(f"pool_{name}"), _POOL_GAUGES[name], labels=("endpoint",)
+                )
+                for key, each in stats:
+                    gauge.add_metric((key,), getattr(each, name))
+                yield gauge
 
     def _collect_clients(self) -> Iterator[Metric]:
         if not self._clients:
@@ -196,21 +195,25 @@ class FinsMetrics(Collector):
         if not self._pollers:
             return
         labels = ("group", "endpoint")
-        scans = CounterMetricFamily(self._name("poller_scans"), "Scans run", labels=labels)
-        errors = CounterMetricFamily(
-            self._name("poller_scan_errors"), "Scans that failed", labels=labels
-        )
-        missed = CounterMetricFamily(
-            self._name("poller_missed_scans"), "Scan times skipped (late scans)", labels=labels
-        )
-        duration = GaugeMetricFamily(
-            self._name("poller_last_scan_seconds"), "Seconds the last scan took", labels=labels
-        )
-        for poller in self._pollers:
-            for group in poller.groups.values():
-                values = (group.name, group.url)
-                scans.add_metric(values, group.scans)
-                errors.add_metric(values, group.errors)
-                missed.add_metric(values, group.missed)
-                duration.add_metric(values, group.last_duration)
-        yield from (scans, errors, missed, duration)
+        groups = [group for poller in list(self._pollers) for group in poller.groups.values()]
+        families: list[tuple[str, str, type[CounterMetricFamily | GaugeMetricFamily], str]] = [
+            ("poller_scans", "Scans run", CounterMetricFamily, "scans"),
+            ("poller_scan_errors", "Scans that failed", CounterMetricFamily, "errors"),
+            (
+                "poller_missed_scans",
+                "Scan times skipped (late scans)",
+                CounterMetricFamily,
+                "missed",
+            ),
+            (
+                "poller_last_scan_seconds",
+                "Seconds the last scan took",
+                GaugeMetricFamily,
+                "last_duration",
+            ),
+        ]
+        for name, doc, family, attribute in families:  # one family at a time
+            metric = family(self._name(name), doc, labels=labels)
+            for group in groups:
+                metric.add_metric((group.name, group.url), getattr(group, attribute))
+            yield metric

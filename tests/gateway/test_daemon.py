@@ -111,6 +111,8 @@ url = "udp://127.0.0.1:{free_port()}"
             instance = gateway.link.instance  # host:pid:random, to tell two instances apart
             assert sub.on("fins/_gateway/gw") == [{"state": "online", "instance": instance}]
             assert gateway.plc_status["gone"].state is PlcState.OFFLINE
+            await gateway.wait_scanned()  # both first scans ended (the gone one failed)
+            assert [r.scanned for r in gateway.routes.values()] == [True, True]
             # Health and metrics over HTTP.
             async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{gateway.http_port}") as http:
                 health = await http.get("/healthz")
@@ -126,6 +128,7 @@ url = "udp://127.0.0.1:{free_port()}"
             assert 'aiofins_gateway_plc_online{plc="gone"} 0.0' in text
             assert "aiofins_gateway_mqtt_connected 1.0" in text
             assert "aiofins_gateway_publish_latency_seconds_count" in text
+            assert "aiofins_gateway_loop_lag_seconds_count" in text
             assert "aiofins_request_duration_seconds" in text  # the library's own metrics
         # Stopped: the gateway says so (retained), and it is the last word on its topic.
         async with subscribe(broker.port, "fins/_gateway/#") as late:

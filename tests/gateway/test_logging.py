@@ -155,6 +155,8 @@ async def test_log_level_debug_takes_effect_and_wins_over_v(broker: Broker, tmp_
     """Before: ``--log-level DEBUG`` changed nothing."""
     async with daemon(broker, tmp_path, "--log-level", "debug") as d:
         await d.until(lambda line: " DEBUG " in line)
+        # Once its PLC was scanned, the daemon froze what it holds (full collections skip it).
+        await d.until(lambda line: " DEBUG aiofins.gateway: " in line and "objects frozen" in line)
         await d.stop()
     async with daemon(broker, tmp_path, "-vv", "--log-level", "WARNING") as d:
         lines = await d.stop()

@@ -10,6 +10,7 @@ prometheus_client).
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import os
 import signal
@@ -19,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 import anyio
 
 from ..protocol.errors import CommandError
+
+log = logging.getLogger("aiofins.gateway")
 
 if TYPE_CHECKING:
     SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
@@ -69,6 +72,14 @@ def run(args: argparse.Namespace) -> int:
 
     fatal: list[BaseException] = []
 
+    async def freeze(gateway: Gateway) -> None:
+        """Once every PLC has been scanned, the objects the gateway holds for good are
+        frozen: a full garbage collection (one over 400,000 objects at 1,000 PLCs took
+        0.3-0.6 s of the loop, delaying every scan) skips them from then on."""
+        await gateway.wait_scanned()
+        gc.freeze()
+        log.debug("%d objects frozen (gc.freeze)", gc.get_freeze_count())
+
     async def main() -> None:
         gateway = Gateway(config, shard=shard)
         async with gateway:
@@ -81,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
                             return
 
                     tg.start_soon(stop)
+                    tg.start_soon(freeze, gateway)
                     port = gateway.http_port
                     print(
                         f"gateway {gateway.name}: {len(gateway.plcs)} PLCs"

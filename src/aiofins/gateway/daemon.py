@@ -53,6 +53,8 @@ log = logging.getLogger("aiofins.gateway")
 
 #: Set requests carried out at once (the rest wait their turn).
 MAX_CONCURRENT_WRITES = 16
+#: Seconds between two probes of the event loop's lag.
+LAG_PROBE_INTERVAL = 0.25
 #: Refused set requests logged one by one per second, at most (the rest are summed up).
 REFUSALS_LOGGED = 20
 
@@ -70,6 +72,8 @@ class Route:
     status: PlcStatus = field(repr=False)
     #: The poller's scan group, from the route's first scan on (see ``Gateway._start_groups``).
     scan_group: ScanGroup | None = None
+    #: Whether a scan of the route has ended (succeeded or failed).
+    scanned: bool = field(default=False, repr=False)
     encoder: ScanEncoder = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -184,6 +188,10 @@ class Gateway:
             )
         self._tg: TaskGroup | None = None
         self._closed = anyio.Event()
+        self._unscanned = len(self.routes)
+        self._scanned = anyio.Event()
+        if not self.routes:
+            self._scanned.set()
         self._writes = anyio.CapacityLimiter(MAX_CONCURRENT_WRITES)
         self._consuming = anyio.CancelScope()
         self._stack = AsyncExitStack()
@@ -208,6 +216,7 @@ class Gateway:
             tg.start_soon(self._run_link)
             tg.start_soon(self._consume)
             tg.start_soon(self._start_groups)
+            tg.start_soon(self._probe_loop_lag)
             self._stack = stack.pop_all()
         return self
 
@@ -234,6 +243,12 @@ class Gateway:
     async def wait_closed(self) -> None:
         await self._closed.wait()
 
+    async def wait_scanned(self) -> None:
+        """Until every (PLC, group) has had its first scan (answered or failed): the
+        gateway holds its sessions, routes and buffers from then on. The CLI freezes them
+        (``gc.freeze()``) then, so Python's full garbage collections skip them."""
+        await self._scanned.wait()
+
     @property
     def http_port(self) -> int | None:
         return None if self.http is None else self.http.port
@@ -243,6 +258,15 @@ class Gateway:
         if self.link.fatal is not None:  # a duplicate shard: stop, the CLI exits non-zero
             self.fatal = self.link.fatal
             self._closed.set()
+
+    async def _probe_loop_lag(self) -> None:
+        """Every :data:`LAG_PROBE_INTERVAL` s, how late the loop woke this task (the histogram
+        ``aiofins_gateway_loop_lag_seconds``): whatever holds the loop delays scans as much."""
+        observe = self.metrics.loop_lag.observe
+        while True:
+            due = anyio.current_time() + LAG_PROBE_INTERVAL
+            await anyio.sleep_until(due)
+            observe(max(0.0, anyio.current_time() - due))
 
     # -- scans --------------------------------------------------------------------------
 
@@ -277,6 +301,11 @@ class Gateway:
         routes = self.routes
         async for snap in self.poller:
             route = routes[snap.group]
+            if not route.scanned:
+                route.scanned = True
+                self._unscanned -= 1
+                if not self._unscanned:
+                    self._scanned.set()
             if route.status.observe(route.group.name, snap.error) is not None:
                 self._announce(route.status)
             if route.group.changes_only:
@@ -435,15 +464,15 @@ class Gateway:
 
     # -- HTTP ---------------------------------------------------------------------------
 
-    def _healthz(self) -> tuple[int, str, bytes]:
+    async def _healthz(self) -> tuple[int, str, bytes]:
         return 200, "application/json", json.dumps(self.health()).encode()
 
-    def _readyz(self) -> tuple[int, str, bytes]:
+    async def _readyz(self) -> tuple[int, str, bytes]:
         ready = self.link.state is LinkState.CONNECTED
         return (200 if ready else 503), "application/json", json.dumps(self.health()).encode()
 
-    def _metrics(self) -> tuple[int, str, bytes]:
-        return 200, CONTENT_TYPE, self.metrics.render()
+    async def _metrics(self) -> tuple[int, str, bytes]:
+        return 200, CONTENT_TYPE, await self.metrics.scrape()
 
     def health(self) -> dict[str, Any]:
         states = [s.state for s in self.plc_status.values()]

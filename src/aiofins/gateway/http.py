@@ -6,23 +6,25 @@ Prometheus text format. One request per connection (HTTP/1.0 style), GET and HEA
 
 Bounded: at most ``max_connections`` connections are served at once (the others wait in
 the kernel's listen queue, not accepted: they hold no descriptor of ours), each has
-``idle_timeout`` seconds for its whole exchange (a client that sends nothing, or reads
-nothing, is cut off), a request head has at most 8 kB. An accept that fails ("Too many open
+``idle_timeout`` seconds to send its request and again to take the answer (a client that
+sends nothing, or reads nothing, is cut off; the time the gateway takes to make the answer
+is not the client's), a request head has at most 8 kB. An accept that fails ("Too many open
 files") is counted and logged, and accepting resumes after a short pause: never fatal.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 
 import anyio
 from anyio.abc import SocketAttribute, SocketListener, SocketStream, TaskGroup
 
 log = logging.getLogger("aiofins.gateway")
 
-#: A route: () → (status, content type, body).
-Handler = Callable[[], tuple[int, str, bytes]]
+#: A route: () → (status, content type, body), awaited (a long answer, such as ``/metrics``,
+#: is made in steps that let the event loop run).
+Handler = Callable[[], Awaitable[tuple[int, str, bytes]]]
 
 _REASONS = {
     200: "OK",
@@ -108,12 +110,13 @@ class HttpServer:
             try:
                 with anyio.fail_after(self.idle_timeout):
                     request = await self._read_head(stream)
-                    status, ctype, body, head_only = self._respond(request)
-                    header = (
-                        f"HTTP/1.1 {status} {_REASONS.get(status, '')}\r\n"
-                        f"Content-Type: {ctype}\r\nContent-Length: {len(body)}\r\n"
-                        "Connection: close\r\n\r\n"
-                    ).encode("ascii")
+                status, ctype, body, head_only = await self._respond(request)
+                header = (
+                    f"HTTP/1.1 {status} {_REASONS.get(status, '')}\r\n"
+                    f"Content-Type: {ctype}\r\nContent-Length: {len(body)}\r\n"
+                    "Connection: close\r\n\r\n"
+                ).encode("ascii")
+                with anyio.fail_after(self.idle_timeout):
                     await stream.send(header if head_only else header + body)
             except TimeoutError:
                 self.timeouts += 1
@@ -126,7 +129,7 @@ class HttpServer:
             data += await stream.receive()
         return data
 
-    def _respond(self, request: bytes) -> tuple[int, str, bytes, bool]:
+    async def _respond(self, request: bytes) -> tuple[int, str, bytes, bool]:
         self.requests += 1
         line = request.split(b"\n", 1)[0].decode("latin-1").strip().split()
         if len(line) != 3:
@@ -138,7 +141,7 @@ class HttpServer:
         if handler is None:
             return 404, "text/plain", b"not found\n", method == "HEAD"
         try:
-            status, ctype, body = handler()
+            status, ctype, body = await handler()
         except Exception:  # a broken handler answers 500 and the server goes on
             log.exception("HTTP handler for %s failed", target)
             return 500, "text/plain", b"internal error\n", False
