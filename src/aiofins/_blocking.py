@@ -1,20 +1,19 @@
 """The blocking client's session driver: a request's steps run from the calling thread.
 
-A :class:`~aiofins.session.Session` holds every rule of a request: the SID taken and
-registered, the frame built, the deadline and the retransmission plan (:meth:`Session.start`),
-the reply matched and timed (:meth:`Session.frame_received`), retransmissions and give-ups
-(the deadline watcher's :meth:`~aiofins.session.watcher.DeadlineWatcher.expire`), the end code
-turned into a response, a busy pause or an error (:meth:`Session.response`,
-:meth:`Session.busy_pause`, :meth:`Session.end_code_failure`), the breaker
-(:func:`~aiofins.session.breaker.rejection`, :meth:`Session.tell_breaker`), the link's
-attempts (:class:`~aiofins.session.link.Link`). None of those steps does I/O or waits: they
-take the session's clock. Under an event loop, :meth:`Session.request` awaits between them;
-here :class:`BlockingDriver` runs the same steps from the calling thread and waits on a
-blocking socket (:mod:`aiofins.transport.blocking`) instead, for as long as the session's
-clock says is left. No event loop, no other thread, no task: a reply is read while its
-caller waits for it.
+A :class:`~aiofins.session.Session` holds every rule of a request, in synchronous steps that
+do no I/O and take the session's clock: :meth:`Session.begin` (checks, slot, SID, frame,
+registration, deadline, hooks, log, the send through ``transport.fast_send``),
+:meth:`Session.frame_received` (matching, RTT, linger, stats), the deadline watcher's
+:meth:`~aiofins.session.watcher.DeadlineWatcher.expire` (retransmissions and give-ups),
+:meth:`Session.finish` (end code, counters, CPU flags, breaker, the busy decision) and
+:meth:`Session.failure` (a request given up, the error worded, the breaker told); the link's
+attempts (:class:`~aiofins.session.link.Link`). Under an event loop a request awaits once
+between them; here :class:`BlockingDriver` waits on a blocking socket
+(:mod:`aiofins.transport.blocking`) instead, for as long as the session's clock says is
+left. No event loop, no other thread, no task: a reply is read while its caller waits for it.
 
-An async :class:`~aiofins.Client` runs on the driver as on a session: the driver's
+An async :class:`~aiofins.Client` runs on the driver as on a session: the driver's ``begin``
+returns a request already answered (its await returns at once), and its ``call``,
 ``request`` and ``request_many`` are coroutines that complete without ever suspending, so
 the blocking client (:mod:`aiofins.sync`) runs the client's coroutine methods to their end
 with one ``send(None)`` each (:func:`run_to_end`), and every method of the client keeps its
@@ -27,9 +26,10 @@ from __future__ import annotations
 
 import inspect
 import logging
+import math
 import time
 from collections.abc import Callable, Coroutine, Sequence
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 from .protocol.errors import CommandError, ConnectionLost, FinsError, FinsTimeout
 from .protocol.frames import check_commands
@@ -39,7 +39,7 @@ from .session.breaker import rejection
 from .session.clock import Clocks
 from .session.messages import no_free_sid, no_response
 from .session.response import response_of
-from .session.slots import DestState, HeldPending
+from .session.slots import DestState, HeldPending, Pending
 from .session.states import LinkState
 from .session.watcher import Expired
 from .transport.blocking import BlockingTransport
@@ -103,6 +103,12 @@ class BlockingDriver:
         self.clock = time.monotonic
         # The one clock of the session is the driver's (no event loop to take one from).
         session._use_clock(Clocks(self.clock, self.clock, True))
+        # No timer to arm: the driver reads the deadlines itself as it waits (a request's
+        # deadline is never earlier than this "next wake-up").
+        session._watcher.at = -math.inf
+        #: The client's step after its request's reply (:meth:`Session.finish`), bound
+        #: here: the client reaches it once per call.
+        self.finish: Callable[[Pending, bytes, int], bool] = session.finish
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.session, name)
@@ -164,11 +170,61 @@ class BlockingDriver:
 
     # ----------------------------------------------------------------- one request
 
-    def begin(self, *args: Any, **kwargs: Any) -> None:
-        """The async client's first step of a request (:meth:`Session.begin`): ``None``
-        here, so every request of the client takes :meth:`call`, which runs it from the
-        calling thread."""
-        return None
+    def begin(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        cap: float | None = None,
+        in_call: bool = False,
+        now: float | None = None,
+    ) -> HeldPending | None:
+        """:meth:`Session.begin` run to its reply from the calling thread: the request
+        (a :class:`HeldPending`) with its reply frame in, so the client's await returns at
+        once and its :meth:`~Session.finish` follows; ``None`` when it must wait first (the
+        link to open, the breaker, a SID): then :meth:`call`. An error the request ends
+        with is raised here, as :meth:`~Session.failure` words it."""
+        p: HeldPending | None = self.session.begin(  # type: ignore[assignment]  # (no loop)
+            mrc, src, params, dest, timeout, idempotent, retries, cap, in_call, now
+        )
+        if p is not None:
+            self._reply(p, timeout, in_call)
+        return p
+
+    def _reply(self, p: HeldPending, timeout: float | None, in_call: bool) -> bytes:
+        """``p``'s reply frame, read from the socket while the deadline watcher's rules
+        send it again or give it up as its deadlines pass; its failure raised (worded by
+        :meth:`Session.failure`: SID quarantined, slot back, breaker told)."""
+        session = self.session
+        clock = self.clock
+        receive = self.transport.receive
+        try:
+            while (reply := p.result) is None:
+                now = clock()
+                wait = p.deadline - now
+                if wait > 0:
+                    receive(wait)
+                else:
+                    session._watcher.expire(now)
+            if type(reply) is not bytes:
+                raise reply  # type: ignore[misc]  # (an exception)
+        except BaseException as exc:
+            raise session.failure(p, exc, timeout, in_call) from None
+        return reply
+
+    async def failed(
+        self,
+        p: HeldPending | None,
+        exc: BaseException,
+        timeout: float | None = None,
+        in_call: bool = False,
+    ) -> NoReturn:
+        """:meth:`Session.failed` without its turn of an event loop: the error raised."""
+        raise self.session.failure(p, exc, timeout, in_call) from None
 
     async def call(
         self,
@@ -181,75 +237,42 @@ class BlockingDriver:
         retries: int | None = None,
         cap: float | None = None,
         in_call: bool = False,
-        after: object = None,
+        after: Pending | None = None,
     ) -> bytes:
         """:meth:`Session.call` run from the calling thread (completes without
-        suspending): the session's :meth:`~Session.begin` (or, when it must wait first,
-        :meth:`_begin_waiting`), the reply read from the socket while the deadline
-        watcher's rules resend or give up, :meth:`~Session.finish` (a busy PLC: the
-        session's pause, then again), :meth:`~Session.failure`. Returns the reply frame of
-        a normal completion. (``after``: the request a busy reply ended; never made here,
-        as :meth:`begin` hands the client no request.)"""
-        session = self.session
-        clock = self.clock
-        receive = self.transport.receive
-        now = clock()
-        p: HeldPending | None = None
-        busy = 0
-        try:
-            while True:
-                p = session.begin(  # type: ignore[assignment]  # (a HeldPending: no loop)
-                    mrc, src, params, dest, timeout, idempotent, retries, cap, in_call, now
-                )
-                if p is None:  # the link to open, the breaker, a SID: the long way
-                    p = self._begin_waiting(
-                        mrc, src, params, dest, timeout, idempotent, retries, cap, in_call, now
-                    )
-                while (reply := p.result) is None:  # (_wait(), inlined: once per call)
-                    now = clock()
-                    wait = p.deadline - now
-                    if wait > 0:
-                        receive(wait)
-                    else:
-                        session._watcher.expire(now)
-                if type(reply) is not bytes:
-                    raise reply  # type: ignore[misc]  # (an exception)
-                if session.finish(p, reply, busy):
-                    return reply
-                time.sleep(session.busy_wait(busy))  # busy (2604/2605): again after a pause
-                busy += 1
-                now = clock()
-        except BaseException as exc:
-            raise session.failure(p, exc, timeout, in_call) from None
-
-    def _begin_waiting(
-        self,
-        mrc: int,
-        src: int,
-        params: bytes,
-        dest: FinsAddress | None,
-        timeout: float | None,
-        idempotent: bool,
-        retries: int | None,
-        cap: float | None,
-        in_call: bool,
-        now: float,
-    ) -> HeldPending:
-        """:meth:`Session.begin` for a request that must wait first (the session's
-        :meth:`Session.call` waits the same things on its event loop): the breaker asked
-        (a :class:`CircuitOpen` raised, or this call is the probe), the link opened, a free
-        SID waited for; then registered and sent (:meth:`_start`)."""
+        suspending): a request :meth:`begin` could not start at once (the breaker asked,
+        the link opened, a free SID waited for: :meth:`_start`), or, ``after`` a busy
+        reply, the command sent again after the session's pauses until the call's
+        deadline; each reply through :meth:`~Session.finish`. Returns the reply frame of a
+        normal completion."""
         session = self.session
         if dest is None:
             dest = session.dest
         timeout, retries, cap = self._options(timeout, idempotent, retries, cap)
-        breaker = session._breaker
-        if breaker.failures and not in_call:
-            refused = rejection(breaker, session.stats, dest, self.transport.description, now)
-            if refused is not None:
-                raise refused
         state = session.dest_state(dest)
-        return self._start(state, mrc, src, params, retries, cap, now, now + timeout, timeout)
+        busy = 0
+        if after is None:
+            now = self.clock()
+            end = now + timeout
+            breaker = session._breaker
+            if breaker.failures and not in_call:  # (turned away: the breaker is told nothing)
+                refused = rejection(breaker, session.stats, dest, self.transport.description, now)
+                if refused is not None:
+                    raise refused
+        else:  # (after a busy reply: its call's deadline)
+            end = after.end
+            time.sleep(session.busy_wait(0))
+            busy = 1
+        while True:
+            try:
+                p = self._start(state, mrc, src, params, retries, cap, self.clock(), end, timeout)
+            except BaseException as exc:
+                raise session.failure(None, exc, timeout, in_call) from None
+            frame = self._reply(p, timeout, in_call)
+            if session.finish(p, frame, busy):
+                return frame
+            time.sleep(session.busy_wait(busy))  # busy (2604/2605): again after a pause
+            busy += 1
 
     async def request(
         self,
@@ -265,8 +288,13 @@ class BlockingDriver:
     ) -> Response:
         """:meth:`Session.request` (its options, errors, retransmissions, busy retries,
         breaker), run from the calling thread: :meth:`call`'s reply as a response."""
+        p = self.begin(mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout)
+        if p is not None:
+            frame: bytes = p.result  # type: ignore[assignment]  # (begin read the reply)
+            if self.session.finish(p, frame):
+                return response_of(frame)
         frame = await self.call(
-            mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout
+            mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, after=p
         )
         return response_of(frame)
 

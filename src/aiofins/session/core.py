@@ -900,15 +900,13 @@ class Session:
         A bad command or option raises :class:`CommandError` before anything is done."""
         if dest is None:
             dest = self.dest
-        if timeout is None:
+        if timeout is None and retries is None and cap is None:  # (checked when set)
             timeout = self.timeout
-        if retries is None:
             retries = self.retries if idempotent else 0
-        if cap is None:
             cap = self.attempt_timeout
-        if not (timeout > 0.0 and retries >= 0 and (cap is None or cap > 0.0)) or not (
-            len(params) <= MAX_PARAMETER_SIZE and 0 <= mrc <= 0xFF and 0 <= src <= 0xFF
-        ):
+        else:
+            timeout, retries, cap = self._call_options(timeout, idempotent, retries, cap)
+        if not (len(params) <= MAX_PARAMETER_SIZE and 0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_call(mrc, src, params, timeout, retries, cap)  # raises what is wrong
         if self._turn_due or (self._breaker.failures and not in_call):
             return None
@@ -946,6 +944,21 @@ class Session:
         self.abandon(p, timeout, isinstance(exc, FinsTimeout))
         p.fail(exc)
         return p
+
+    def _call_options(
+        self, timeout: float | None, idempotent: bool, retries: int | None, cap: float | None
+    ) -> tuple[float, int, float | None]:
+        """A call's ``timeout``, ``retries`` and ``cap`` (``attempt_timeout``), the
+        session's where not given; :class:`CommandError` for one out of its range."""
+        if timeout is None:
+            timeout = self.timeout
+        if retries is None:
+            retries = self.retries if idempotent else 0
+        if cap is None:
+            cap = self.attempt_timeout
+        if not (timeout > 0.0 and retries >= 0 and (cap is None or cap > 0.0)):
+            check_call(0, 0, b"", timeout, retries, cap)  # raises what is wrong
+        return timeout, retries, cap
 
     def _pending_made(self) -> Pending:
         """A new request's :class:`Pending` (its fields set by :meth:`start`): on a bare
