@@ -38,6 +38,19 @@ def anyio_backend(request: pytest.FixtureRequest) -> Backend:
     return backend
 
 
+#: Seconds after which a wait that should end is called a hang: a guard, never a timing bound
+#: (the suite may run on a machine at load 20).
+HANG = 120.0
+
+
+async def eventually(condition: Callable[[], object]) -> None:
+    """Until ``condition()`` holds, looked at every 10 ms (a counter nothing signals), with
+    :data:`HANG` as the guard."""
+    with anyio.fail_after(HANG):
+        while not condition():
+            await anyio.sleep(0.01)
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -78,7 +91,7 @@ class Broker:
             text=True,
         )
         # Its log is block-buffered in a pipe: ready is when the port accepts a connection.
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + HANG
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 assert self.proc.stderr is not None
@@ -88,7 +101,7 @@ class Broker:
                 return
             except OSError:
                 time.sleep(0.01)
-        raise AssertionError("mosquitto did not listen within 10 s")
+        raise AssertionError(f"mosquitto did not listen within {HANG:g} s")
 
     def stop(self) -> None:
         if self.proc is not None:
@@ -140,7 +153,7 @@ class Subscriber:
         self._changed.set()
         self._changed = anyio.Event()
 
-    async def wait_for(self, condition: Callable[[], object], timeout: float = 10.0) -> None:
+    async def wait_for(self, condition: Callable[[], object], timeout: float = HANG) -> None:
         with anyio.fail_after(timeout):
             while not condition():
                 await self._changed.wait()

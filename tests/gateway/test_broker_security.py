@@ -13,7 +13,7 @@ from aiofins.gateway import Gateway, LinkState
 from aiofins.gateway.config import parse_config
 from aiofins.simulator import VirtualPLC, run_simulator
 
-from .conftest import Broker, need_mosquitto
+from .conftest import HANG, Broker, eventually, need_mosquitto
 
 pytestmark = pytest.mark.anyio
 
@@ -56,17 +56,14 @@ async def test_credentials_from_the_environment(
             monkeypatch.setenv("AIOFINS_MQTT_USERNAME", "gw")
             monkeypatch.setenv("AIOFINS_MQTT_PASSWORD", "wrong")
             async with Gateway(cfg) as refused:
-                with anyio.fail_after(10):
-                    while refused.link.connect_failures < 2:
-                        await anyio.sleep(0.02)
+                await eventually(lambda: refused.link.connect_failures >= 2)
                 assert refused.link.state is not LinkState.CONNECTED
                 assert refused.link.connects == 0
             monkeypatch.setenv("AIOFINS_MQTT_PASSWORD", "s3cret")
             async with Gateway(cfg) as gateway:
-                with anyio.fail_after(10):
+                with anyio.fail_after(HANG):
                     await gateway.link.connected.wait()
-                    while gateway.routes["p/g"].outbox.published < 2:
-                        await anyio.sleep(0.02)
+                await eventually(lambda: gateway.routes["p/g"].outbox.published >= 2)
     finally:
         broker.stop()
 
@@ -106,16 +103,13 @@ async def test_tls_with_a_ca_file(tmp_path: Path) -> None:
             url = f"udp://127.0.0.1:{sim.udp_port}"
             cfg = parse_config(gateway_config(broker, url, f'tls = true\nca_file = "{ca}"'))
             async with Gateway(cfg) as gateway:
-                with anyio.fail_after(10):
+                with anyio.fail_after(HANG):
                     await gateway.link.connected.wait()
-                    while gateway.routes["p/g"].outbox.published < 2:
-                        await anyio.sleep(0.02)
+                await eventually(lambda: gateway.routes["p/g"].outbox.published >= 2)
             # Without the CA the broker's certificate is not trusted: no connection.
             untrusted = parse_config(gateway_config(broker, url, "tls = true"))
             async with Gateway(untrusted) as refused:
-                with anyio.fail_after(10):
-                    while refused.link.connect_failures < 1:
-                        await anyio.sleep(0.02)
+                await eventually(lambda: refused.link.connect_failures >= 1)
                 assert refused.link.connects == 0
     finally:
         broker.stop()

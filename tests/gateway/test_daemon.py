@@ -16,8 +16,10 @@ from aiofins.gateway.config import GatewayConfig, parse_config
 from aiofins.simulator import VirtualPLC, run_simulator
 
 from .conftest import (
+    HANG,
     Broker,
     Subscriber,
+    eventually,
     free_port,
     need_mosquitto,
     publisher,
@@ -161,9 +163,7 @@ url = "udp://127.0.0.1:{sim.udp_port}"
             first = sub.on("fins/p/c")[0]
             assert first["scan"] == 1 and first["values"].keys() == {"a", "b"}
             route = gateway.routes["p/c"]
-            with anyio.fail_after(5):
-                while route.scans < 5:  # scans without changes publish nothing
-                    await anyio.sleep(0.02)
+            await eventually(lambda: route.scans >= 5)  # scans without changes publish nothing
             assert len(sub.messages) == 1 and route.outbox.published == 1
             counted = route.scans  # (the last one counted may not have read the PLC yet)
             plc.write("D1", [7])
@@ -260,17 +260,14 @@ url = "udp://127.0.0.1:{sim.udp_port}"
                     # count from the first one it got.
                     first = min(m.json()["scan"] for m in received.messages)
                     await anyio.to_thread.run_sync(broker.stop)
-                    with anyio.fail_after(10):
-                        while gateway.link.state is LinkState.CONNECTED:
-                            await anyio.sleep(0.01)
+                    await eventually(lambda: gateway.link.state is not LinkState.CONNECTED)
                     down = route.scans
-                    with anyio.fail_after(10):  # the outbox overflows while the broker is away
-                        while route.scans < down + 20:
-                            await anyio.sleep(0.02)
+                    # The outbox overflows while the broker is away.
+                    await eventually(lambda: route.scans >= down + 20)
                     assert route.outbox.dropped >= 10
                     assert len(route.outbox.messages) == 5
                 await anyio.to_thread.run_sync(broker.start)
-                with anyio.fail_after(10):
+                with anyio.fail_after(HANG):
                     await gateway.link.connected.wait()
                 async with subscribe(
                     broker.port, "fins/p1/g", identifier="h8-sub", clean=False, into=received

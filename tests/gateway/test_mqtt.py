@@ -25,7 +25,7 @@ from anyio.streams.buffered import BufferedByteReceiveStream
 from aiofins.gateway.config import MqttConfig
 from aiofins.gateway.mqtt import LinkState, MqttLink, Outbox
 
-from .conftest import Broker, subscribe
+from .conftest import HANG, Broker, eventually, subscribe
 
 pytestmark = pytest.mark.anyio
 
@@ -50,7 +50,7 @@ class Peer:
     abort: anyio.Event = field(default_factory=anyio.Event)
 
     async def wait_for(self, count: int, connection: int) -> None:
-        with anyio.fail_after(10):
+        with anyio.fail_after(HANG):
             while len(self.connections) <= connection or (
                 len(self.connections[connection]) < count
             ):
@@ -138,7 +138,7 @@ async def big_qos0_put(peer: Peer) -> AsyncIterator[tuple[MqttLink, Outbox]]:
     box = link.outbox("big", qos=0, limit=len(BIG))
     async with anyio.create_task_group() as tg:
         tg.start_soon(link.run)
-        with anyio.fail_after(10):
+        with anyio.fail_after(HANG):
             await link.connected.wait()
         for payload in BIG:
             link.put(box, payload)
@@ -161,9 +161,7 @@ async def test_qos0_messages_not_written_when_the_link_breaks_go_back_to_their_o
 ) -> None:
     async with mqtt_peer() as peer, big_qos0_put(peer) as (link, box):
         peer.abort.set()  # RST while most messages wait to be written
-        with anyio.fail_after(10):
-            while link.state is LinkState.CONNECTED:
-                await anyio.sleep(0.01)
+        await eventually(lambda: link.state is not LinkState.CONNECTED)
         # Every message was written (published) or is back in the outbox, in order.
         written = box.published
         assert 0 < len(box.messages) == len(BIG) - written
@@ -204,7 +202,7 @@ async def test_a_qos0_message_is_written_in_put_itself(broker: Broker) -> None:
     link = MqttLink(MqttConfig(port=broker.port, timeout=2.0), client_id="f", status_topic="s")
     async with subscribe(broker.port, "fast") as sub, anyio.create_task_group() as tg:
         tg.start_soon(link.run)
-        with anyio.fail_after(10):
+        with anyio.fail_after(HANG):
             await link.connected.wait()
         box = link.outbox("fast", qos=0)
         link.put(box, b"x")
@@ -260,7 +258,7 @@ async def test_a_clean_stop_is_not_taken_for_a_takeover_by_the_next_start(broker
     link = MqttLink(MqttConfig(port=broker.port, timeout=2.0), client_id="g", status_topic="st")
     async with anyio.create_task_group() as tg:
         tg.start_soon(link.run)
-        with anyio.fail_after(10):
+        with anyio.fail_after(HANG):
             await link.connected.wait()
         link.close()
     async with subscribe(broker.port, "st") as sub:

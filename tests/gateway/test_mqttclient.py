@@ -16,7 +16,7 @@ from aiofins.gateway.mqttclient import (
     Received,
 )
 
-from .conftest import Broker, free_port, publisher
+from .conftest import HANG, Broker, free_port, publisher
 
 pytestmark = pytest.mark.anyio
 
@@ -77,7 +77,7 @@ async def test_publish_subscribe_and_receive_on_a_real_broker(broker: Broker) ->
         assert info.rc == 0 and info.is_published()  # written before publish_now returned
         async with publisher(broker.port) as pub:
             await pub.publish("in/other", b"three", qos=1)
-        with anyio.fail_after(10):
+        with anyio.fail_after(HANG):
             got = [await inbox.get() for _ in range(3)]
         assert sorted((m.topic, m.payload) for m in got) == [
             ("in/other", b"three"),

@@ -19,7 +19,7 @@ from aiofins.gateway.writes import REPLY_POOL
 from aiofins.simulator import VirtualPLC, run_simulator
 from aiofins.simulator.faults import Delay, FaultRule
 
-from .conftest import Broker, need_mosquitto, publisher, subscribe
+from .conftest import Broker, eventually, need_mosquitto, publisher, subscribe
 from .test_daemon import config
 
 pytestmark = pytest.mark.anyio
@@ -128,9 +128,7 @@ async def test_retained_sets_are_refused_on_start_and_not_again_on_reconnect(
                 await anyio.to_thread.run_sync(broker.stop)
                 await anyio.to_thread.run_sync(broker.start)
                 async with subscribe(broker.port, f"{SET}/sp/reply") as sub:
-                    with anyio.fail_after(20):
-                        while gateway.write_counts.get("retained", 0) < 3:
-                            await anyio.sleep(0.02)  # polling the counter, not a timing
+                    await eventually(lambda: gateway.write_counts.get("retained", 0) >= 3)
                     # The retained one came again and was not answered again: a request
                     # after it is the next reply on the topic (replies keep their order).
                     async with publisher(broker.port) as pub:
