@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import signal
 import subprocess
 import time
 from collections.abc import Iterator
@@ -17,6 +18,19 @@ from aiofins.simulator.serial import SerialSettings
 #: the client URL's options and the simulator's settings that tests on ptys pin.
 PTY_8N1 = "bytesize=8&parity=N&stopbits=1"
 PTY_LINE = SerialSettings(bytesize=8, parity="N", stopbits=1)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """SIGINT as a terminal's foreground program has it, for the programs tests stop with it.
+
+    A script that runs the suite as a background job (``pytest &`` in a non-interactive shell)
+    starts it with SIGINT ignored, and every program a test starts would inherit that: Python
+    then installs no KeyboardInterrupt, and a script stopped by SIGINT (Ctrl-C, as a user
+    stops ``examples/watch_alarms.py``) never ends. The suite takes SIGINT's default back.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 #: An anyio backend: a name, or a name and its options.
 Backend = str | tuple[str, dict[str, Any]]

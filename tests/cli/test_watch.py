@@ -135,12 +135,17 @@ def test_watch_shows_each_tag_with_its_value_quality_and_trend() -> None:
         tags = ["temp=D100:float32", "run=CIO 0.00", "lot=D110:string:8"]
         term = Terminal(_watch(sim.url, *tags, "--interval", "0.05", "--count", "5000"), sim.env())
         try:
-            term.wait_for(lambda: term.row("temp")[2:4] == ["20", "good"])
+            # A frame can take several reads to arrive: wait until it is all on the screen.
+            term.wait_for(
+                lambda: (
+                    term.row("temp")[2:4] == ["20", "good"]
+                    and term.row("run")[:4] == ["run", "CIO", "0.00", "False"]
+                    and term.row("lot")[:4] == ["lot", "D110:string:8", "LOT-7", "good"]
+                    and "Ctrl-C to stop" in term.lines()
+                )
+            )
             header = next(line for line in term.lines() if line.startswith("aiofins watch"))
             assert f"aiofins watch {sim.url}   scan" in header
-            assert term.row("run")[:4] == ["run", "CIO", "0.00", "False"]
-            assert term.row("lot")[:4] == ["lot", "D110:string:8", "LOT-7", "good"]
-            assert "Ctrl-C to stop" in term.lines()
             # The process moves: the value, its trend and its range follow.
             sim.call(sim.plc.write_value, "D100", 80.0, "float32")
             sim.call(sim.plc.write, "CIO 0.00", [1])
