@@ -317,15 +317,18 @@ class Gateway:
             else:
                 put(route.outbox, route.encoder.encode(snap), snap.timestamp)
 
-    def _announce(self, status: PlcStatus) -> None:
+    def _announce(self, status: PlcStatus, *, changed: bool = True) -> None:
         """Queue the PLC's state on its status topic (retained; the newest replaces any
-        still waiting)."""
+        still waiting), and log it if it ``changed`` (a state said again after a reconnect
+        is not logged: a broker restart logged every PLC "online" again)."""
         topic = render(self.config.mqtt.plc_status_topic, gateway=self.name, plc=status.name)
         extra: dict[str, Any] = {"plc": status.name, "gateway": self.name}
         if status.reason is not None:
             extra["error"] = status.reason
         box = self.link.outbox(topic, qos=1, retain=True, limit=1)
         self.link.put(box, status_message(status.state.value, **extra))
+        if not changed:
+            return
         log.info(
             "PLC %s is %s%s",
             status.name,
@@ -342,7 +345,7 @@ class Gateway:
                 continue
             box = self.link.outboxes.get(render(topic_of, gateway=self.name, plc=status.name))
             if box is None or not box.messages:
-                self._announce(status)
+                self._announce(status, changed=False)
 
     def _on_published(self, stamp: float) -> None:
         self.metrics.latency.observe(max(0.0, time.time() - stamp))
