@@ -245,8 +245,9 @@ class Gateway:
 
     async def wait_scanned(self) -> None:
         """Until every (PLC, group) has had its first scan (answered or failed): the
-        gateway holds its sessions, routes and buffers from then on. The CLI freezes them
-        (``gc.freeze()``) then, so Python's full garbage collections skip them."""
+        gateway holds its sessions, routes and buffers from then on. The CLI keeps Python's
+        garbage collector off until then and freezes them (``gc.freeze()``), so full
+        collections skip them."""
         await self._scanned.wait()
 
     @property
