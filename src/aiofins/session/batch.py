@@ -35,6 +35,7 @@ from ..protocol.frames import check_command, check_commands, end_code_error
 from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .messages import no_free_sid, no_response
+from .options import shown
 from .response import Response, SessionStats
 from .sids import SidSpace
 from .slots import DestState, Pending
@@ -119,6 +120,8 @@ class Batching(Protocol):
 
     def requests_in_flight(self) -> list[Pending]: ...
 
+    def tell_breaker(self, error: BaseException | None, timeout: float) -> None: ...
+
     async def request(
         self,
         mrc: int,
@@ -151,12 +154,13 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
 class BatchPending(Pending):
     """One command of a batch on the wire; the receive callback hands its reply to the batch.
 
-    Made bare, ``BatchPending()`` (no ``__init__`` to run): :meth:`Batch.flush` sets the
-    batch's fields, :meth:`Session.start` the rest."""
+    Made bare, ``BatchPending()`` (its ``__init__`` sets nothing): :meth:`Batch.flush` sets
+    the batch's fields, :meth:`Session.start` the rest."""
 
     __slots__ = ("batch", "index")
 
-    __init__ = object.__init__
+    def __init__(self) -> None:
+        pass
 
     batch: Batch
     index: int
@@ -483,7 +487,7 @@ async def request_many(
     if timeout is None:
         timeout = session.timeout
     elif timeout <= 0:
-        raise CommandError(f"timeout {timeout} must be positive")
+        raise CommandError(f"timeout {shown(timeout)} must be positive")
     if retries is None:
         retries = session.retries if idempotent else 0
     elif retries < 0:

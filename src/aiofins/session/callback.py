@@ -57,16 +57,13 @@ _OPEN = LinkState.OPEN
 
 class Calling(Batching, Protocol):
     """What :func:`start_requests` uses of the session (a :class:`~aiofins.session.Session`)
-    besides what its batch does: whether the call may start at once, and the breaker to
-    tell how it ended."""
+    besides what its batch does: whether the call may start at once."""
 
     @property
     def link_state(self) -> LinkState: ...
 
     @property
     def breaker_state(self) -> BreakerState: ...
-
-    def tell_breaker(self, error: BaseException | None, timeout: float) -> None: ...
 
 
 class CallbackBatch(Batch):
@@ -78,7 +75,6 @@ class CallbackBatch(Batch):
 
     __slots__ = ("done", "starting")
 
-    session: Calling
     done: Done | None
     starting: bool
 
@@ -179,12 +175,14 @@ def start_requests(
 class CallbackPending(Pending):
     """One command of :func:`start_request` on the wire: the receive path hands its reply
     to :meth:`wake`, the deadline watcher its timeout (or the link its failure) to
-    :meth:`fail`, and either calls ``done`` from there. Made bare (``__new__`` only):
-    :func:`start_request` and :meth:`Session.start` set every field."""
+    :meth:`fail`, and either calls ``done`` from there. Made bare, ``CallbackPending()``
+    (its ``__init__`` sets nothing): :func:`start_request` and :meth:`Session.start` set
+    every field."""
 
     __slots__ = ("done_with", "handle", "params", "retries", "session", "target", "timeout")
 
-    __init__ = object.__init__
+    def __init__(self) -> None:
+        pass
 
     session: Calling
     #: The destination's state (address, slots).
@@ -328,7 +326,7 @@ def start_request(
         timeout = session.timeout
     if retries is None:
         retries = session.retries
-    p: CallbackPending = _new(CallbackPending)
+    p = CallbackPending()
     p.fut = None
     p.session = session
     p.target = state
@@ -356,6 +354,3 @@ def start_request(
         p.free_slot()
         return None
     return p
-
-
-_new = object.__new__

@@ -1171,6 +1171,7 @@ class Session:
         except BaseException as exc:  # given up (SID quarantined), the slot given back
             self.abandon(p, timeout, isinstance(exc, FinsTimeout))
             self._slot_back(p)
+            p.unawaited()  # (the link may have failed it meanwhile: exc is raised instead)
             raise
         if self._turn_due:  # (asyncio only)
             self._turn_due = False

@@ -10,6 +10,16 @@ from ..protocol.frames import check_command
 from .sids import MAX_LINGER
 
 
+def shown(value: float | None) -> str:
+    """A number of seconds as its caller would write it in an error message: a whole
+    float without its ``.0``. (A compiled session receives ``timeout=0``
+    as ``0.0``: mypyc turns an ``int`` passed for a ``float`` into one, see
+    docs/packaging.md; the message says ``timeout 0`` either way.)"""
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return str(value)
+
+
 def check_options(
     *,
     gct: int,
@@ -37,9 +47,9 @@ def check_options(
     if not 1 <= max_in_flight <= 255:
         raise CommandError(f"max_in_flight {max_in_flight} out of range 1..255")
     if timeout <= 0:
-        raise CommandError(f"timeout {timeout} must be positive")
+        raise CommandError(f"timeout {shown(timeout)} must be positive")
     if attempt_timeout is not None and attempt_timeout <= 0:
-        raise CommandError(f"attempt_timeout {attempt_timeout} must be positive")
+        raise CommandError(f"attempt_timeout {shown(attempt_timeout)} must be positive")
     for name, count in (
         ("retries", retries),
         ("busy_retries", busy_retries),
@@ -48,13 +58,13 @@ def check_options(
         if count < 0:
             raise CommandError(f"{name} {count} must not be negative")
     if busy_backoff < 0:
-        raise CommandError(f"busy_backoff {busy_backoff} must not be negative")
+        raise CommandError(f"busy_backoff {shown(busy_backoff)} must not be negative")
     if quarantine_factor <= 0:
-        raise CommandError(f"quarantine_factor {quarantine_factor} must be positive")
+        raise CommandError(f"quarantine_factor {shown(quarantine_factor)} must be positive")
     if not 0 <= min_quarantine < math.inf:
-        raise CommandError(f"min_quarantine {min_quarantine} must be 0 or more seconds")
+        raise CommandError(f"min_quarantine {shown(min_quarantine)} must be 0 or more seconds")
     if not 0 <= min_linger <= MAX_LINGER:
-        raise CommandError(f"min_linger {min_linger} must be 0..{MAX_LINGER} seconds")
+        raise CommandError(f"min_linger {shown(min_linger)} must be 0..{MAX_LINGER} seconds")
     if max_sid_spaces is None:
         max_sid_spaces = default_sid_spaces
     elif not 1 <= max_sid_spaces <= 254:
@@ -78,9 +88,9 @@ def check_call(
     frame can carry, before anything is done (what :meth:`Session.begin` calls only when
     its one comparison found something wrong)."""
     if not timeout > 0:
-        raise CommandError(f"timeout {timeout} must be positive")
+        raise CommandError(f"timeout {shown(timeout)} must be positive")
     if retries < 0:
         raise CommandError(f"retries {retries} must not be negative")
     if cap is not None and not cap > 0:
-        raise CommandError(f"attempt_timeout {cap} must be positive")
+        raise CommandError(f"attempt_timeout {shown(cap)} must be positive")
     check_command(mrc, src, params)

@@ -7,10 +7,11 @@ import contextlib
 from collections import deque
 from collections.abc import Generator
 from types import TracebackType
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import anyio
 
+from .._compiling import python_class
 from ..protocol.errors import FinsTimeout
 from ..protocol.header import FinsAddress
 from ..transport.base import Transport
@@ -126,6 +127,14 @@ class Pending:
             return RequestState.SENT if self.attempts == 1 else RequestState.RETRANSMITTED
         return RequestState.ABANDONED if self.abandoned else RequestState.ANSWERED
 
+    def unawaited(self) -> None:
+        """Its caller gives up on it without awaiting it (its send failed): an error the
+        link failed it with meanwhile is taken, not reported by asyncio as a future's
+        exception never retrieved."""
+        fut = self.fut
+        if fut is not None and fut.done() and not fut.cancelled():
+            fut.exception()
+
     def wake(self, frame: bytes) -> None:
         raise NotImplementedError
 
@@ -143,28 +152,32 @@ class Pending:
 class AsyncioPending(Pending):
     """Waits on a bare asyncio future: the cheapest wake-up asyncio has.
 
-    Made bare, ``AsyncioPending()`` (no ``__init__`` to run): :meth:`Session.start` sets
-    every field, the caller :attr:`fut` and :attr:`slots`."""
+    Made bare, ``AsyncioPending()`` (its ``__init__`` sets nothing): :meth:`Session.start`
+    sets every field, the caller :attr:`fut` and :attr:`slots`. (Not ``__init__ =
+    object.__init__``: a compiled class calls its base's ``__init__`` regardless, see
+    docs/packaging.md.)"""
 
     __slots__ = ()
 
-    __init__ = object.__init__
-
-    fut: asyncio.Future[bytes]
+    def __init__(self) -> None:
+        pass
 
     def wake(self, frame: bytes) -> None:
-        if not self.fut.done():
-            self.fut.set_result(frame)
+        fut = self.fut
+        if fut is not None and not fut.done():
+            fut.set_result(frame)
 
     def fail(self, exc: BaseException) -> None:
-        if not self.fut.done():
-            self.fut.set_exception(exc)
+        fut = self.fut
+        if fut is not None and not fut.done():
+            fut.set_exception(exc)
 
     async def wait(self) -> bytes:
-        return await self.fut
+        return await cast("asyncio.Future[bytes]", self.fut)
 
     def __await__(self) -> Generator[Any, None, bytes]:
-        return self.fut.__await__()  # the future itself: no coroutine of ours
+        # the future itself: no coroutine of ours
+        return cast("asyncio.Future[bytes]", self.fut).__await__()
 
 
 class EventPending(Pending):
@@ -232,6 +245,7 @@ class HeldPending(Pending):
         return result
 
 
+@python_class
 class SlotTimeout(FinsTimeout):
     """No request slot (or no free SID) became free in time: the destination's queue did not
     drain, or all 256 of its SIDs are in flight, quarantined or lingering.
