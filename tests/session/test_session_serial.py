@@ -129,7 +129,10 @@ async def test_corrupted_fcs_is_counted_and_retried(pty_pair: tuple[str, str]) -
 
     async with (
         hostlink_peer(plc, corrupt_first) as lines,
-        serial_session(host, timeout=0.2) as session,
+        # The dropped reply's attempt waits a third of the call's 1.5 s, the retransmission
+        # the rest: 1 s for a reply over the pty even on a loaded machine (with 0.2 s and two
+        # retries, a retransmission waited 57 ms, and a loaded machine sent a third).
+        serial_session(host, timeout=1.5, retries=1) as session,
     ):
         response = await session.request(0x01, 0x01, bytes.fromhex("820005000001"), idempotent=True)
         assert response.data == bytes.fromhex("2005")
