@@ -86,6 +86,8 @@ async def test_trio_declines_and_the_awaitable_path_reads() -> None:
         assert done.outcomes == [] and not peer.received[5:]
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_a_dropped_request_is_sent_again_with_the_same_frame() -> None:
     seen = 0
 
@@ -201,6 +203,8 @@ async def test_failures_open_the_breaker_and_then_it_declines() -> None:
         assert len(peer.received) == 2
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_an_answer_closes_a_breaker_that_counted_failures() -> None:
     replies = 0
 
@@ -224,6 +228,8 @@ async def test_an_answer_closes_a_breaker_that_counted_failures() -> None:
         assert s._breaker.failures == 0 and len(peer.received) == 2
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_declines_without_a_free_slot_or_an_open_link() -> None:
     async with (
         on_asyncio_only(),

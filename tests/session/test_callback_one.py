@@ -12,6 +12,7 @@ from aiofins.protocol.errors import ConnectionLost, EndCodeError, FinsTimeout
 from aiofins.session.breaker import BreakerState
 from aiofins.session.callback import CallbackPending, start_request
 
+from ..virtual_time import on_virtual_time
 from .test_callback import on_asyncio_only
 from .test_request_many import assert_idle, expected, key_of, reads
 from .test_session_udp import Reply, answer, read_params, reply, session_for, udp_responder
@@ -69,6 +70,8 @@ async def test_trio_declines() -> None:
         assert peer.received == []
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_a_dropped_request_is_sent_again_with_the_same_frame() -> None:
     seen = 0
 
@@ -131,6 +134,8 @@ async def test_busy_end_codes_are_retried_with_a_fresh_sid() -> None:
         assert_idle(s)
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_busy_too_often_fails_with_the_end_code() -> None:
     async with (
         on_asyncio_only(),
@@ -206,6 +211,8 @@ async def test_cancel_quarantines_the_sid_and_never_calls_back() -> None:
         assert done.outcomes == []
 
 
+@on_virtual_time  # counts transmissions: on the wall clock a loaded machine's late reply
+# was sent again after the retransmission timeout (uvloop: its clock cannot be virtual)
 async def test_cancel_while_busy_gives_everything_back() -> None:
     async with (
         on_asyncio_only(),
