@@ -11,8 +11,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
 
 from aiofins.simulator.serial import SerialSettings
+
+# Hypothesis' per-example deadline (200 ms by default) is a wall-clock bound: under a busy
+# machine an example that runs in 24 ms alone took 560 ms and failed the suite
+# (tests/helpers/test_chunking.py, README's test command beside six busy processes). Tests
+# assert bytes and values, never time, so no example has a deadline.
+settings.register_profile("aiofins", deadline=None)
+settings.load_profile("aiofins")
 
 #: A pty takes only 8N1 (tcsetattr refuses 7E2, the default of the client and simulator):
 #: the client URL's options and the simulator's settings that tests on ptys pin.
