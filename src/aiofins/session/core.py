@@ -58,7 +58,7 @@ from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, ca
 from .clock import Clock, Clocks, backend_clocks
 from .link import Link
 from .log import cpu_flags_seen, log_duplicate, log_frame, log_unmatched
-from .matching import match_relay_error, match_wildcard
+from .matching import RELAY_LINGER, match_relay_error, match_wildcard
 from .messages import no_response
 from .options import check_call, check_options
 from .response import (
@@ -422,12 +422,13 @@ class Session:
             return
         pending = sids.pending
         p = pending.pop(key, None)
+        linger = sids.linger
         if p is None or mrc != p.mrc or src != p.src or icf not in _ICFS or raw >= _RELAY:
-            p = self._matched(frame, p, key, icf, mrc, src, raw, sids)
+            p, linger = self._matched(frame, p, key, icf, mrc, src, raw, sids, linger)
             if p is None:
                 return
             key = p.key
-        if sids.linger and p.plan is not None and self._held(p, key, frame, sids):
+        elif linger and p.plan is not None and self._held(p, key, frame, sids):
             return  # (a copy of the SID's last reply, held back: see _hold_copy)
         p.done = True
         p.end_code = raw
@@ -442,10 +443,9 @@ class Session:
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
-        linger = sids.linger
         r = p.rtt
         if r is None:  # sent again: a reply to another transmission may follow
-            linger = sids.resent_linger(p, now, self.rto_bounds[1])
+            linger = max(linger, sids.resent_linger(p, now, self.rto_bounds[1]))
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
         elif not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
             r.sample(latency, self.rto_bounds if self.adaptive else None)
@@ -476,28 +476,36 @@ class Session:
         src: int,
         raw: int,
         sids: SidSpace,
-    ) -> Pending | None:
+        linger: float,
+    ) -> tuple[Pending | None, float]:
         """The request a reply answers when it is not simply the one under its key
         (``p``, taken out of ``sids``' pending table, if any): one sent to a wildcard
         address, or the one a relay error names (see :meth:`_match_other`); ``None`` (put
-        back, counted) when its command code or ICF shows the reply is not its, or a relay
-        error is too short to say where it comes from."""
+        back, counted) when its command code or ICF shows the reply is not its, a relay
+        error is too short to say where it comes from, or the reply is held back (see
+        :meth:`_held`). With it, how long its SID lingers (``linger``, the link's): a relay
+        error is never held back (a new one is byte for byte the old one), and its SID
+        lingers at least :data:`~.matching.RELAY_LINGER` (see "The relay-error rule")."""
         pending = sids.pending
         if p is None:
             p = self._match_other(frame, key, raw, sids)
             if p is None:
-                return None
+                return None, linger
             key = p.key
             del pending[key]
         if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
             pending[key] = p
             self.stats.mismatched += 1
-            return None
-        if raw >= RELAY_ERROR_BIT and len(frame) < MIN_RELAY_REPLY_SIZE:
-            pending[key] = p
-            self.stats.malformed += 1
-            return None
-        return p
+            return None, linger
+        if raw >= RELAY_ERROR_BIT:
+            if len(frame) < MIN_RELAY_REPLY_SIZE:
+                pending[key] = p
+                self.stats.malformed += 1
+                return None, linger
+            return p, max(linger, RELAY_LINGER)
+        if linger and p.plan is not None and self._held(p, key, frame, sids):
+            return None, linger
+        return p, linger
 
     def _match_other(self, frame: bytes, key: int, raw: int, sids: SidSpace) -> Pending | None:
         """The request a reply whose key ``key`` matches no request of ``sids`` exactly

@@ -33,9 +33,15 @@ def match_relay_error(pending: dict[int, Pending], frame: bytes) -> Pending | No
     return fits[0] if len(fits) == 1 else None
 
 
-#: A SID whose late reply has come stays quarantined this much longer (at most): room for a
-#: duplicate of that reply, which must not reach the SID's next request either.
+#: A SID whose late reply has come stays quarantined this much longer (or the link's linger,
+#: if longer; no more and no less): room for a duplicate of that reply, which must not reach
+#: the SID's next request either.
 LATE_REPLY_GRACE = 0.5
+#: A SID answered by a relay error lingers at least this long (or the link's linger, if
+#: longer), for every destination while the session addresses several: a copy of the relay
+#: error, matched by SID and command code alone (and under the key of the relay's own CPU),
+#: would fit any request that took the SID, whether or not the link has shown duplicates.
+RELAY_LINGER = LATE_REPLY_GRACE
 
 
 def count_unmatched(
@@ -46,36 +52,40 @@ def count_unmatched(
     frame: bytes,
     now: float,
     relay_error: bool = False,
-) -> str:
+    grace: float = LATE_REPLY_GRACE,
+) -> tuple[str, int]:
     """Count a reply ``frame`` no request waits for: late (timed out), duplicate, or
     unsolicited.
 
-    A late reply also ends its SID's quarantine (after :data:`LATE_REPLY_GRACE` from
-    ``now``, the session's time): the reply the quarantine waited for has come. A relay
-    error (``relay_error``: its key names the relay point) is late for any SID
-    quarantined under its SID number. A duplicate is a copy of the reply its SID was last
-    answered with (``answers``: key -> that reply). Returns which: ``"late"``,
-    ``"duplicate"`` or ``"unsolicited"``.
+    A late reply also ends its SID's quarantine ``grace`` seconds (at least
+    :data:`LATE_REPLY_GRACE`) from ``now``, the session's time: the reply the quarantine
+    waited for has come, and a copy of it may follow (a quarantine about to end is
+    lengthened to that). A relay error (``relay_error``: its key names the relay point) is
+    late for any SID quarantined under its SID number. A duplicate is a copy of the reply
+    its SID was last answered with (``answers``: key -> that reply; for a relay error,
+    ``key`` is that of the request its SID number last answered, see
+    :meth:`SidSpace.unmatched <aiofins.session.sids.SidSpace.unmatched>`). Returns which
+    (``"late"``, ``"duplicate"`` or ``"unsolicited"``) and the key it was counted under
+    (for a duplicate: the key of the reply it copies).
     """
+    end = now + grace
     if relay_error:
         sid = key & 0xFF
         mine = [k for k in quarantine if k & 0xFF == sid]
         if mine:
             stats.late_replies += 1
-            end = now + LATE_REPLY_GRACE
             for k in mine:
-                quarantine[k] = min(quarantine[k], end)
-            return "late"
+                quarantine[k] = end
+            return "late", mine[0]
     keys = (key, key & 0x00FFFFFF, key & 0xFF00FFFF, key & 0x0000FFFF)
     for k in keys:
-        until = quarantine.get(k)
-        if until is not None:
+        if k in quarantine:
             stats.late_replies += 1
-            quarantine[k] = min(until, now + LATE_REPLY_GRACE)
-            return "late"
+            quarantine[k] = end
+            return "late", k
     for k in keys:
         if answers.get(k) == frame:
             stats.duplicates += 1
-            return "duplicate"
+            return "duplicate", k
     stats.unsolicited += 1
-    return "unsolicited"
+    return "unsolicited", key

@@ -276,7 +276,12 @@ class SidSpace:
         ago made every SID linger seconds, and requests wait for SIDs long after the PLC
         answered normally again (issue #22)."""
         now = self.clock()
-        kind = count_unmatched(stats, self.quarantine, self.answers, key, frame, now, relay_error)
+        grace = max(LATE_REPLY_GRACE, self.linger)
+        if relay_error:  # its key is the relay's: a copy is of the SID's last answer
+            key = self.last_answered(key)
+        kind, key = count_unmatched(
+            stats, self.quarantine, self.answers, key, frame, now, relay_error, grace
+        )
         if kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
@@ -286,6 +291,20 @@ class SidSpace:
             elif done_at is not None:  # the network duplicated a reply
                 return kind, self.learn(now - done_at, now)
         return kind, 0.0
+
+    def last_answered(self, key: int) -> int:
+        """The key of the request last answered under ``key``'s SID number, any
+        destination (``key`` itself if none): a relay error carries the relay's address,
+        and a copy of one is a copy of the answer to that request. (While the session
+        addresses several destinations a SID is in flight to one at a time, so its last
+        answer is its last use's.) A scan of :attr:`recent`: for relay errors no request
+        waits for."""
+        sid = key & 0xFF
+        last, when = key, -1.0
+        for k, done_at in self.recent.items():
+            if k & 0xFF == sid and abs(done_at) > when:
+                last, when = k, abs(done_at)
+        return last
 
     def learn(self, lateness: float, now: float) -> float:
         """A duplicate came ``lateness`` seconds after the reply it copies: the linger
