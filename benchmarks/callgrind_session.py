@@ -12,6 +12,8 @@ of interpreter start-up and imports. Cases:
   (``max_in_flight=50``), per command;
 - ``tasks``: 50 tasks on one session (``max_in_flight=50``), each awaiting
   ``session.request`` in a loop, per request;
+- ``read``: sequential ``plc.read("D100", 1)`` of a :class:`~aiofins.client.Client` over
+  that session (the public API's usual read), per read;
 - ``reads``: the same 50 tasks calling ``plc.read("D100", 1)`` of a
   :class:`~aiofins.client.Client` over that session (the public API), per read;
 - ``dm``: ``plc.read("D0", 32768)`` (a full DM area, 33 frames of up to 999 words, pipelined
@@ -140,6 +142,10 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
                 request = session.request
                 for _ in range(n):
                     await request(0x01, 0x01, params, idempotent=True)
+            elif case == "read":
+                read = Client(session).read
+                for _ in range(n):
+                    await read("D100", 1)
             elif case in ("tasks", "reads"):
                 request = session.request
                 read = Client(session).read

@@ -62,6 +62,19 @@ def test_read_frames_check_each_reply() -> None:
         read_frames("D0", -1, 999)
 
 
+def test_a_one_frame_read_decodes_its_reply_frame_in_place() -> None:
+    plan = read_frames("D100", 3, 999)
+    head = bytes.fromhex("c00002000200000100070101") + b"\x00\x00"  # header, 0101, 0000
+    assert plan.reply_size == 14 + 6
+    assert plan.one(head + bytes.fromhex("0001fffe1234")) == [1, 0xFFFE, 0x1234]
+    for data in (bytes(4), bytes(8)):  # a reply that is not 3 words: said, not decoded
+        with pytest.raises(DecodeError, match="expected 3 x 2 = 6 data bytes, got"):
+            plan.one(head + data)
+    bits = read_frames("CIO 0.03", 2, 7)
+    assert bits.one(head + b"\x01\x00") == [1, 0]
+    assert read_frames("D0", 1000, 999).unpack_from is None  # two frames: values() joins
+
+
 def test_write_frames_encode_what_memory_area_write_encodes() -> None:
     values = list(range(2500))
     plan = write_frames("D10", len(values), 997)

@@ -67,15 +67,19 @@ class ReadFrames:
     #: Elements each frame reads.
     counts: tuple[int, ...]
     element_size: int
-    #: The unpacker of a one-frame read's data.
-    unpack: Callable[[bytes], tuple[int, ...]] | None
+    #: A one-frame read's unpacker of its whole reply frame (the data after the 14 bytes of
+    #: header, command code and end code: ``unpack_from(frame, 14)``), else None.
+    unpack_from: Callable[[bytes, int], tuple[int, ...]] | None
+    #: The size of that reply frame (header, command code, end code and data).
+    reply_size: int
 
-    def one(self, data: bytes) -> list[int]:
-        """The elements of a one-frame read's reply data (checked for its size first)."""
-        unpack = self.unpack
-        if unpack is None or len(data) != self.sizes[0]:
-            return self.values((data,))
-        return list(unpack(data))
+    def one(self, frame: bytes) -> list[int]:
+        """The elements of a one-frame read's reply ``frame`` (its data checked for its
+        size first; decoded in place, no copy of the data)."""
+        unpack_from = self.unpack_from
+        if unpack_from is None or len(frame) != self.reply_size:
+            return self.values((frame[14:],))
+        return list(unpack_from(frame, 14))
 
     def values(self, data: Sequence[bytes]) -> list[int]:
         """The elements of the replies' data (each checked for its size first)."""
@@ -125,7 +129,8 @@ def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
         tuple(r.count * size for r in requests),
         tuple(r.count for r in requests),
         size,
-        struct.Struct(f">{count}{code}").unpack if len(requests) == 1 else None,
+        struct.Struct(f">{count}{code}").unpack_from if len(requests) == 1 else None,
+        14 + count * size,
     )
 
 
