@@ -9,6 +9,11 @@ configuration, it reports after a warm-up:
 * CPU seconds of each gateway process per published scan message;
 * scan-to-delivery latency p50/p99 (the scan's timestamp to ``mosquitto_sub`` receiving it,
   broker included).
+* the event loop's lag in the window (``aiofins_gateway_loop_lag_seconds``, a probe every
+  0.25 s: how many were late by more than 0.1, 0.5 and 1 s; trees without it say n/a).
+
+``/metrics`` is scraped at the window's start and end; ``--scrape-every 5`` also scrapes it
+inside the window, as Prometheus would (a scrape that holds the loop shows as misses).
 
     python benchmarks/bench_gateway.py [--plcs 1000] [--tags 20] [--seconds 30] [--warmup 10]
 
@@ -78,15 +83,43 @@ def cpu_seconds(pid: int) -> float:
 
 
 def metrics(port: int) -> dict[str, float]:
-    """Sum of each aiofins_gateway_* sample over its labels."""
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as response:
+    """Sum of each aiofins_gateway_* sample over its labels; the loop lag histogram's
+    buckets by their bound (``lag<=0.1``; trees that have it)."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=60) as response:
         text = response.read().decode()
     out: dict[str, float] = {}
     for line in text.splitlines():
         m = re.match(r"^(aiofins_gateway_\w+?)(?:\{.*\})? ([0-9.e+-]+)$", line)
         if m:
             out[m.group(1)] = out.get(m.group(1), 0.0) + float(m.group(2))
+        lag = re.match(r'^aiofins_gateway_loop_lag_seconds_bucket\{le="([^"]+)"\} (\S+)$', line)
+        if lag:
+            out[f"lag<={lag.group(1)}"] = float(lag.group(2))
     return out
+
+
+def lag_summary(m0: dict[str, float], m1: dict[str, float]) -> str:
+    """The loop lag probes of the window: how many, and how many were late by more than
+    0.1, 0.5 and 1 s ("n/a" for a tree without the histogram)."""
+    if "lag<=+Inf" not in m1:
+        return "n/a"
+    total = m1["lag<=+Inf"] - m0.get("lag<=+Inf", 0.0)
+
+    def over(bound: str) -> float:
+        return total - (m1[f"lag<={bound}"] - m0.get(f"lag<={bound}", 0.0))
+
+    worst = next(
+        (
+            b
+            for b in sorted((k[5:] for k in m1 if k.startswith("lag<=")), key=float)
+            if m1[f"lag<={b}"] - m0.get(f"lag<={b}", 0.0) == total
+        ),
+        "+Inf",
+    )
+    return (
+        f"{total:.0f} probes, late > 0.1 s {over('0.1'):.0f}, > 0.5 s {over('0.5'):.0f}, "
+        f"> 1 s {over('1.0'):.0f}, all <= {worst} s"
+    )
 
 
 def config(broker: int, http_ports: list[int], ports: list[int], tags: int) -> str:
@@ -111,6 +144,7 @@ def run_case(
     warmup: float,
     tmp: Path,
     src: str | None = None,
+    scrape_every: float = 0.0,
 ) -> dict[str, object]:
     """One case: ``shards`` gateway processes (of the aiofins in ``src``, a source tree's
     ``src`` directory, if given) for ``warmup`` + ``seconds``."""
@@ -141,7 +175,13 @@ def run_case(
             start = time.time()
             cpu0 = [cpu_seconds(p.pid) for p in procs]
             m0 = [metrics(port) for port in http_ports]
-            time.sleep(seconds)
+            scrapes = 0
+            while scrape_every and time.time() + scrape_every < start + seconds:
+                time.sleep(scrape_every)
+                for port in http_ports:  # as Prometheus would, inside the window
+                    metrics(port)
+                scrapes += 1
+            time.sleep(max(0.0, start + seconds - time.time()))
             end = time.time()
             cpu1 = [cpu_seconds(p.pid) for p in procs]
             m1 = [metrics(port) for port in http_ports]
@@ -180,6 +220,8 @@ def run_case(
         "cpu_us_per_scan": 1e6 * sum(cpu) / published if published else float("nan"),
         "p50_ms": 1e3 * statistics.median(latencies) if latencies else float("nan"),
         "p99_ms": 1e3 * latencies[int(0.99 * (len(latencies) - 1))] if latencies else float("nan"),
+        "scrapes": scrapes,
+        "loop_lag": "; ".join(lag_summary(a, b) for a, b in zip(m0, m1, strict=True)),
     }
 
 
@@ -196,6 +238,13 @@ def main() -> None:
         help="NAME=SRC_DIR,... source trees to compare, rounds interleaved (default: this one)",
     )
     parser.add_argument("--rounds", type=int, default=1, help="rounds of every case and tree")
+    parser.add_argument(
+        "--scrape-every",
+        type=float,
+        default=0.0,
+        help="also scrape /metrics every S seconds inside the window (default: only at its "
+        "start and end)",
+    )
     args = parser.parse_args()
     for tool in ("gcc", "mosquitto", "mosquitto_sub"):
         if shutil.which(tool) is None:
@@ -239,16 +288,27 @@ def main() -> None:
                 for name, _, src in (t.partition("=") for t in args.trees.split(",") if t)
             ] or [("", None)]
             cpu_per_scan: dict[tuple[int, str], list[float]] = {}
+            missed: dict[tuple[int, str], list[float]] = {}
             for round_ in range(args.rounds):
                 for shards in (int(s) for s in args.shards.split(",")):
                     # Each round starts with the next tree: none always runs last (the
                     # machine's load drifts within a round).
                     shift = round_ % len(trees)
                     for name, src in trees[shift:] + trees[:shift]:
-                        r = run_case(shards, cfg, broker_port, args.seconds, args.warmup, tmp, src)
+                        r = run_case(
+                            shards,
+                            cfg,
+                            broker_port,
+                            args.seconds,
+                            args.warmup,
+                            tmp,
+                            src,
+                            args.scrape_every,
+                        )
                         cpu_per_scan.setdefault((shards, name), []).append(
                             float(r["cpu_us_per_scan"])  # type: ignore[arg-type]
                         )
+                        missed.setdefault((shards, name), []).append(float(r["missed"]))  # type: ignore[arg-type]
                         label = f"round {round_ + 1} {name}: " if name else ""
                         report(label, shards, r)
             if len(trees) > 1 or args.rounds > 1:
@@ -258,8 +318,10 @@ def main() -> None:
                     median = statistics.median(values)
                     print(
                         f"{shards} gateway(s) {name or 'this tree'}: CPU per published scan "
-                        f"median {median:.1f} us (runs {', '.join(f'{v:.0f}' for v in values)}),"
-                        f" {median / first:.3f} x {trees[0][0] or 'the first'}"
+                        f"median {median:.1f} us (runs {', '.join(f'{v:.0f}' for v in values)};"
+                        f" min-max {min(values) / median - 1:+.0%}..{max(values) / median - 1:+.0%}"
+                        f"), {median / first:.3f} x {trees[0][0] or 'the first'}; missed "
+                        f"{', '.join(f'{v:.0f}' for v in missed[(shards, name)])}"
                     )
             print(f"mosquitto CPU over all runs: {cpu_seconds(broker.pid) - mosquitto_cpu0:.1f} s")
         finally:
@@ -280,6 +342,7 @@ def report(label: str, shards: int, r: dict[str, object]) -> None:
         f"CPU per process {per_process} of a core, "
         f"{r['cpu_us_per_scan']:.0f} us per published scan; "
         f"scan-to-delivery p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms; "
+        f"{r['scrapes']} scrapes in the window; loop lag: {r['loop_lag']}; "
         f"load average {os.getloadavg()[0]:.1f}",
         flush=True,
     )
