@@ -23,7 +23,15 @@ from typing import Any
 
 class WorldStuck(RuntimeError):
     """Nothing is ready and no timer is set: every task waits for something that cannot
-    come (a deadlock of the code under test, never a quiet network: the world keeps timers)."""
+    come (a deadlock of the code under test, never a quiet network: the world keeps timers);
+    or virtual time stands still for :data:`STILL_LIMIT` turns of the loop (a busy loop: a
+    task that yields without waiting, over and over, in the code under test or the
+    world's)."""
+
+
+#: Turns of the loop at one virtual instant after which the world is stuck in a busy loop
+#: (a burst of 255 requests answered at once takes a few thousand).
+STILL_LIMIT = 200_000
 
 
 class _VirtualSelector(selectors.DefaultSelector):
@@ -33,6 +41,7 @@ class _VirtualSelector(selectors.DefaultSelector):
     def __init__(self, clock: VirtualClock) -> None:
         super().__init__()
         self._clock = clock
+        self._still = 0
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         events = super().select(0)
@@ -40,8 +49,18 @@ class _VirtualSelector(selectors.DefaultSelector):
             return events
         if timeout is None:
             raise WorldStuck("no callback ready and no timer set: the world can never move")
+        before = self._clock.now
         if timeout > 0:
             self._clock.now += timeout
+        if self._clock.now != before:
+            self._still = 0
+        else:
+            self._still += 1
+            if self._still > STILL_LIMIT:
+                raise WorldStuck(
+                    f"virtual time stands still at {self._clock.now:.4f} s for"
+                    f" {STILL_LIMIT:,} turns of the loop: a task yields without ever waiting"
+                )
         return []
 
 

@@ -62,6 +62,10 @@ BREAKER_COOLDOWN_MAX = 2.0
 RECONNECT_BACKOFF_MAX = 5.0
 #: Seconds a FINS/TCP connection attempt (connect and handshake) may take in the world.
 TCP_CONNECT_TIMEOUT = 1.0
+#: Seconds a pool task waits (at least) after a borrow failed before it borrows again.
+BORROW_PAUSE = 0.01
+#: Virtual seconds the clients may take to stop after the recovery phase.
+STOP_LIMIT = 120.0
 #: Fault kinds of the schedule, and the kinds that act per frame with a probability.
 KINDS = (
     "loss",
@@ -770,8 +774,11 @@ class World:
                 try:
                     async with pool.client(urls[n]) as client:
                         await self._operate(client, "pool", [n])
-                except FinsError:
-                    pass  # the borrow failed (its own timeout): the op was never started
+                except FinsError:  # the borrow failed: the op was never started (no step)
+                    # A borrow refused at once (the pool backs off a failed connection:
+                    # "retrying in 0.1 s") with no think time looped at one virtual instant
+                    # for ever (seed 30145): wait as an application would.
+                    await asyncio.sleep(max(think, BORROW_PAUSE))
 
         async with anyio.create_task_group() as tg:
             for _ in range(self.config.pool_tasks):
@@ -855,8 +862,15 @@ class World:
             self.spent_at = self.now()
             await self.recover()
             self.stopping = True
-            while self.ready_count < len(paths):
-                await asyncio.sleep(0.05)
+            with anyio.move_on_after(STOP_LIMIT) as stop:
+                while self.ready_count < len(paths):
+                    await asyncio.sleep(0.05)
+            if stop.cancelled_caught:
+                self.fail(
+                    "never stuck",
+                    f"{len(paths) - self.ready_count} of {len(paths)} client paths did not"
+                    f" stop within {STOP_LIMIT:.0f} s of being told to",
+                )  # (the run ends: fail() cancels it)
             await self.quiesce()
             self.closed.set()
 
