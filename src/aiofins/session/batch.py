@@ -36,7 +36,7 @@ from ..protocol.header import FinsAddress
 from ..transport.base import Transport
 from .messages import no_free_sid, no_response
 from .options import shown
-from .response import Response, SessionStats
+from .response import Response, SessionStats, response_of
 from .sids import SidSpace
 from .slots import DestState, Pending
 from .spaces import ExtraSpace
@@ -173,7 +173,11 @@ class BatchPending(Pending):
         if batch.fut.done():
             return
         session = batch.session
-        response = session.response(frame, self.end_code)
+        if self.end_code:  # flags or an error: see Session.completed
+            response = session.response(frame, self.end_code)
+        else:  # 0000, the usual reply: counted as Session.completed counts it, without its call
+            session.stats.completed += 1
+            response = response_of(frame)
         if response is not None:
             batch.results[self.index] = response
             if batch.on_response is not None:
