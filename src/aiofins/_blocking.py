@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import inspect
 import logging
-import math
 import time
 from collections.abc import Callable, Coroutine, Sequence
 from typing import Any, NoReturn, TypeVar
@@ -41,7 +40,7 @@ from .session.messages import no_free_sid, no_response
 from .session.response import response_of
 from .session.slots import DestState, HeldPending, Pending
 from .session.states import LinkState
-from .session.watcher import Expired
+from .session.watcher import TIMERLESS, Expired
 from .transport.blocking import BlockingTransport
 
 R = TypeVar("R")
@@ -103,9 +102,8 @@ class BlockingDriver:
         self.clock = time.monotonic
         # The one clock of the session is the driver's (no event loop to take one from).
         session._use_clock(Clocks(self.clock, self.clock, True))
-        # No timer to arm: the driver reads the deadlines itself as it waits (a request's
-        # deadline is never earlier than this "next wake-up").
-        session._watcher.at = -math.inf
+        # No timer to arm: the driver reads the deadlines itself as it waits.
+        session._watcher.at = TIMERLESS
         #: The client's step after its request's reply (:meth:`Session.finish`), bound
         #: here: the client reaches it once per call.
         self.finish: Callable[[Pending, bytes, int], bool] = session.finish

@@ -219,7 +219,8 @@ async def test_cancel_while_busy_gives_everything_back() -> None:
         udp_responder(lambda cmd: [(0.0, reply(cmd, 0x2604))]) as peer,
         session_for(peer, busy_backoff=60.0) as s,
     ):
-        request = started(start_request(s, ONE, Done()))
+        # (the 60 s pause fits in the call's time: the session retries only then)
+        request = started(start_request(s, ONE, Done(), timeout=120))
         while not s.stats.busy_retries:  # (the reply comes on the loop's next passes)
             await anyio.lowlevel.checkpoint()
         assert request.handle is not None

@@ -33,13 +33,11 @@ from ..protocol.errors import (
 )
 from ..protocol.frames import check_command, check_commands, end_code_error
 from ..protocol.header import FinsAddress
-from ..transport.base import Transport
 from .messages import no_free_sid, no_response
 from .options import shown
-from .response import Response, SessionStats, response_of
-from .sids import SidSpace
+from .response import Response, response_of
 from .slots import DestState, Pending
-from .spaces import ExtraSpace
+from .spaces import ExtraSpace, SidUser
 
 _NORMAL = EndCode(0)
 _DEBUG = logging.DEBUG
@@ -55,30 +53,16 @@ OnResponse = Callable[[int, Response], object]
 __all__ = ["check_command", "end_code_error", "raise_after_a_turn", "request_many"]
 
 
-class Batching(Protocol):
+class Batching(SidUser, Protocol):
     """What a batch uses of its session (a :class:`~aiofins.session.Session`): the request
-    path's steps, its settings and counters."""
-
-    @property
-    def transport(self) -> Transport: ...
-
-    @property
-    def source(self) -> FinsAddress: ...
+    path's steps, its settings and counters (besides a SID waiter's: :class:`SidUser`,
+    whose :meth:`~SidUser.start` and :meth:`~SidUser.abandon` it takes too)."""
 
     @property
     def dest(self) -> FinsAddress: ...
 
     @property
-    def timeout(self) -> float: ...
-
-    @property
     def retries(self) -> int: ...
-
-    @property
-    def sids(self) -> SidSpace: ...
-
-    @property
-    def stats(self) -> SessionStats: ...
 
     @property
     def loop(self) -> Any: ...
@@ -86,27 +70,11 @@ class Batching(Protocol):
     @property
     def on_asyncio(self) -> bool: ...
 
-    def clock(self) -> float: ...
-
     def log_frames_now(self) -> None: ...
 
     async def ensure_open(self, timeout: float | None = None) -> None: ...
 
     def dest_state(self, dest: FinsAddress) -> DestState: ...
-
-    def start(
-        self,
-        p: Pending,
-        state: DestState,
-        mrc: int,
-        src: int,
-        params: bytes,
-        retries: int,
-        now: float,
-        end: float,
-        cap: float | None,
-        space: ExtraSpace | None = None,
-    ) -> bytes | None: ...
 
     def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None: ...
 
@@ -115,8 +83,6 @@ class Batching(Protocol):
     def busy_pause(self, frame: bytes, busy: int) -> float | None: ...
 
     def end_code_failure(self, frame: bytes, mrc: int, src: int) -> FinsError: ...
-
-    def abandon(self, p: Pending, timeout: float, timed_out: bool = False) -> None: ...
 
     def requests_in_flight(self) -> list[Pending]: ...
 

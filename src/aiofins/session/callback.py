@@ -19,27 +19,25 @@ path (:meth:`Session.request_many`), which waits for the link, the slot or the b
 probe as any call does.
 
 A caller of one command a time (a Poller's scan of one frame) takes
-:func:`start_request`: the same conditions, the same :meth:`Session.start` and receive
-path, but no batch: the command's :class:`CallbackPending` hands the reply frame itself to
-``done(frame, error)`` (no future, no :class:`Response`), and only a busy end code
-(2604/2605) turns it into a :class:`CallbackBatch`, whose retries after a growing pause,
-SID waits and extra SID spaces are the batch's.
+:func:`start_request`: the session's request path itself, :meth:`Session.begin` with the
+caller's own record (a :class:`CallbackPending`), whose ``wake``/``fail`` call
+:meth:`Session.finish` / :meth:`Session.failure` from the receive path or the watcher and
+hand the reply frame itself to ``done(frame, error)`` (no future, no batch, no
+:class:`Response`); a busy end code sends it again from a timer after the session's pause.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from ..protocol.errors import FinsTimeout
-from ..protocol.frames import ERROR_BITS
 from ..protocol.header import FinsAddress
 from .batch import Batch, Batching, Command
 from .breaker import BreakerState
-from .messages import no_response
 from .response import Response
-from .slots import DestState, Pending
+from .slots import Pending
 from .states import LinkState
 
 logger = logging.getLogger("aiofins.session")
@@ -54,6 +52,10 @@ FrameDone = Callable[[bytes | None, BaseException | None], object]
 _CLOSED = BreakerState.CLOSED
 _OPEN = LinkState.OPEN
 
+#: Seconds between tries to send a command again after a busy reply's pause when the
+#: request path cannot start it at once (no slot or SID free, the link, the breaker).
+_AGAIN = 0.01
+
 
 class Calling(Batching, Protocol):
     """What :func:`start_requests` uses of the session (a :class:`~aiofins.session.Session`)
@@ -64,6 +66,33 @@ class Calling(Batching, Protocol):
 
     @property
     def breaker_state(self) -> BreakerState: ...
+
+    def begin(
+        self,
+        mrc: int,
+        src: int,
+        params: bytes = b"",
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        idempotent: bool = False,
+        retries: int | None = None,
+        cap: float | None = None,
+        in_call: bool = False,
+        now: float | None = None,
+        pending: Pending | None = None,
+    ) -> Pending | None: ...
+
+    def finish(self, p: Pending, frame: bytes, busy: int = 0) -> bool: ...
+
+    def failure(
+        self,
+        p: Pending | None,
+        exc: BaseException,
+        timeout: float | None = None,
+        in_call: bool = False,
+    ) -> BaseException: ...
+
+    def busy_wait(self, busy: int) -> float: ...
 
 
 class CallbackBatch(Batch):
@@ -173,79 +202,97 @@ def start_requests(
 
 
 class CallbackPending(Pending):
-    """One command of :func:`start_request` on the wire: the receive path hands its reply
-    to :meth:`wake`, the deadline watcher its timeout (or the link its failure) to
-    :meth:`fail`, and either calls ``done`` from there. Made bare, ``CallbackPending()``
-    (its ``__init__`` sets nothing): :func:`start_request` and :meth:`Session.start` set
-    every field."""
+    """One command of :func:`start_request` on the wire, on the session's request path:
+    :meth:`Session.begin` sends it; the receive path hands its reply to :meth:`wake`,
+    which calls :meth:`Session.finish`, the deadline watcher its timeout (or the link its
+    failure) to :meth:`fail`, which calls :meth:`Session.failure`; either calls ``done``
+    from there. A busy reply (2604/2605) with time left sends it again from a timer after
+    the session's pause (:meth:`again`). Made bare, ``CallbackPending()`` (its ``__init__`` sets
+    nothing): :func:`start_request` and :meth:`Session.begin` set every field."""
 
-    __slots__ = ("done_with", "handle", "params", "retries", "session", "target", "timeout")
+    __slots__ = (
+        "busy",
+        "busy_reply",
+        "done_with",
+        "handle",
+        "params",
+        "retries",
+        "session",
+        "target",
+        "timeout",
+    )
 
     def __init__(self) -> None:
         pass
 
     session: Calling
-    #: The destination's state (address, slots).
-    target: DestState
-    timeout: float
+    #: The destination (``None``: the session's).
+    target: FinsAddress | None
+    timeout: float | None
     params: bytes
-    retries: int
+    retries: int | None
+    #: Busy replies so far, and the last of them.
+    busy: int
+    busy_reply: bytes
     done_with: FrameDone | None
-    #: The batch that took over after a busy end code (see :meth:`wake`), if any.
-    handle: CallbackBatch | None
+    #: The timer that sends it again after a busy reply, while one is due.
+    handle: asyncio.TimerHandle | None
 
     def wake(self, frame: bytes) -> None:
-        """The reply (out of the pending table, its SID lingering): a normal completion is
-        counted and handed over; a busy end code (2604/2605) hands the command to a
-        :class:`CallbackBatch` that sends it again after the session's pause; any other
-        end code fails the call with the session's exception for it."""
+        """The reply (out of the pending table, its SID lingering), through the session's
+        :meth:`~Session.finish`: a normal completion handed over; a busy one with time
+        left sent again after the session's pause; any other end code fails the call with
+        the session's exception for it."""
         done = self.done_with
         if done is None:  # cancelled
             return
         session = self.session
-        end = self.end_code
-        if not end & ERROR_BITS:
-            if end:  # CPU error flags: logged and counted by the session's own step
-                session.response(frame, end)
-            else:
-                session.stats.completed += 1
-            self.done_with = None
-            slots = self.slots  # free_slot(), inlined (a call saved per reply)
-            if slots is not None:
-                self.slots = None
-                slots.release()
-            session.tell_breaker(None, self.timeout)
-            try:
-                done(frame, None)
-            except Exception:  # the caller's bug: logged here, never raised into the transport
-                logger.exception("%s: a request's callback failed", session.transport.description)
+        try:
+            if not session.finish(self, frame, self.busy):  # busy: again after a pause
+                self.busy_reply = frame
+                self.handle = session.loop.call_later(session.busy_wait(self.busy), self.again)
+                self.busy += 1
+                return
+        except Exception as exc:  # (the end code's error)
+            self._end(None, exc)
             return
-        pause = session.busy_pause(frame, 0)
-        if pause is not None:
-            self.handle = _busy_batch(self, pause)
-            return
-        self._end(session.end_code_failure(frame, self.mrc, self.src))
+        self._end(frame, None)
 
     def fail(self, exc: BaseException) -> None:
         """No reply after every transmission (its SID quarantined and slot freed by the
-        watcher), or the link failed."""
+        watcher), or the link failed: :meth:`Session.failure` words it."""
+        if self.done_with is not None:
+            self._end(None, self.session.failure(self, exc, self.timeout))
+
+    def again(self) -> None:
+        """After a busy reply's pause: the command sent again on the request path, within
+        the call's deadline; if it cannot start at once (no slot or SID free, the link or
+        the breaker), tried again shortly, and the PLC's busy reply is the error at the
+        deadline."""
+        self.handle = None
         if self.done_with is None:
             return
-        if isinstance(exc, FinsTimeout):
-            s = self.session
-            exc = no_response(
-                s.transport, s.source, self.target.address, self.mrc, self.src, self.timeout,
-                self.attempts,
-            )  # fmt: skip
-        self._end(exc)
+        session = self.session
+        left = self.end - session.clock()
+        if left > 0.0:
+            try:
+                p = session.begin(
+                    self.mrc, self.src, self.params, self.target, left, True, self.retries,
+                    pending=self,
+                )  # fmt: skip
+            except Exception as exc:
+                self._end(None, exc)
+                return
+            if p is None:
+                self.handle = session.loop.call_later(min(_AGAIN, left), self.again)
+            return
+        self._end(None, session.end_code_failure(self.busy_reply, self.mrc, self.src))
 
-    def _end(self, error: BaseException) -> None:
+    def _end(self, frame: bytes | None, error: BaseException | None) -> None:
         done = self.done_with
         assert done is not None
         self.done_with = None
-        self.free_slot()
-        self.session.tell_breaker(error, self.timeout)
-        _call(self.session, done, None, error)
+        _call(self.session, done, frame, error)
 
     def cancel(self) -> None:
         """Give up without calling ``done``: unanswered, its SID is quarantined; the slot
@@ -253,11 +300,12 @@ class CallbackPending(Pending):
         if self.done_with is None:
             return
         self.done_with = None
-        batch = self.handle
-        if batch is not None:
-            batch.cancel()
+        handle = self.handle
+        if handle is not None:
+            self.handle = None
+            handle.cancel()
             return
-        self.session.abandon(self, self.timeout)
+        self.session.abandon(self, self.session.timeout if self.timeout is None else self.timeout)
         self.free_slot()
 
 
@@ -270,31 +318,6 @@ def _call(
         logger.exception("%s: a request's callback failed", session.transport.description)
 
 
-def _busy_batch(p: CallbackPending, pause: float) -> CallbackBatch:
-    """A busy end code came for ``p``: a one-command :class:`CallbackBatch` holding ``p``'s
-    slot sends it again after ``pause`` (its next busy replies pause longer, as in any
-    batch), and hands the outcome to ``p``'s ``done``."""
-    session = p.session
-    session.stats.busy_retries += 1
-    done = p.done_with
-    assert done is not None
-
-    def ended(responses: list[Response] | None, error: BaseException | None) -> None:
-        p.done_with = None
-        done(None if responses is None else responses[0].frame, error)
-
-    command: Command = (p.mrc, p.src, p.params)
-    batch = CallbackBatch(session, (command,), p.target, p.timeout, p.retries, 1)
-    batch.done = ended
-    batch.starting = False
-    batch.held = 1  # p's slot
-    p.slots = None
-    batch.next = batch.started = 1  # (sent by later(), not by a flush)
-    batch.busy[0] = 1
-    batch.later(pause, 0)
-    return batch
-
-
 def start_request(
     session: Calling,
     command: Command,
@@ -304,53 +327,25 @@ def start_request(
     timeout: float | None = None,
     retries: int | None = None,
 ) -> CallbackPending | None:
-    """Send one idempotent ``command`` (``(mrc, src, params)``, checked by the caller) and
-    call ``done(frame, error)`` with its reply frame or its failure; the returned request's
-    :meth:`~CallbackPending.cancel` gives up on it. ``None`` (nothing sent) when it cannot
-    start at once, as :func:`start_requests`, or when every SID of the destination is
-    taken (the awaitable path waits for one)."""
-    if (
-        not session.on_asyncio
-        or session.link_state is not _OPEN
-        or session.breaker_state is not _CLOSED
-    ):
+    """Send one idempotent ``command`` (``(mrc, src, params)``) on the session's request
+    path (:meth:`Session.begin` with this request's record) and call ``done(frame,
+    error)`` with its reply frame or its failure; the returned request's
+    :meth:`~CallbackPending.cancel` gives up on it. ``None`` (nothing sent) when
+    :meth:`~Session.begin` cannot start it at once (the link, the breaker, no slot or SID
+    free: the awaitable path waits), or not under asyncio."""
+    if not session.on_asyncio:
         return None
-    send = session.transport.fast_send
-    if send is None:
-        return None
-    state = session.dest_state(session.dest if dest is None else dest)
-    slots = state.slots
-    if not slots.try_acquire():
-        return None
-    if timeout is None:
-        timeout = session.timeout
-    if retries is None:
-        retries = session.retries
     p = CallbackPending()
     p.fut = None
     p.session = session
-    p.target = state
+    p.target = dest
     p.timeout = timeout
     p.handle = None
-    p.params = command[2]
+    p.busy = 0
     p.retries = retries
-    session.log_frames_now()
-    now = session.clock()
-    try:
-        frame = session.start(p, state, *command, retries, now, now + timeout, None)
-    except BaseException:
-        slots.release()
-        raise
-    if frame is None:  # no free SID of the session's own: the awaitable path waits
-        slots.release()
-        return None
-    p.slots = slots
+    mrc, src, p.params = command
     p.done_with = done
-    try:
-        send(frame)
-    except Exception:  # the send failed: nothing of it left; the awaitable path says why
+    if session.begin(mrc, src, p.params, dest, timeout, True, retries, pending=p) is None:
         p.done_with = None
-        session.abandon(p, timeout)
-        p.free_slot()
         return None
     return p

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Callable, Sequence
 from functools import partial
 from struct import error as StructError
@@ -43,6 +44,7 @@ from ..protocol.frames import (
     RELAY_ERROR_BIT,
     RESPONSE_ICFS,
     address_bits,
+    check_command,
     end_code_error,
     header_prefix,
     key_address,
@@ -82,12 +84,13 @@ from .slots import (
 )
 from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
 from .states import LinkState
-from .watcher import DeadlineWatcher, Expired
+from .watcher import TIMERLESS, DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
 _CLOSED_BREAKER = BreakerState.CLOSED
+_INF = math.inf
 #: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
 _SAMPLE_MASK = 7
 _NORMAL = EndCode(0)
@@ -465,6 +468,8 @@ class Session:
             fifo.popleft()
         if self._heap or len(fifo) > 64 + 4 * len(pending):  # (a slow one keeps others)
             self._deadlines.prune(len(pending))
+        elif not fifo and (at := self._watcher.at) != _INF and at != TIMERLESS:
+            self._watcher.disarm()  # no deadline left: no timer to fire for nothing
 
     def _matched(
         self,
@@ -899,13 +904,15 @@ class Session:
         cap: float | None = None,
         in_call: bool = False,
         now: float | None = None,
+        pending: Pending | None = None,
     ) -> Pending | None:
         """Check, take a slot and a SID, register, send (``transport.fast_send``), read
         right after: the request's :class:`Pending` (then ``await p`` and :meth:`finish`,
         or :meth:`failure`), or ``None``, nothing done, if it must wait (link, breaker,
         slot, SID, an awaited send, a fair turn): then :meth:`call`. Options as in
-        :meth:`request` (``cap``: ``attempt_timeout``); ``now``: the session's clock.
-        A bad command or option raises :class:`CommandError` before anything is done."""
+        :meth:`request` (``cap``: ``attempt_timeout``); ``now``: the session's clock;
+        ``pending``: the caller's own record (see docs/session.md). A bad command or
+        option raises :class:`CommandError` before anything is done."""
         if dest is None:
             dest = self.dest
         if timeout is None and retries is None and cap is None:  # (checked when set)
@@ -916,10 +923,9 @@ class Session:
             timeout, retries, cap = self._call_options(timeout, idempotent, retries, cap)
         if not (len(params) <= MAX_PARAMETER_SIZE and 0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
             check_call(mrc, src, params, timeout, retries, cap)  # raises what is wrong
-        if self._turn_due or (self._breaker.failures and not in_call):
+        if self._turn_due or (self._breaker.state is not _CLOSED_BREAKER and not in_call):
             return None
-        transport = self.transport
-        send = transport.fast_send
+        send = (transport := self.transport).fast_send
         state = self._last_state if dest is self._last_dest else self.dest_state(dest)
         slots = state.slots
         if send is None or slots.in_flight >= slots.limit or slots.waiters:
@@ -927,8 +933,10 @@ class Session:
         slots.in_flight += 1
         now = self.clock() if now is None else now
         self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
-        if self._asyncio:  # (_pending_made(), inlined)
-            p: Pending = AsyncioPending()
+        if pending is not None:
+            p = pending
+        elif self._asyncio:  # (_pending_made(), inlined)
+            p = AsyncioPending()
             p.fut = self._new_future()
         else:
             p = self._other_pending()
@@ -940,16 +948,22 @@ class Session:
         try:
             send(frame)
         except Exception as exc:
-            return self._unsent(p, exc, timeout)
-        if (poll := transport.poll_now) is not None:
+            return self._unsent(p, exc, timeout, pending)
+        if (poll := transport.poll_now) is not None and pending is None:
             self._read_after_send(poll, p)
         return p
 
-    def _unsent(self, p: Pending, exc: Exception, timeout: float) -> Pending:
+    def _unsent(
+        self, p: Pending, exc: Exception, timeout: float, pending: Pending | None
+    ) -> Pending | None:
         """:meth:`begin`'s send of ``p`` raised ``exc``: ``p`` given up (its SID
         quarantined, counted) and failed with ``exc``, which its caller's await raises
-        (then :meth:`failure`: the slot back, the breaker told)."""
+        (then :meth:`failure`: the slot back, the breaker told); a caller's own record
+        (``pending``) is not failed but its slot given back, and ``None`` returned."""
         self.abandon(p, timeout, isinstance(exc, FinsTimeout))
+        if pending is not None:
+            self._slot_back(p)
+            return None
         p.fail(exc)
         return p
 
@@ -1100,13 +1114,8 @@ class Session:
         :meth:`request`."""
         if dest is None:
             dest = self.dest
-        if timeout is None:
-            timeout = self.timeout
-        if retries is None:
-            retries = self.retries if idempotent else 0
-        if cap is None:
-            cap = self.attempt_timeout
-        check_call(mrc, src, params, timeout, retries, cap)
+        timeout, retries, cap = self._call_options(timeout, idempotent, retries, cap)
+        check_command(mrc, src, params)
         if after is None:
             end = self.clock() + timeout
             if self._breaker.failures and not in_call:  # (none: the breaker is closed)

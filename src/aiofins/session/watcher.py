@@ -37,6 +37,11 @@ logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
 
+#: :attr:`DeadlineWatcher.at` of a watcher whose session is driven without an event loop
+#: (the blocking driver reads the deadlines itself as it waits): never armed or disarmed.
+TIMERLESS = -math.inf
+
+
 @python_class
 class Expired(FinsTimeout):
     """A request's deadline passed after every transmission (the caller words the message)."""
@@ -203,6 +208,19 @@ class DeadlineWatcher:
             scope.deadline = (
                 deadline if self.direct else self.timer_clock() + (deadline - self.clock())
             )
+
+    def disarm(self) -> None:
+        """No request has a deadline any more (the last one was answered): the timer
+        cancelled rather than left to fire for nothing; the next request arms it again
+        (:meth:`arm`). A paced caller's request is answered long before its deadline:
+        this saves the timer's dispatch and :meth:`fire` per request."""
+        self.at = math.inf
+        timer = self.timer
+        if timer is not None:
+            self.timer = None
+            timer.cancel()
+        elif self.scope is not None:
+            self.scope.deadline = math.inf
 
     def expire(self, now: float) -> None:
         """Send again or give up every request due at ``now``."""
