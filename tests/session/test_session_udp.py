@@ -6,6 +6,7 @@ command, which replies to send and when, so it can misbehave on purpose.
 
 from __future__ import annotations
 
+import math
 import re
 import socket
 from collections.abc import AsyncIterator, Callable
@@ -471,13 +472,15 @@ async def test_a_slow_reply_over_udp_is_retransmitted_after_the_rto() -> None:
         assert len(set(responder.received[1:])) == 1  # the same frame, the same SID
 
 
-def test_answered_requests_do_not_wake_the_deadline_watcher() -> None:
-    """A paced caller (one read every 50 ms, each answered long before its 20 ms RTO): the
-    watcher's timer finds nothing due and its task is not woken (under asyncio: the timer
-    re-arms itself; trio's cancel-scope deadline still wakes it, so asyncio only). On
-    virtual time (asyncio on looptime; uvloop's clock cannot be virtual): on the wall clock
-    a loaded machine answered later than the 20 ms RTO, and the read was retransmitted."""
-    run_on_virtual_time(_answered_requests_do_not_wake_the_deadline_watcher, "asyncio")
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_answered_requests_do_not_wake_the_deadline_watcher(backend: str) -> None:
+    """A paced caller (one read every 50 ms, each answered long before its 20 ms RTO): once
+    a reply leaves no deadline, the watcher's timer is cancelled (asyncio) or its cancel
+    scope's deadline lifted (trio), so nothing fires and its task is not woken; the next
+    request arms it again. On virtual time (asyncio on looptime, trio's MockClock; uvloop's
+    clock cannot be virtual): on the wall clock a loaded machine answered later than the
+    20 ms RTO, and the read was retransmitted."""
+    run_on_virtual_time(_answered_requests_do_not_wake_the_deadline_watcher, backend)
 
 
 async def _answered_requests_do_not_wake_the_deadline_watcher() -> None:
@@ -490,6 +493,7 @@ async def _answered_requests_do_not_wake_the_deadline_watcher() -> None:
         for word in range(6):
             response = await session.request(0x01, 0x01, read_params(word), idempotent=True)
             assert response.data == word_data(responder.received[-1])
+            assert watcher.at == math.inf and watcher.timer is None  # (disarmed)
             await anyio.sleep(0.05)  # the pace, past each request's RTO
         assert session.stats.retries == 0
         assert len(responder.received) == 6

@@ -455,13 +455,11 @@ class Session:
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
             sids.asked[key] = p.plan  # (what it asked: read by _hold_copy)
-        fut = p.fut
-        if fut is None:
+        if (fut := p.fut) is None:
             p.wake(frame)
         elif not fut.done():  # (cancelled: the caller cleans up as it resumes)
             fut.set_result(frame)
-        hooks = self._hooks
-        if hooks is not None and hooks.response_received:
+        if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
         fifo = self._fifo  # the answered requests at the front of the deadlines dropped
         while fifo and fifo[0].done:
