@@ -28,7 +28,6 @@ hand the reply frame itself to ``done(frame, error)`` (no future, no batch, no
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from collections.abc import Callable, Sequence
 from typing import Protocol
@@ -93,6 +92,12 @@ class Calling(Batching, Protocol):
     ) -> BaseException: ...
 
     def busy_wait(self, busy: int) -> float: ...
+
+
+class Cancellable(Protocol):
+    """A timer's handle (asyncio's or uvloop's ``TimerHandle``)."""
+
+    def cancel(self) -> None: ...
 
 
 class CallbackBatch(Batch):
@@ -235,8 +240,9 @@ class CallbackPending(Pending):
     busy: int
     busy_reply: bytes
     done_with: FrameDone | None
-    #: The timer that sends it again after a busy reply, while one is due.
-    handle: asyncio.TimerHandle | None
+    #: The timer that sends it again after a busy reply, while one is due (the event
+    #: loop's handle: asyncio's or uvloop's, hence a protocol).
+    handle: Cancellable | None
 
     def wake(self, frame: bytes) -> None:
         """The reply (out of the pending table, its SID lingering), through the session's
