@@ -255,7 +255,9 @@ def test_poll_text_lines_say_why_a_scan_failed(capsys: pytest.CaptureFixture[str
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # a PLC that never answers
         silent.bind(("127.0.0.1", 0))
         url = f"udp://127.0.0.1:{silent.getsockname()[1]}"
-        code, out, _ = run(capsys, "poll", url, "x=D0", "--timeout", "0.05", "--count", "1")
+        # 1 s: time for the socket to open first, even on a loaded machine (with 0.05 s the
+        # line said "no connection within 0.05 s" instead)
+        code, out, _ = run(capsys, "poll", url, "x=D0", "--timeout", "1", "--count", "1")
     assert code == 0
     assert out.startswith("#1 x=None(error)  (FinsTimeout: no response to command 0101"), out
 
