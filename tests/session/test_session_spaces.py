@@ -324,8 +324,8 @@ async def test_a_plc_refusing_another_connection_is_a_counted_failure_not_an_err
             assert any("cannot open another SID space" in r.getMessage() for r in caplog.records)
 
 
-@on_virtual_time  # 7,650 reads against a 1 s timeout: on the wall clock a loaded machine
-# timed some out
+@on_virtual_time  # thousands of reads against a 1 s timeout: on the wall clock a loaded
+# machine timed some out
 async def test_replies_all_sent_to_one_port_reach_the_space_they_are_addressed_to() -> None:
     """An Ethernet unit with an IP address table (or static conversion) sends every reply to
     one port, whichever socket its command came from; its DNA/DA1/DA2 names which of our
@@ -359,8 +359,8 @@ async def test_replies_all_sent_to_one_port_reach_the_space_they_are_addressed_t
 
         async def reader(first: int) -> None:
             nonlocal wrong, good, failed
-            for i in range(30):
-                word = first + i
+            for i in range(10):  # with the destination check off, 120 of the 2,550 reads
+                word = first + i  # returned other reads' words (30 each: 3 x the CPU)
                 try:
                     response = await session.request(0x01, 0x01, read_params(word))
                 except FinsTimeout:
@@ -375,6 +375,6 @@ async def test_replies_all_sent_to_one_port_reach_the_space_they_are_addressed_t
             for task in range(255):
                 tg.start_soon(reader, task * 30)
         stats = session.stats
-        assert (good, wrong, failed) == (255 * 30, 0, 0)
+        assert (good, wrong, failed) == (255 * 10, 0, 0)
         assert stats.sid_spaces_opened >= 1 and stats.misdirected > 0
         assert stats.timeouts == stats.late_replies == stats.unsolicited == 0
