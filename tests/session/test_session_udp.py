@@ -475,11 +475,12 @@ async def test_a_slow_reply_over_udp_is_retransmitted_after_the_rto() -> None:
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
 def test_answered_requests_do_not_wake_the_deadline_watcher(backend: str) -> None:
     """A paced caller (one read every 50 ms, each answered long before its 20 ms RTO): once
-    a reply leaves no deadline, the watcher's timer is cancelled (asyncio) or its cancel
-    scope's deadline lifted (trio), so nothing fires and its task is not woken; the next
-    request arms it again. On virtual time (asyncio on looptime, trio's MockClock; uvloop's
-    clock cannot be virtual): on the wall clock a loaded machine answered later than the
-    20 ms RTO, and the read was retransmitted."""
+    the watcher's timer has fired for nothing (after the first read), a reply that leaves
+    no deadline cancels the timer (asyncio) or lifts its cancel scope's deadline (trio), so
+    nothing fires and the watcher's task is not woken; the next request arms it again.
+    On virtual time (asyncio on looptime, trio's MockClock; uvloop's clock cannot be
+    virtual): on the wall clock a loaded machine answered later than the 20 ms RTO, and
+    the read was retransmitted."""
     run_on_virtual_time(_answered_requests_do_not_wake_the_deadline_watcher, backend)
 
 
@@ -489,12 +490,41 @@ async def _answered_requests_do_not_wake_the_deadline_watcher() -> None:
         session_for(responder, retries=2, timeout=1) as session,
     ):
         watcher = session._watcher
-        passes = watcher.passes  # (its first, at the start)
-        for word in range(6):
+        await session.request(0x01, 0x01, read_params(0), idempotent=True)  # RTT measured
+        await anyio.sleep(0.2)  # past its first wait (1/7 of the timeout: no RTO yet)
+        assert watcher.disarms
+        passes = watcher.passes
+        for word in range(1, 6):
             response = await session.request(0x01, 0x01, read_params(word), idempotent=True)
             assert response.data == word_data(responder.received[-1])
             assert watcher.at == math.inf and watcher.timer is None  # (disarmed)
-            await anyio.sleep(0.05)  # the pace, past each request's RTO
+            await anyio.sleep(0.05)
         assert session.stats.retries == 0
         assert len(responder.received) == 6
         assert watcher.passes == passes
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_requests_back_to_back_keep_one_watcher_timer(backend: str) -> None:
+    """After a paced phase (the timer cancelled as each reply leaves no deadline), requests
+    sent back to back come while the cancelled timer would still be pending: the session
+    stops cancelling, and one timer serves many requests again (a timer per request would
+    cost more than the one firing). On virtual time, as above."""
+    run_on_virtual_time(_requests_back_to_back_keep_one_watcher_timer, backend)
+
+
+async def _requests_back_to_back_keep_one_watcher_timer() -> None:
+    async with (
+        udp_responder() as responder,
+        session_for(responder, retries=2, timeout=1) as session,
+    ):
+        watcher = session._watcher
+        for pause in (0.2, 0.05):  # (the first wait is 1/7 of the timeout: no RTO yet)
+            await session.request(0x01, 0x01, read_params(0), idempotent=True)
+            await anyio.sleep(pause)
+        assert watcher.disarms and watcher.at == math.inf
+        for word in range(5):
+            await session.request(0x01, 0x01, read_params(word), idempotent=True)
+        assert not watcher.disarms
+        assert watcher.at != math.inf  # (one timer armed, for the first of them)
+        assert session.stats.retries == 0

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 from collections.abc import Callable, Sequence
 from functools import partial
 from struct import error as StructError
@@ -84,13 +83,12 @@ from .slots import (
 )
 from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
 from .states import LinkState
-from .watcher import TIMERLESS, DeadlineWatcher, Expired
+from .watcher import DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
 
 _CLOSED_BREAKER = BreakerState.CLOSED
-_INF = math.inf
 #: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
 _SAMPLE_MASK = 7
 _NORMAL = EndCode(0)
@@ -466,8 +464,8 @@ class Session:
             fifo.popleft()
         if self._heap or len(fifo) > 64 + 4 * len(pending):  # (a slow one keeps others)
             self._deadlines.prune(len(pending))
-        elif not fifo and (at := self._watcher.at) != _INF and at != TIMERLESS:
-            self._watcher.disarm()  # no deadline left: no timer to fire for nothing
+        elif not fifo and self._watcher.disarms:  # no deadline left, a timer for nothing
+            self._watcher.disarm()
 
     def _matched(
         self,
@@ -812,7 +810,7 @@ class Session:
             self._deadlines.add(p)
         watcher = self._watcher
         if deadline < watcher.at:
-            watcher.arm(deadline)
+            watcher.arm(deadline, now)
         hooks = self._hooks
         if hooks is not None and hooks.request_sent:
             self.emit(hooks.request_sent, RequestSent, p)

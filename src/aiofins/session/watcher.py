@@ -106,6 +106,14 @@ class DeadlineWatcher:
         self.chores: list[Callable[[], None]] = []
         #: Passes its task has made over the deadlines (each wake-up of the task is one).
         self.passes = 0
+        #: Whether the session cancels the timer when the last deadline is answered
+        #: (:meth:`disarm`): set when the timer fired with nothing left to do (a paced
+        #: caller, answered before each deadline, the next request after it), cleared when
+        #: a request comes while the timer cancelled would still have been pending (a
+        #: caller sending back to back, whose requests that timer covered).
+        self.disarms = False
+        #: When the timer :meth:`disarm` cancelled would have fired.
+        self.parked = 0.0
 
     def from_task(self, chore: Callable[[], None]) -> None:
         """Run ``chore`` from the watcher's task at its next wake-up, which this causes:
@@ -140,6 +148,7 @@ class DeadlineWatcher:
             waiter.set_result(None)
             return
         self.at = at
+        self.disarms = at == math.inf  # (fired for nothing: cancel it next time)
         if at != math.inf:
             self.timer = self.loop.call_at(
                 at if self.direct else self.timer_clock() + (at - now), self._fire
@@ -163,6 +172,7 @@ class DeadlineWatcher:
                 continue
             at = self.deadlines.earliest()
             self.at = at
+            self.disarms = at == math.inf  # (nothing left: a timer would fire for nothing)
             if loop is not None:
                 waiter = self.waiter = loop.create_future()
                 if at != math.inf:
@@ -184,13 +194,15 @@ class DeadlineWatcher:
                 await anyio.sleep_forever()
             self.scope = None
 
-    def arm(self, deadline: float) -> None:
-        """Wake the watcher at ``deadline`` (the session's clock) if that is earlier than
-        planned. Runs in receive callbacks too (a batch sends from there), so the backend's
-        clock is read directly rather than through ``anyio.current_time()``, which needs a
-        task."""
+    def arm(self, deadline: float, now: float) -> None:
+        """Wake the watcher at ``deadline`` (the session's clock; ``now``: the request's
+        sending time) if that is earlier than planned. Runs in receive callbacks too (a
+        batch sends from there), so the backend's clock is read directly rather than
+        through ``anyio.current_time()``, which needs a task."""
         if deadline >= self.at:
             return
+        if now < self.parked:  # the timer disarm() cancelled would have served: keep them
+            self.disarms = False
         waiter = self.waiter
         if waiter is not None:
             self.at = deadline
@@ -210,10 +222,12 @@ class DeadlineWatcher:
             )
 
     def disarm(self) -> None:
-        """No request has a deadline any more (the last one was answered): the timer
-        cancelled rather than left to fire for nothing; the next request arms it again
-        (:meth:`arm`). A paced caller's request is answered long before its deadline:
-        this saves the timer's dispatch and :meth:`fire` per request."""
+        """No request has a deadline any more (the last one was answered) and the timer
+        fires for nothing here (:attr:`disarms`): it is cancelled; the next request arms it
+        again (:meth:`arm`). A paced caller's request is answered long before its
+        deadline and the next comes after it: this saves the timer's dispatch and
+        :meth:`fire` per request (a back-to-back caller keeps one timer for many)."""
+        self.parked = self.at
         self.at = math.inf
         timer = self.timer
         if timer is not None:
