@@ -165,3 +165,31 @@ async def test_the_same_question_under_a_reused_sid_is_answered_at_once() -> Non
             assert r.data == expected(7)
         assert len(peer.received) == 512
         assert (session.stats.completed, session.stats.duplicates) == (512, 0)
+
+
+@on_virtual_time
+async def test_a_read_without_retries_is_not_answered_by_a_copy_of_its_sid_s_old_reply() -> None:
+    """The same as above with ``retries=0`` (the soak's seeds 40079 and 30485: reads that
+    could not be sent again took a copy of their SID's last reply, another read's words).
+    A read is idempotent: on a link that has shown duplicates it keeps its frame though it
+    has no retries, the copy is held back, the read sent once more (where the transport
+    sends synchronously; else it just waits on), and its own reply answers it. No
+    timeout, no other retransmission."""
+    async with (
+        udp_responder(copies_of_the_first_reply(0.5, 0.6, taught=0.15)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(257):
+            if word == 2:
+                await anyio.sleep(0.2)  # the duplicate of word 1's reply comes
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[256][9] == peer.received[0][9] == 0  # SID 0 again
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x01\x00"]
+        assert resent == [peer.received[256]] * (1 + again)  # same frame and SID
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (257, 2, 0)
+        assert (stats.retries, stats.timeouts) == (again, 0)
+        assert session.sids.linger == pytest.approx(1.0)

@@ -203,6 +203,7 @@ class Batch:
         "fut",
         "handles",
         "held",
+        "keep",
         "next",
         "on_response",
         "remaining",
@@ -225,9 +226,13 @@ class Batch:
         retries: int,
         window: int,
         on_response: OnResponse | None = None,
+        idempotent: bool = False,
     ) -> None:
         self.session = session
         self.on_response = on_response
+        #: Idempotent commands sent without retries: on a link that has shown duplicates
+        #: each keeps its frame (see ``Session._keep_frame``).
+        self.keep = idempotent and not retries
         self.commands = commands
         self.count = len(commands)
         self.state = state
@@ -287,6 +292,8 @@ class Batch:
             if frame is None:  # no free SID of the transport's own
                 self.sid_elsewhere(p, now, end)
                 continue
+            if self.keep and session.sids.linger:
+                p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
             if sid_waits:
                 sid_waits.pop(index, None)
             frames.append(frame)
@@ -321,6 +328,8 @@ class Batch:
             mrc, src, params = self.commands[index]
             frame = session.start(p, state, mrc, src, params, self.retries, now, end, None, space)
             assert frame is not None
+            if self.keep and space.sids.linger:
+                p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
             self.sid_waits.pop(index, None)
             self.send_on(space, p, frame)
             return
@@ -481,7 +490,7 @@ async def request_many(
             session, commands, dest, timeout, idempotent, retries, width, on_response
         )
     await state.slots.acquire(timeout, f"{dest}")
-    batch = Batch(session, commands, state, timeout, retries, width, on_response)
+    batch = Batch(session, commands, state, timeout, retries, width, on_response, idempotent)
     batch.held = 1
     try:
         batch.start()

@@ -583,6 +583,14 @@ class Session:
                 pass
         return True
 
+    def _keep_frame(self, p: Pending, frame: bytes, cap: float | None, now: float) -> None:
+        """``p``, idempotent and sent ``now`` without retries (``retries=0``), on a link
+        that has shown duplicates: its frame kept in a plan with no retransmission left
+        (its deadline and the watcher's handling unchanged), so that the duplicate rule
+        may hold back a copy of its SID's last reply and send it once more (see
+        :meth:`_hold_copy`): a read is answered by its own reply, not another read's."""
+        p.plan = (frame, 0, p.end, cap, p.end - now)
+
     def _copy_resolved(self, sids: SidSpace, key: int, frame: bytes) -> None:
         """The request under ``key`` is answered with ``frame`` after a copy of its SID's
         last reply was held back (see :meth:`_hold_copy`): if ``frame`` differs, that copy
@@ -902,13 +910,11 @@ class Session:
         now: float | None = None,
         pending: Pending | None = None,
     ) -> Pending | None:
-        """Check, take a slot and a SID, register, send (``transport.fast_send``), read
-        right after: the request's :class:`Pending` (then ``await p`` and :meth:`finish`,
-        or :meth:`failure`), or ``None``, nothing done, if it must wait (link, breaker,
-        slot, SID, an awaited send, a fair turn): then :meth:`call`. Options as in
-        :meth:`request` (``cap``: ``attempt_timeout``); ``now``: the session's clock;
-        ``pending``: the caller's own record (see docs/session.md). A bad command or
-        option raises :class:`CommandError` before anything is done."""
+        """Check, take a slot and a SID, register, send (``transport.fast_send``), read right
+        after: the :class:`Pending` (then ``await p``, :meth:`finish` or :meth:`failure`), or
+        ``None``, nothing done, if it must wait (link, breaker, slot, SID, an awaited send, a
+        fair turn: then :meth:`call`). Options as :meth:`request`'s (``cap``: attempt_timeout;
+        ``pending``: the caller's record, docs/session.md); bad ones raise CommandError."""
         if dest is None:
             dest = self.dest
         if timeout is None and retries is None and cap is None:  # (checked when set)
@@ -941,6 +947,8 @@ class Session:
         if frame is None:  # no SID free at once: call() waits for one
             self._slot_back(p)
             return None
+        if not retries and idempotent and self.sids.linger:  # (a read on a duplicating link)
+            p.plan = (frame, 0, p.end, cap, p.end - now)  # (see _keep_frame)
         try:
             send(frame)
         except Exception as exc:
@@ -1124,7 +1132,7 @@ class Session:
                 await anyio.sleep(self.busy_wait(0))
             busy = 0 if after is None else 1
             while True:
-                p = await self._sent(mrc, src, params, dest, timeout, retries, cap, end)
+                p = await self._sent(mrc, src, params, dest, timeout, retries, cap, end, idempotent)
                 frame = await (p.fut or p.wait())
                 if self.finish(p, frame, busy):
                     return frame
@@ -1150,6 +1158,7 @@ class Session:
         retries: int,
         cap: float | None,
         end: float,
+        idempotent: bool = False,
     ) -> Pending:
         """One request of :meth:`call` on the wire, waiting as it must until ``end``: for
         the link, a slot of ``dest``, a SID (see :func:`start_when_free`), the send; then
@@ -1176,6 +1185,8 @@ class Session:
         except BaseException:
             self._slot_back(p)
             raise
+        if not retries and idempotent and self.sids.linger:  # (shared by every space)
+            self._keep_frame(p, frame, cap, now)
         try:
             if (fast_send := transport.fast_send) is not None:
                 fast_send(frame)
