@@ -78,7 +78,10 @@ async def test_scans_after_the_first_wake_no_task_under_asyncio(sim: Simulator) 
             assert snap["n"].quality is Quality.GOOD and snap["n"].timestamp == snap.timestamp
         assert snaps[0].changed == {"t", "n", "b", "w", "s"} and snaps[1].changed == set()
         # The first scan compiles the plan on the group's task; then the callback path.
-        assert tasks == (["g"] if is_asyncio() else ["g"] * 6)
+        if is_asyncio():
+            assert tasks == ["g"]
+        else:  # every scan on the group's task; a 7th may begin before the consumer stops
+            assert tasks[:6] == ["g"] * 6 and set(tasks) == {"g"}
         assert group.errors == 0 and group.state is ScanState.STOPPED
         (stats,) = pool.stats(url).values()
         assert stats.in_use == 0
