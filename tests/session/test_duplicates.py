@@ -193,3 +193,53 @@ async def test_a_read_without_retries_is_not_answered_by_a_copy_of_its_sid_s_old
         assert (stats.completed, stats.duplicates, stats.unsolicited) == (257, 2, 0)
         assert (stats.retries, stats.timeouts) == (again, 0)
         assert session.sids.linger == pytest.approx(1.0)
+
+
+def copies_of_the_first_reply_two_uses_later(late: float, rtt_of_512: float) -> Handler:
+    """A peer whose first reply (word 0, SID 0) the network copies ``late`` s later, whose
+    second reply (word 1) it copies 0.15 s later (the link duplicates replies), and whose
+    reply to the 513th read (word 512: SID 0's third use) comes ``rtt_of_512`` s after it
+    (its retransmissions: at once). Every other read is answered at once."""
+    seen: set[bytes] = set()
+
+    def handler(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        good = reply(cmd, 0, word_data(cmd))
+        if word == 0:
+            return [(0.0, good), (late, good)]
+        if word == 1:
+            return [(0.0, good), (0.15, good)]
+        if word == 512 and cmd not in seen:
+            seen.add(cmd)
+            return [(rtt_of_512, good)]
+        return [(0.0, good)]
+
+    return handler
+
+
+@on_virtual_time
+async def test_a_copy_of_a_reply_the_sid_carried_two_uses_earlier_is_held_back() -> None:
+    """Issue #22, defect 5 (the soak's seed 30485): the copy of SID 0's first reply (word
+    0) comes 0.7 s late, when SID 0 carries its third request (word 512), whose own reply
+    takes 0.3 s: the copy comes first. It is not the SID's last reply (word 256's) but a
+    byte-for-byte copy of an earlier one, within the hold window on a link that has shown
+    duplicates: held back like a copy of the last, and the read's own reply answers it
+    (the copy then teaches the linger from the reply it copies: 1.4 s)."""
+    async with (
+        udp_responder(copies_of_the_first_reply_two_uses_later(0.7, 0.3)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(513):
+            if word == 2:
+                await anyio.sleep(0.2)  # the duplicate of word 1's reply comes
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[512][9] == peer.received[256][9] == peer.received[0][9] == 0
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x02\x00"]
+        assert resent == [peer.received[512]] * (1 + again)  # same frame and SID
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (513, 2, 0)
+        assert (stats.retries, stats.timeouts) == (again, 0)
+        assert session.sids.linger == pytest.approx(1.4)

@@ -83,11 +83,15 @@ UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]
     "defect 5 (a late duplicate taken for a new reply)": (
         "4 spaces, 1 session x 32 tasks, timeout 0.1 s, retries 0: 5 % of replies"
         " duplicated up to 0.3 s late from the start; at ~4,000 reads a second a SID comes"
-        " round every few ms, and a copy 87 ms late of a reply the SID carried several uses"
-        " ago (not its last one, which the duplicate rule compares) answers a read of the"
-        " same length: it returns the other read's words (as in soak seed 30485; the worlds of"
-        " seed 30263, late replies then duplicates, and of seed 40079, a copy of the SID's"
-        " last reply to a read without retries, pass since this family was narrowed)",
+        " round every few ms, and a copy 87 ms late of a reply the SID carried five uses"
+        " ago, received before the link's first duplicate was seen (so neither kept nor"
+        " compared: the session keeps the recent replies of each SID only once the link"
+        " has shown duplicates), answers a read of the same length: it returns the other"
+        " read's words (soak seed 30485 itself, its schedule to the last digit; the worlds"
+        " of seed 30263, late replies then duplicates, of seed 40079, a copy of the SID's"
+        " last reply to a read without retries, and this configuration's seed 4, a copy of"
+        " an older reply once the link had shown duplicates, pass since this family was"
+        " narrowed)",
         replace(
             BASE,
             timeout=0.1,
@@ -98,9 +102,9 @@ UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]
             mean_gap=0.01,
             storm=True,
         ),
-        [Episode(0.007, 0.383, 1, "dup", 0.05)],
+        [Episode(0.00711489360145835, 0.38255768741480084, 1, "dup", 0.05)],
         20000,
-        (4,),
+        (30485,),
     ),
 }
 # (The "no free SID after the faults" family's world, soak seed 20047's: fixed by a598f59,

@@ -79,6 +79,8 @@ from .slots import (
     EventPending,
     HeldPending,
     Pending,
+    Plan,
+    Retransmission,
     SlotQueue,
 )
 from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
@@ -452,7 +454,7 @@ class Session:
             r.sample(latency, self.rto_bounds if self.adaptive else None)
         if linger:  # before the wake-up: a batch sends its next command inside it
             sids.lingering[key] = now + linger
-            sids.asked[key] = p.plan  # (what it asked: read by _hold_copy)
+            sids.remember(key, frame, now, p.plan)  # (what it asked: read by _hold_copy)
         if (fut := p.fut) is None:
             p.wake(frame)
         elif not fut.done():  # (cancelled: the caller cleans up as it resumes)
@@ -531,12 +533,18 @@ class Session:
 
     def _held(self, p: Pending, key: int, frame: bytes, sids: SidSpace) -> bool:
         """On a link with a linger, a reply to ``p`` (which may be sent again) that is a
-        byte-for-byte copy of its SID's last reply: whether it is held back (see
-        :meth:`_hold_copy`; ``p`` put back in the pending table)."""
-        if sids.answers.get(key) == frame and self._hold_copy(p, key, sids):
+        byte-for-byte copy of its SID's last reply, or of one of its recent replies
+        (:attr:`SidSpace.replies <aiofins.session.sids.SidSpace.replies>`): whether it is
+        held back (see :meth:`_hold_copy`; ``p`` put back in the pending table)."""
+        if sids.answers.get(key) == frame:
+            held = self._hold_copy(p, key, sids, sids.asked.get(key))
+        elif sids.replies and (older := sids.copied(key, frame)) is not None:
+            held = self._hold_copy(p, key, sids, older[1], older[0])
+        else:
+            return False
+        if held:
             sids.pending[key] = p
-            return True
-        return False
+        return held
 
     def _answered_after_doubt(
         self, sids: SidSpace, key: int, frame: bytes, sent_at: float, now: float
@@ -549,11 +557,19 @@ class Session:
         if sids.given_up:  # an outage's quarantines end now that the destination answers
             sids.answered_after(key, sent_at, now)
 
-    def _hold_copy(self, p: Pending, key: int, sids: SidSpace) -> bool:
+    def _hold_copy(
+        self,
+        p: Pending,
+        key: int,
+        sids: SidSpace,
+        old: Plan | Retransmission | None,
+        done_at: float | None = None,
+    ) -> bool:
         """A reply to ``p`` (a request that may be sent again) is a copy, byte for byte,
-        of the reply its SID was last answered with: whether it is held back (``p`` waits
-        on; counted as a duplicate) rather than answer ``p``. The duplicate rule of
-        docs/session.md ("SIDs: quarantine and linger").
+        of the reply its SID was last answered with (or of an earlier recent one, which
+        came at ``done_at``), to a request whose plan was ``old``: whether it is held back
+        (``p`` waits on; counted as a duplicate) rather than answer ``p``. The duplicate
+        rule of docs/session.md ("SIDs: quarantine and linger").
 
         It is that reply's late duplicate, or ``p``'s own reply holding the same bytes;
         nothing in it tells which (a one-byte SID). A request asking the same thing again
@@ -565,10 +581,9 @@ class Session:
         retransmission): its next reply answers it, whatever it holds."""
         plan = p.plan
         sent = plan[0] if isinstance(plan, tuple) else getattr(plan, "frame", None)
-        old = sids.asked.get(key)
         if old is not None and sent == (old[0] if isinstance(old, tuple) else old.frame):
             return False  # the same question: the same answer is no surprise
-        if not sids.hold(key, self.clock()):
+        if not sids.hold(key, self.clock(), done_at):
             return False
         self.stats.duplicates += 1
         transport = self.transport if p.space is None else p.space.transport

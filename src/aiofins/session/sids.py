@@ -38,6 +38,10 @@ MAX_LINGER = 5.0
 #: next request (which asked something else) within this many seconds of that reply, or
 #: LINGER_FACTOR times the linger, is held back (see :meth:`SidSpace.hold`).
 HOLD_WINDOW = 1.0
+#: On a link that has shown duplicates, the replies each SID was answered with within the
+#: hold window are kept (at most this many per SID key, the newest; see
+#: :meth:`SidSpace.remember`): a late copy of any of them is held back, not only of the last.
+KEPT_REPLIES = 8
 #: Longest pause between two looks for a free SID while all 256 are taken.
 SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
@@ -65,6 +69,7 @@ class SidSpace:
         "pending",
         "quarantine",
         "recent",
+        "replies",
         "routed",
         "short_at",
     )
@@ -94,6 +99,10 @@ class SidSpace:
         #: SID key -> how late after the SID's previous reply a copy of that reply came
         #: to its new request, held back (see :meth:`hold`).
         self.held: dict[int, float] = {}
+        #: SID key -> its recent replies, oldest first, as (the reply, when it came, the
+        #: plan of the request it answered), on a link that has shown duplicates only
+        #: (see :meth:`remember`; at most :data:`KEPT_REPLIES` per key).
+        self.replies: dict[int, list[tuple[bytes, float, Plan | Retransmission | None]]] = {}
         #: The linger after a completion the link has shown necessary (late duplicates).
         self.linger = min_linger
         #: The same after a retransmission (learnt from replies to earlier transmissions).
@@ -254,6 +263,7 @@ class SidSpace:
         self.given_up.clear()
         self.lingering.clear()
         self.held.clear()
+        self.replies.clear()
 
     def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:
         """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
@@ -317,18 +327,52 @@ class SidSpace:
         self.extend_lingers(now)
         return lateness
 
-    def hold(self, key: int, now: float) -> bool:
-        """A reply under ``key`` that is a copy, byte for byte, of the reply the SID was
-        last answered with came to the SID's new request, which asked something else:
-        whether it is held back rather than answer it (noted in :attr:`held`; see the
-        session's ``_hold_copy``). Held when it is the first such copy for that request
-        and came within :data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR` times the linger, of
-        that reply (later than the linger, a duplicate may find the SID reused)."""
+    def remember(
+        self, key: int, frame: bytes, now: float, asked: Plan | Retransmission | None
+    ) -> None:
+        """``key``'s SID, which lingers, was answered ``now`` with ``frame`` to a request
+        whose plan is ``asked`` (kept in :attr:`asked`). On a link that has shown
+        duplicates, ``frame`` is kept among the SID's recent replies (:attr:`replies`):
+        those older than the hold window (see :meth:`hold`) go, and the oldest beyond
+        :data:`KEPT_REPLIES`. At a high rate a SID comes round several times while a copy
+        of one of its replies may still come."""
+        self.asked[key] = asked
+        if not self.linger:
+            return
+        replies = self.replies.get(key)
+        if replies is None:
+            self.replies[key] = [(frame, now, asked)]
+            return
+        window = max(HOLD_WINDOW, LINGER_FACTOR * self.linger)
+        while replies and (len(replies) >= KEPT_REPLIES or now - replies[0][1] >= window):
+            del replies[0]
+        replies.append((frame, now, asked))
+
+    def copied(self, key: int, frame: bytes) -> tuple[float, Plan | Retransmission | None] | None:
+        """When the recent reply of :attr:`replies` under ``key`` that ``frame`` is a copy
+        of, byte for byte, came, and the plan of the request it answered (the newest if
+        several; ``None``: none)."""
+        replies = self.replies.get(key)
+        if replies:
+            for reply, at, asked in reversed(replies):
+                if reply == frame:
+                    return at, asked
+        return None
+
+    def hold(self, key: int, now: float, done_at: float | None = None) -> bool:
+        """A reply under ``key`` that is a copy, byte for byte, of a reply the SID was
+        answered with (the last, or ``done_at``: an earlier one of :attr:`replies`) came
+        to the SID's new request, which asked something else: whether it is held back
+        rather than answer it (noted in :attr:`held`; see the session's ``_hold_copy``).
+        Held when it is the first such copy for that request and came within
+        :data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR` times the linger, of that reply
+        (later than the linger, a duplicate may find the SID reused)."""
         if key in self.held:
             return False  # the second: it answers
-        done_at = self.recent.get(key)
         if done_at is None:
-            return False
+            done_at = self.recent.get(key)
+            if done_at is None:
+                return False
         lateness = now - abs(done_at)
         if lateness >= HOLD_WINDOW and lateness >= LINGER_FACTOR * self.linger:
             return False
@@ -341,11 +385,17 @@ class SidSpace:
         from when they were answered. A duplicate of their replies may be as late as this
         one; without this, a SID answered just before the duplicate was seen could be
         reused under the old linger and take a later duplicate of its old reply for the
-        new request's (issue #22, defect 5: another read's words after a SID wrap)."""
+        new request's (issue #22, defect 5: another read's words after a SID wrap).
+        The last replies within the hold window of SIDs that have no recent replies kept
+        yet (the link's first duplicate) start their :attr:`replies`."""
         linger = self.linger
         lingering, pending = self.lingering, self.pending
+        window = max(HOLD_WINDOW, LINGER_FACTOR * linger)
+        replies, answers = self.replies, self.answers
         for key, done_at in self.recent.items():
             if done_at > 0 and now - done_at < linger and key not in pending:
                 until = done_at + linger
                 if lingering.get(key, 0.0) < until:
                     lingering[key] = until
+            if key not in replies and now - abs(done_at) < window and key in answers:
+                replies[key] = [(answers[key], abs(done_at), self.asked.get(key))]
