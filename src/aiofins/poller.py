@@ -52,7 +52,7 @@ from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, EndCodeError, FinsError
 from .protocol.frames import END_CODE, MIN_REPLY_SIZE
 from .protocol.values import Value
-from .session.callback import CallbackBatch, CallbackPending, start_request, start_requests
+from .session.callback import CallbackBatch, CallbackPending, PreparedRequest, start_requests
 from .session.response import new_response
 from .tags import ReadPlan, TagNames, parse_tag
 from .transport.base import is_asyncio
@@ -214,24 +214,31 @@ class ScanGroup:
     _missed_reported: int = 0
     #: The pool lease the group's scans borrow the endpoint's client with (kept between scans).
     _lease: _Lease | None = field(default=None, repr=False)
-    #: The scan in flight on the callback path (see :meth:`Poller._scan_soon`), if any:
-    #: (its request(s), the lease, the client lent, when it started: loop clock, wall clock).
-    _scan: tuple[CallbackBatch | CallbackPending, _Lease, Client, float, float] | None = field(
+    #: The scan of several frames in flight on the callback path (see
+    #: :meth:`Poller._scan_soon`), if any: (its batch, the lease, the client lent, when it
+    #: started: loop clock, wall clock).
+    _scan: tuple[CallbackBatch, _Lease, Client, float, float] | None = field(
         default=None, repr=False
     )
-    #: What ends such a scan of several frames (the poller's :meth:`~Poller._scanned_soon`
-    #: for this group) and of one frame (:meth:`~Poller._scanned_frame`).
+    #: What ends such a scan (the poller's :meth:`~Poller._scanned_soon` for this group).
     _done: Callable[[list[Response] | None, BaseException | None], None] | None = field(
         default=None, repr=False
     )
-    _frame_done: Callable[[bytes | None, BaseException | None], None] | None = field(
-        default=None, repr=False
-    )
+    #: The scan step of a plan of one frame on the callback path, kept between scans
+    #: (made at its first such scan; dropped when its lease or client changes).
+    _step: _FrameScan | None = field(default=None, repr=False)
     #: The plan's one frame, made once: (its command, the decoder of its reply frame, or
     #: None); ``()`` for a plan of several frames (sent as a batch); ``None``: not made yet.
     _one: _OneFrame | tuple[()] | None = field(default=None, repr=False)
     #: A snapshot of the callback path for the group's task to deliver (backpressure).
     _undelivered: Snapshot | None = field(default=None, repr=False)
+
+    def _in_flight(self) -> CallbackBatch | CallbackPending | None:
+        """The request(s) of its scan in flight on the callback path, if any."""
+        if self._scan is not None:
+            return self._scan[0]
+        step = self._step
+        return None if step is None else step.request
 
     def _enter(self, state: ScanState) -> None:
         """The one place a group changes state."""
@@ -316,7 +323,6 @@ class Poller:
         assert self._tg is not None
         group._wake.bind()
         group._done = partial(self._scanned_soon, group)
-        group._frame_done = partial(self._scanned_frame, group)
         group._enter(ScanState.IDLE)
         self._tg.start_soon(self._run_group, group)
         self._plan_scan(self._now() if now is None else now, group)
@@ -381,6 +387,8 @@ class Poller:
                     scan[1].release()
                     if group._lease is None:
                         group._lease = scan[1]
+                if group._step is not None:
+                    group._step.give_up()
                 group._undelivered = None
                 if group.state is not ScanState.STOPPED:
                     group._enter(ScanState.STOPPED)
@@ -471,7 +479,13 @@ class Poller:
             if late:
                 when += late * interval
             if group.state is idle:
-                if scan_soon is None or not scan_soon(group):
+                if scan_soon is None:
+                    started = False
+                elif (step := group._step) is not None:  # (a plan of one frame)
+                    started = step.start()
+                else:
+                    started = scan_soon(group)
+                if not started:
                     group._enter(due)
                     group._wake.set()  # the group's task scans
             else:
@@ -582,10 +596,11 @@ class Poller:
     def _scan_soon(self, group: ScanGroup) -> bool:
         """Start ``group``'s due scan from the timer's own step (asyncio): its frames go out
         now and the scan ends in the session's receive callback (:meth:`_scanned_soon`),
-        no task woken for it. False (nothing started, the group's task scans instead) when
-        it cannot start at once: the group's first scan (it compiles the plan), no session
-        ready to lend, a plan the client must check first, or the session's own conditions
-        (link open, breaker closed, a slot free: see
+        no task woken for it. A plan of one frame gets its scan step here, kept for the
+        next scans (:class:`_FrameScan`). False (nothing started, the group's task scans
+        instead) when it cannot start at once: the group's first scan (it compiles the
+        plan), no session ready to lend, a plan the client must check first, or the
+        session's own conditions (link open, breaker closed, a slot free: see
         :func:`~aiofins.session.callback.start_requests`)."""
         plan = group.plan
         lease = group._lease
@@ -594,33 +609,26 @@ class Poller:
             return False
         client = lease.borrow_ready()
         if client is None:
-            return False
-        if plan.cache.get("fits") is not client.limits:
             lease.release()
             return False
-        started = self._now()
+        limits = client.limits
+        if plan.cache.get("fits") is not limits:
+            lease.release()
+            return False
         one = group._one
         if one is None:
             one = group._one = _one_frame(plan)
-        request: CallbackBatch | CallbackPending | None
+        if one:
+            lease.release()  # (the step borrows it for each scan)
+            step = group._step = _FrameScan(self, group, lease, client, limits, one)
+            return step.start()
+        started = self._now()
+        request: CallbackBatch | None
         try:
-            if one:
-                assert group._frame_done is not None
-                request = start_request(
-                    client.session,
-                    one[0],
-                    group._frame_done,
-                    dest=client.dest,
-                    timeout=group.timeout,
-                )
-            else:
-                request = start_requests(
-                    client.session,
-                    plan.scan_commands()[0],
-                    done,
-                    dest=client.dest,
-                    timeout=group.timeout,
-                )
+            request = start_requests(
+                client.session, plan.scan_commands()[0], done, dest=client.dest,
+                timeout=group.timeout,
+            )  # fmt: skip
         except Exception:  # a bug, not the PLC: the group's task scans (and says what)
             logger.exception("scan group %s: the scan could not start", group.name)
             request = None
@@ -634,43 +642,23 @@ class Poller:
         return True
 
     def _scanned_frame(
-        self, group: ScanGroup, frame: bytes | None, error: BaseException | None
+        self,
+        group: ScanGroup,
+        client: Client,
+        started: float,
+        stamp: float,
+        frame: bytes | None,
+        error: BaseException | None,
     ) -> None:
-        """A scan of one frame of :meth:`_scan_soon` ended (called by the session with the
-        reply frame): decoded from the frame in one call where the plan allows (see
-        :meth:`ReadPlan.frame_decoder`), else as :meth:`_scanned_soon` does."""
-        scan = group._scan
-        if scan is None:  # (given up by the poller's exit)
+        """A scan of one frame (:class:`_FrameScan`) ended whose frame the plan's decoder
+        did not take (a failure, a frame of another size, words no value of their type):
+        decoded tag by tag, as :meth:`_scanned_soon` does."""
+        if frame is None:
+            self._end_scan(group, client, started, stamp, None, error)
             return
-        group._scan = None
-        _, lease, client, started, stamp = scan
-        lease.release()
-        if group._lease is None:
-            group._lease = lease
-        try:
-            if frame is None:
-                self._end_scan(group, client, started, stamp, None, error)
-                return
-            one = group._one
-            decode = one[1] if one else None
-            values = None if decode is None else decode(frame)
-            if values is None:  # tag by tag (and what is wrong with which)
-                raw = int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
-                response = new_response(EndCode(raw), frame[MIN_REPLY_SIZE:], frame)
-                self._end_scan(group, client, started, stamp, [response], None)
-                return
-            if frame[END_CODE] or frame[END_CODE + 1]:  # (CPU error flags)
-                client.last_end_code = EndCode(
-                    int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
-                )
-            else:
-                client.last_end_code = _NORMAL
-            self._handover(group, self._scanned(group, started, stamp, values, None, _NO_BAD, None))
-        except Exception:  # a bug, not the PLC: logged, and the group scans on
-            logger.exception("scan group %s: the scan could not end", group.name)
-            group.errors += 1
-            if group.state is ScanState.SCANNING:
-                group._enter(ScanState.IDLE)
+        raw = int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
+        response = new_response(EndCode(raw), frame[MIN_REPLY_SIZE:], frame)
+        self._end_scan(group, client, started, stamp, [response], None)
 
     def _scanned_soon(
         self, group: ScanGroup, responses: list[Response] | None, error: BaseException | None
@@ -796,40 +784,15 @@ class Poller:
                 extra={"group": group.name, "endpoint": group.url},
             )
         group.last_duration = self._now() - started
-        changed: AbstractSet[str] = _UNCHANGED
-        last = group._last
         if error is None and not bad:  # the usual scan: every tag read
             plan = group.plan
             assert plan is not None
             tag_names = plan.tag_names
-            names = tag_names.names
             if values is None:
                 assert read is not None
-                values = tuple([read[name] for name in names])
-            before = group._last_good
-            if before is not None:  # so was the last one: compare values only
-                if values != before:  # (equal tuples: nothing changed, found in one C call)
-                    changed = {
-                        names[i]
-                        for i, (old, new) in enumerate(zip(before, values, strict=True))
-                        if not (old is new or old == new)
-                    }
-            else:
-                changed = set()
-                for name, got in zip(names, values, strict=True):
-                    previous = last.get(name)
-                    if (
-                        previous is None
-                        or previous.quality is not _GOOD
-                        or not (previous.value is got or previous.value == got)
-                    ):
-                        changed.add(name)
-            good: GoodReadings = _new(GoodReadings)  # a reading is made when asked for
-            good._names = tag_names
-            good._values = values
-            good._stamp = stamp
-            group._last, group._last_good = good, values
-            return self._deliver(group, stamp, good, changed, None)
+                values = tuple([read[name] for name in tag_names.names])
+            return self._good(group, stamp, values, tag_names)
+        last = group._last
         readings: dict[str, TagReading] = {}
         changed = set()
         for name in group.tags:
@@ -855,6 +818,39 @@ class Poller:
             readings[name] = reading
         group._last, group._last_good = readings, None
         return self._deliver(group, stamp, readings, changed, error)
+
+    def _good(
+        self, group: ScanGroup, stamp: float, values: tuple[Value, ...], tag_names: TagNames
+    ) -> Snapshot | None:
+        """The snapshot of a scan in which every tag was read (``values`` in the plan's tag
+        order, named by ``tag_names``; the scan counted and logged by :meth:`_scanned`)."""
+        changed: AbstractSet[str] = _UNCHANGED
+        before = group._last_good
+        names = tag_names.names
+        if before is not None:  # so was the last one: compare values only
+            if values != before:  # (equal tuples: nothing changed, found in one C call)
+                changed = {
+                    names[i]
+                    for i, (old, new) in enumerate(zip(before, values, strict=True))
+                    if not (old is new or old == new)
+                }
+        else:
+            changed = set()
+            last = group._last
+            for name, got in zip(names, values, strict=True):
+                previous = last.get(name)
+                if (
+                    previous is None
+                    or previous.quality is not _GOOD
+                    or not (previous.value is got or previous.value == got)
+                ):
+                    changed.add(name)
+        good: GoodReadings = _new(GoodReadings)  # a reading is made when asked for
+        good._names = tag_names
+        good._values = values
+        good._stamp = stamp
+        group._last, group._last_good = good, values
+        return self._deliver(group, stamp, good, changed, None)
 
     def _deliver(
         self,
@@ -885,6 +881,137 @@ class Poller:
             },
         )
         return snapshot
+
+
+class _FrameScan:
+    """A group's scan of a plan of one frame on the callback path (asyncio), kept between
+    scans: the group's lease and the client it lends, the plan's command prepared on that
+    client's session (:class:`~aiofins.session.callback.PreparedRequest`) and the decoder
+    of its reply frame. Each due scan :meth:`start` borrows the client (the pool's fast
+    path: the pool sees each scan as a use, idle closing and health checks as before),
+    sends from the timer's step, and :meth:`done` ends it in the session's receive
+    callback: decode, snapshot, buffer."""
+
+    __slots__ = (
+        "client",
+        "decode",
+        "group",
+        "lease",
+        "limits",
+        "names",
+        "poller",
+        "prepared",
+        "request",
+        "stamp",
+        "started",
+    )
+
+    def __init__(
+        self,
+        poller: Poller,
+        group: ScanGroup,
+        lease: _Lease,
+        client: Client,
+        limits: object,
+        one: _OneFrame,
+    ) -> None:
+        self.poller = poller
+        self.group = group
+        self.lease = lease
+        self.client = client
+        #: The client's limits the plan was checked against.
+        self.limits = limits
+        command, self.decode = one
+        plan = group.plan
+        assert plan is not None
+        self.names = plan.tag_names
+        self.prepared = PreparedRequest(
+            client.session, command, self.done, dest=client.dest, timeout=group.timeout
+        )
+        #: The scan in flight (``None``: none), when it started (loop clock, wall clock).
+        self.request: CallbackPending | None = None
+        self.started = self.stamp = 0.0
+
+    def start(self) -> bool:
+        """Send the group's due scan now; False (nothing started, the group's task scans
+        instead) as :meth:`Poller._scan_soon` says, and the step dropped when the group's
+        lease or the client lent is no longer the one it was made for."""
+        group = self.group
+        lease = self.lease
+        if group._lease is not lease:  # (a scan_once beside it holds the lease)
+            group._step = None
+            return False
+        client = lease.borrow_ready()
+        if client is not self.client or client.limits is not self.limits:
+            lease.release()
+            group._step = None
+            return False
+        self.started = self.poller._now()
+        try:
+            request = self.prepared.send()
+        except Exception:  # a bug, not the PLC: the group's task scans (and says what)
+            logger.exception("scan group %s: the scan could not start", group.name)
+            request = None
+        if request is None:
+            lease.release()
+            return False
+        self.request = request
+        self.stamp = time.time()
+        group._lease = None  # in use (a scan_once beside this scan takes another)
+        group._enter(ScanState.SCANNING)
+        group.scans += 1
+        return True
+
+    def done(self, frame: bytes | None, error: BaseException | None) -> None:
+        """The scan's reply frame (a normal completion) or its failure, from the session:
+        decoded in one call where the plan allows (:meth:`ReadPlan.frame_decoder`), else
+        tag by tag (:meth:`Poller._scanned_frame`); its snapshot to the buffer."""
+        if self.request is None:  # (given up by the poller's exit)
+            return
+        self.request = None
+        group = self.group
+        lease = self.lease
+        lease.release()
+        if group._lease is None:
+            group._lease = lease
+        poller = self.poller
+        try:
+            decode = self.decode
+            values = None if frame is None or decode is None else decode(frame)
+            if values is None:
+                poller._scanned_frame(group, self.client, self.started, self.stamp, frame, error)
+                return
+            assert frame is not None
+            if frame[END_CODE] or frame[END_CODE + 1]:  # (CPU error flags)
+                self.client.last_end_code = EndCode(
+                    int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
+                )
+            else:
+                self.client.last_end_code = _NORMAL
+            if group._missed_unlogged or group._failing is not None:  # (to log: the rest)
+                snapshot = poller._scanned(
+                    group, self.started, self.stamp, values, None, _NO_BAD, None
+                )
+            else:  # the usual scan: _scanned's steps for a good scan with nothing to log
+                group.last_duration = poller._now() - self.started
+                snapshot = poller._good(group, self.stamp, values, self.names)
+            poller._handover(group, snapshot)
+        except Exception:  # a bug, not the PLC: logged, and the group scans on
+            logger.exception("scan group %s: the scan could not end", group.name)
+            group.errors += 1
+            if group.state is ScanState.SCANNING:
+                group._enter(ScanState.IDLE)
+
+    def give_up(self) -> None:
+        """The poller exits: the scan in flight, if any, given up (its SID quarantined),
+        the lease given back."""
+        request = self.request
+        if request is not None:
+            self.request = None
+            request.cancel()
+            self.lease.release()
+            if self.group._lease is None:
+                self.group._lease = self.lease
 
 
 _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR

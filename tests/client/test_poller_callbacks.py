@@ -97,12 +97,13 @@ async def test_a_scan_in_flight_holds_its_lease_and_its_state(sim: Simulator) ->
             await until(lambda: group.state is ScanState.SCANNING)
             (stats,) = pool.stats(url).values()
             assert stats.in_use == 1  # borrowed: the pool neither lends it as idle nor closes it
-            assert (group._scan is not None) is is_asyncio()
-            if group._scan is not None:  # a plan of one frame: one request, no batch
-                assert isinstance(group._scan[0], CallbackPending)
+            request = group._in_flight()
+            assert (request is not None) is is_asyncio()
+            if request is not None:  # a plan of one frame: one request, no batch
+                assert isinstance(request, CallbackPending) and group._scan is None
             await take(poller, 1)
         (stats,) = pool.stats(url).values()
-        assert stats.in_use == 0 and group._scan is None
+        assert stats.in_use == 0 and group._in_flight() is None
 
 
 async def test_leaving_with_a_scan_in_flight_gives_everything_back(sim: Simulator) -> None:
@@ -113,7 +114,7 @@ async def test_leaving_with_a_scan_in_flight_gives_everything_back(sim: Simulato
             await take(poller, 1)
             sim.plan.rule = FaultRule(drop_request=1.0)
             await until(lambda: group.state is ScanState.SCANNING)
-        assert group.state is ScanState.STOPPED and group._scan is None
+        assert group.state is ScanState.STOPPED and group._in_flight() is None
         (stats,) = pool.stats(url).values()
         assert stats.in_use == 0
         async with pool.client(url) as plc:

@@ -207,35 +207,21 @@ def start_requests(
 
 
 class CallbackPending(Pending):
-    """One command of :func:`start_request` on the wire, on the session's request path:
-    :meth:`Session.begin` sends it; the receive path hands its reply to :meth:`wake`,
+    """One command of a :class:`PreparedRequest` on the wire, on the session's request
+    path: :meth:`Session.begin` sends it; the receive path hands its reply to :meth:`wake`,
     which calls :meth:`Session.finish`, the deadline watcher its timeout (or the link its
     failure) to :meth:`fail`, which calls :meth:`Session.failure`; either calls ``done``
     from there. A busy reply (2604/2605) with time left sends it again from a timer after
     the session's pause (:meth:`again`). Made bare, ``CallbackPending()`` (its ``__init__`` sets
-    nothing): :func:`start_request` and :meth:`Session.begin` set every field."""
+    nothing): :meth:`PreparedRequest.send` and :meth:`Session.begin` set every field."""
 
-    __slots__ = (
-        "busy",
-        "busy_reply",
-        "done_with",
-        "handle",
-        "params",
-        "retries",
-        "session",
-        "target",
-        "timeout",
-    )
+    __slots__ = ("busy", "busy_reply", "done_with", "handle", "prep")
 
     def __init__(self) -> None:
         pass
 
-    session: Calling
-    #: The destination (``None``: the session's).
-    target: FinsAddress | None
-    timeout: float | None
-    params: bytes
-    retries: int | None
+    #: What it sends, to whom, with which options (shared by every send of the command).
+    prep: PreparedRequest
     #: Busy replies so far, and the last of them.
     busy: int
     busy_reply: bytes
@@ -252,7 +238,7 @@ class CallbackPending(Pending):
         done = self.done_with
         if done is None:  # cancelled
             return
-        session = self.session
+        session = self.prep.session
         try:
             if not session.finish(self, frame, self.busy):  # busy: again after a pause
                 self.busy_reply = frame
@@ -262,13 +248,17 @@ class CallbackPending(Pending):
         except Exception as exc:  # (the end code's error)
             self._end(None, exc)
             return
-        self._end(frame, None)
+        self.done_with = None
+        try:
+            done(frame, None)
+        except Exception:  # the caller's bug: logged here, never raised into the transport
+            logger.exception("%s: a request's callback failed", session.transport.description)
 
     def fail(self, exc: BaseException) -> None:
         """No reply after every transmission (its SID quarantined and slot freed by the
         watcher), or the link failed: :meth:`Session.failure` words it."""
         if self.done_with is not None:
-            self._end(None, self.session.failure(self, exc, self.timeout))
+            self._end(None, self.prep.session.failure(self, exc, self.prep.timeout))
 
     def again(self) -> None:
         """After a busy reply's pause: the command sent again on the request path, within
@@ -278,12 +268,13 @@ class CallbackPending(Pending):
         self.handle = None
         if self.done_with is None:
             return
-        session = self.session
+        prep = self.prep
+        session = prep.session
         left = self.end - session.clock()
         if left > 0.0:
             try:
                 p = session.begin(
-                    self.mrc, self.src, self.params, self.target, left, True, self.retries,
+                    self.mrc, self.src, prep.params, prep.dest, left, True, prep.retries,
                     pending=self,
                 )  # fmt: skip
             except Exception as exc:
@@ -298,7 +289,7 @@ class CallbackPending(Pending):
         done = self.done_with
         assert done is not None
         self.done_with = None
-        _call(self.session, done, frame, error)
+        _call(self.prep.session, done, frame, error)
 
     def cancel(self) -> None:
         """Give up without calling ``done``: unanswered, its SID is quarantined; the slot
@@ -311,7 +302,9 @@ class CallbackPending(Pending):
             self.handle = None
             handle.cancel()
             return
-        self.session.abandon(self, self.session.timeout if self.timeout is None else self.timeout)
+        session = self.prep.session
+        timeout = self.prep.timeout
+        session.abandon(self, session.timeout if timeout is None else timeout)
         self.free_slot()
 
 
@@ -322,6 +315,57 @@ def _call(
         done(frame, error)
     except Exception:  # the caller's bug: logged here, never raised into the transport
         logger.exception("%s: a request's callback failed", session.transport.description)
+
+
+class PreparedRequest:
+    """One idempotent command (``(mrc, src, params)``) to send again and again, its reply
+    frame or failure handed to ``done(frame, error)``: made once (a Poller's scan of one
+    frame makes it once per plan and session), then each :meth:`send` is the session's
+    request path, :meth:`Session.begin` with a new :class:`CallbackPending`, which holds
+    this request instead of a copy of its options. ``dest``, ``timeout`` and ``retries``
+    as in :func:`start_request`; the command is checked by each send, as every request is."""
+
+    __slots__ = ("dest", "done", "mrc", "params", "retries", "session", "src", "timeout")
+
+    def __init__(
+        self,
+        session: Calling,
+        command: Command,
+        done: FrameDone,
+        *,
+        dest: FinsAddress | None = None,
+        timeout: float | None = None,
+        retries: int | None = None,
+    ) -> None:
+        self.session = session
+        self.mrc, self.src, self.params = command
+        self.done = done
+        self.dest = dest
+        self.timeout = timeout
+        self.retries = retries
+
+    def send(self) -> CallbackPending | None:
+        """Send it now and call ``done`` when it ends; the request on the wire (its
+        :meth:`~CallbackPending.cancel` gives up on it), or ``None`` (nothing sent) when
+        :meth:`~Session.begin` cannot start it at once (the link, the breaker, no slot or
+        SID free: the awaitable path waits), or not under asyncio."""
+        session = self.session
+        if not session.on_asyncio:
+            return None
+        p = CallbackPending()
+        p.fut = None
+        p.prep = self
+        p.handle = None
+        p.busy = 0
+        p.done_with = self.done
+        begin = session.begin(
+            self.mrc, self.src, self.params, self.dest, self.timeout, True, self.retries,
+            pending=p,
+        )  # fmt: skip
+        if begin is None:
+            p.done_with = None
+            return None
+        return p
 
 
 def start_request(
@@ -338,20 +382,8 @@ def start_request(
     error)`` with its reply frame or its failure; the returned request's
     :meth:`~CallbackPending.cancel` gives up on it. ``None`` (nothing sent) when
     :meth:`~Session.begin` cannot start it at once (the link, the breaker, no slot or SID
-    free: the awaitable path waits), or not under asyncio."""
-    if not session.on_asyncio:
-        return None
-    p = CallbackPending()
-    p.fut = None
-    p.session = session
-    p.target = dest
-    p.timeout = timeout
-    p.handle = None
-    p.busy = 0
-    p.retries = retries
-    mrc, src, p.params = command
-    p.done_with = done
-    if session.begin(mrc, src, p.params, dest, timeout, True, retries, pending=p) is None:
-        p.done_with = None
-        return None
-    return p
+    free: the awaitable path waits), or not under asyncio. (A command sent again and
+    again: :class:`PreparedRequest`.)"""
+    return PreparedRequest(
+        session, command, done, dest=dest, timeout=timeout, retries=retries
+    ).send()
