@@ -475,8 +475,9 @@ class Poller:
         while schedule and schedule[0][0] <= now:
             when, order, group = pop(schedule)
             interval = group.interval
-            late = math.floor((now - when) / interval)  # scan times already gone
-            if late:
+            late = 0  # scan times already gone
+            if now - when >= interval:
+                late = math.floor((now - when) / interval)
                 when += late * interval
             if group.state is idle:
                 if scan_soon is None:

@@ -295,7 +295,9 @@ class _Lease:
             return None
         self.entry = entry
         client = entry.client
-        return client if client is None else client.with_read_only(self.read_only)
+        if client is None or client.read_only == self.read_only:  # (the usual borrower)
+            return client
+        return client.with_read_only(self.read_only)
 
     async def borrow(self) -> Client:
         """The client, once the endpoint's session is ready, where :meth:`borrow_ready` had
