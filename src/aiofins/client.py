@@ -459,7 +459,7 @@ class Client(CommandMethods):
             p = session.begin(mrc, src, params, target, timeout, idempotent, retries)
             if p is not None:
                 try:
-                    frame = await (p.fut or p.wait())
+                    frame = p.reply or await (p.fut or p.wait())
                 except BaseException as exc:
                     await session.failed(p, exc, timeout)
             if p is None or not session.finish(p, frame):  # a wait first, or busy
@@ -615,7 +615,7 @@ class Client(CommandMethods):
                 p = session.begin(mrc, src, params, target, timeout, True, retries)
                 if p is not None:
                     try:
-                        frame = await (p.fut or p.wait())
+                        frame = p.reply or await (p.fut or p.wait())
                     except BaseException as exc:
                         await session.failed(p, exc, timeout)
                 if p is None or not session.finish(p, frame):  # a wait first, or busy
@@ -978,7 +978,7 @@ class Client(CommandMethods):
                 p = session.begin(mrc, src, params, self.dest, timeout, True)
                 if p is not None:
                     try:
-                        frame = await (p.fut or p.wait())
+                        frame = p.reply or await (p.fut or p.wait())
                     except BaseException as exc:
                         await session.failed(p, exc, timeout)
                 if p is None or not session.finish(p, frame):  # a wait first, or busy

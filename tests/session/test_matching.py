@@ -21,7 +21,13 @@ def relay_error(sid: int, mrc: int = 0x01, src: int = 0x01) -> bytes:
 
 
 def pending(*keys: int, mrc: int = 0x01, src: int = 0x01) -> dict[int, Pending]:
-    return {k: Pending(k, mrc, src) for k in keys}
+    return {k: _record(k, mrc, src) for k in keys}
+
+
+def _record(k: int, mrc: int, src: int) -> Pending:
+    p = Pending()
+    p.blank(k, mrc, src)
+    return p
 
 
 def test_a_relay_error_reaches_the_one_request_with_its_sid_and_command() -> None:

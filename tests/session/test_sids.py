@@ -20,8 +20,15 @@ def dest(address: FinsAddress = PLC) -> DestState:
     return DestState(address, b"", SlotQueue(5))
 
 
+def record(key: int) -> Pending:
+    """A request of 0101 under ``key``, not sent."""
+    p = Pending()
+    p.blank(key, 0x01, 0x01)
+    return p
+
+
 def in_flight(space: SidSpace, key: int) -> Pending:
-    p = Pending(key, 0x01, 0x01)
+    p = record(key)
     p.sent_at = monotonic()
     space.pending[key] = p
     return p
@@ -137,7 +144,7 @@ def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -
     answered(space, 0x10002, 99.9)  # answered 0.1 s ago, free under the old linger (0)
     answered(space, 0x10003, 99.0)  # answered 1 s ago: past any linger learnt here
     answered(space, 0x10004, 99.95)  # answered, and its SID carries a new request already
-    space.pending[0x10004] = Pending(0x10004, 0x01, 0x01)
+    space.pending[0x10004] = record(0x10004)
     kind, lateness = space.unmatched(stats, 0x10001, b"reply")
     assert kind == "duplicate" and lateness == pytest.approx(0.3)
     assert space.linger == pytest.approx(0.6)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from asyncio import InvalidStateError
 from collections.abc import Callable, Sequence
 from functools import partial
 from struct import error as StructError
@@ -433,8 +434,7 @@ class Session:
             key = p.key
         elif linger and p.plan is not None and self._held(p, key, frame, sids):
             return  # (a copy of the SID's last reply, held back: see _hold_copy)
-        p.done = True
-        p.end_code = raw
+        p.done, p.end_code = True, raw
         now = self.clock()
         if sids.held or sids.given_up:
             self._answered_after_doubt(sids, key, frame, p.sent_at, now)
@@ -446,8 +446,7 @@ class Session:
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
-        r = p.rtt
-        if r is None:  # sent again: a reply to another transmission may follow
+        if (r := p.rtt) is None:  # sent again: a reply to another transmission may follow
             linger = max(linger, sids.resent_linger(p, now, self.rto_bounds[1]))
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
         elif not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
@@ -457,16 +456,27 @@ class Session:
             sids.remember(key, frame, now, p.plan)  # (what it asked: read by _hold_copy)
         if (fut := p.fut) is None:
             p.wake(frame)
-        elif not fut.done():  # (cancelled: the caller cleans up as it resumes)
-            fut.set_result(frame)
+        else:
+            try:  # noqa: SIM105 (no context manager: once per reply)
+                fut.set_result(frame)
+            except InvalidStateError:  # (cancelled: the caller cleans up as it resumes)
+                pass
         if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
         fifo = self._fifo  # the answered requests at the front of the deadlines dropped
         while fifo and fifo[0].done:
             fifo.popleft()
-        if self._heap or len(fifo) > 64 + 4 * len(pending):  # (a slow one keeps others)
-            self._deadlines.prune(len(pending))
-        elif not fifo and self._watcher.disarms:  # no deadline left, a timer for nothing
+        if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
+            self._deadlines_left(len(pending))
+
+    def _deadlines_left(self, in_flight: int) -> None:
+        """After a reply, when the deadlines need more than dropping the answered requests
+        at the front of their FIFO: compacted when some stay out of order (the heap) or a
+        slow request keeps many answered ones behind it; with no deadline left, the
+        watcher's timer cancelled if it fires for nothing (:attr:`DeadlineWatcher.disarms`)."""
+        if self._heap or len(self._fifo) > 64 + 4 * in_flight:
+            self._deadlines.prune(in_flight)
+        elif not self._fifo and self._watcher.disarms:
             self._watcher.disarm()
 
     def _matched(
@@ -809,6 +819,7 @@ class Session:
         every attempt go out, the wait doubling each time; never more than the caller's
         per-attempt ``cap``."""
         p.done = p.abandoned = False
+        p.reply = None
         p.attempts = 1
         p.end = end
         if retries:
@@ -834,6 +845,11 @@ class Session:
         watcher = self._watcher
         if deadline < watcher.at:
             watcher.arm(deadline, now)
+        if self._log_frames or self._hooks is not None:
+            self._sent_told(p, frame)
+
+    def _sent_told(self, p: Pending, frame: bytes) -> None:
+        """The hooks (:class:`RequestSent`) and the DEBUG log told that ``p`` is sent."""
         hooks = self._hooks
         if hooks is not None and hooks.request_sent:
             self.emit(hooks.request_sent, RequestSent, p)
@@ -950,14 +966,10 @@ class Session:
         slots.in_flight += 1
         now = self.clock() if now is None else now
         self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
-        if pending is not None:
-            p = pending
-        elif self._asyncio:  # (_pending_made(), inlined)
-            p = AsyncioPending()
-            p.fut = self._new_future()
-        else:
-            p = self._other_pending()
+        asyncio_made = pending is None and self._asyncio
+        p = pending or (AsyncioPending() if asyncio_made else self._other_pending())
         p.slots = slots
+        p.fut = None  # (under asyncio made after the send if it is not answered by then)
         frame = self.start(p, state, mrc, src, params, retries, now, now + timeout, cap)
         if frame is None:  # no SID free at once: call() waits for one
             self._slot_back(p)
@@ -970,6 +982,8 @@ class Session:
             return self._unsent(p, exc, timeout, pending)
         if (poll := transport.poll_now) is not None and pending is None:
             self._read_after_send(poll, p)
+        if asyncio_made and p.reply is None and p.fut is None:  # no answer yet: a future
+            p.fut = self._new_future()
         return p
 
     def _unsent(
@@ -1251,7 +1265,7 @@ class Session:
         )
         if p is not None:
             try:
-                frame = await (p.fut or p.wait())  # (the bare future under asyncio)
+                frame = p.reply or await (p.fut or p.wait())  # (answered at once: no wait)
             except BaseException as exc:
                 await self.failed(p, exc, timeout, _in_call)
         if p is None or not self.finish(p, frame):  # a wait first, or busy: a pause first

@@ -71,6 +71,28 @@ class Pending:
     reply comes (the receive path reads it with the rest of the reply's head).
     """
 
+    key: int
+    mrc: int
+    src: int
+    done: bool
+    #: When the current attempt ends.
+    deadline: float
+    #: The call's deadline: no transmission after it, no busy retry past it.
+    end: float
+    sent_at: float
+    fut: asyncio.Future[bytes] | None
+    attempts: int
+    plan: Plan | Retransmission | None
+    rtt: DestState | None
+    abandoned: bool
+    #: The extra SID space it went out on (``None``: the session's own transport).
+    space: Space | None
+    #: The in-flight slot it holds (``None``: none, or given back: see :meth:`free_slot`).
+    slots: SlotQueue | None
+    #: The reply frame, for a caller that may take it without a wait: a request answered
+    #: before its caller waited (see :class:`AsyncioPending`) or by a driver that read it
+    #: (:class:`HeldPending`); ``None`` otherwise (then ``await (p.fut or p.wait())``).
+    reply: bytes | None
     end_code: int
 
     __slots__ = (
@@ -84,6 +106,7 @@ class Pending:
         "key",
         "mrc",
         "plan",
+        "reply",
         "rtt",
         "sent_at",
         "slots",
@@ -91,25 +114,26 @@ class Pending:
         "src",
     )
 
-    def __init__(self, key: int, mrc: int, src: int) -> None:
+    def blank(self, key: int, mrc: int, src: int) -> None:
+        """Set every field, for command ``mrc src`` under ``key``, not yet sent (records made
+        outside :meth:`Session.start <aiofins.session.Session.start>`, which sets them all).
+        ``Pending`` has no ``__init__``: a record made bare, ``AsyncioPending()``, costs no
+        Python call (see docs/packaging.md)."""
         self.key = key
         self.mrc = mrc
         self.src = src
         self.done = False
         self.deadline = 0.0
-        #: The call's deadline: no transmission after it, no busy retry past it.
         self.end = 0.0
         self.sent_at = 0.0
-        self.fut: asyncio.Future[bytes] | None = None
+        self.fut = None
         self.attempts = 1
-        self.plan: Plan | Retransmission | None = None
-        self.rtt: DestState | None = None
+        self.plan = None
+        self.reply = None
+        self.rtt = None
         self.abandoned = False
-        #: The extra SID space it went out on (``None``: the session's own transport).
-        self.space: Space | None = None
-        #: The in-flight slot it holds (``None``: none, or given back: see
-        #: :meth:`free_slot`).
-        self.slots: SlotQueue | None = None
+        self.space = None
+        self.slots = None
 
     def free_slot(self) -> None:
         """Give back the in-flight slot this request holds, if any: its reply came, it was
@@ -150,34 +174,40 @@ class Pending:
 
 
 class AsyncioPending(Pending):
-    """Waits on a bare asyncio future: the cheapest wake-up asyncio has.
+    """Waits on a bare asyncio future, the cheapest wake-up asyncio has, made only when its
+    caller has to wait: a request answered by the read right after its send (see
+    :meth:`Session.begin <aiofins.session.Session.begin>`) keeps its reply in
+    :attr:`reply` and never has one.
 
-    Made bare, ``AsyncioPending()`` (its ``__init__`` sets nothing): :meth:`Session.start`
-    sets every field, the caller :attr:`fut` and :attr:`slots`. (Not ``__init__ =
-    object.__init__``: a compiled class calls its base's ``__init__`` regardless, see
-    docs/packaging.md.)"""
+    Made bare, ``AsyncioPending()`` (no ``__init__`` in its classes: no Python call):
+    :meth:`Session.start` sets every field, the caller :attr:`fut` (or not) and
+    :attr:`slots`."""
 
     __slots__ = ()
 
-    def __init__(self) -> None:
-        pass
-
     def wake(self, frame: bytes) -> None:
         fut = self.fut
-        if fut is not None and not fut.done():
+        if fut is None:  # answered before its caller waits
+            self.reply = frame
+        elif not fut.done():
             fut.set_result(frame)
 
     def fail(self, exc: BaseException) -> None:
         fut = self.fut
-        if fut is not None and not fut.done():
+        if fut is None:  # failed before its caller waits (its send, or the link's failure)
+            self.fut = fut = asyncio.get_running_loop().create_future()
+        if not fut.done():
             fut.set_exception(exc)
 
     async def wait(self) -> bytes:
+        reply = self.reply
+        if reply is not None:
+            return reply
         return await cast("asyncio.Future[bytes]", self.fut)
 
     def __await__(self) -> Generator[Any, None, bytes]:
-        # the future itself: no coroutine of ours
-        return cast("asyncio.Future[bytes]", self.fut).__await__()
+        fut = self.fut  # the future itself, when there is one: no coroutine of ours
+        return self.wait().__await__() if fut is None else fut.__await__()
 
 
 class EventPending(Pending):
@@ -186,7 +216,7 @@ class EventPending(Pending):
     __slots__ = ("event", "result", "traceback")
 
     def __init__(self, key: int, mrc: int, src: int) -> None:
-        Pending.__init__(self, key, mrc, src)
+        self.blank(key, mrc, src)
         self.event = anyio.Event()
         self.result: bytes | BaseException | None = None
         self.traceback: TracebackType | None = None
@@ -230,7 +260,7 @@ class HeldPending(Pending):
 
     def wake(self, frame: bytes) -> None:
         if self.result is None:
-            self.result = frame
+            self.result = self.reply = frame
 
     def fail(self, exc: BaseException) -> None:
         if self.result is None:
