@@ -14,6 +14,10 @@ of interpreter start-up and imports. Cases:
   ``session.request`` in a loop, per request;
 - ``read``: sequential ``plc.read("D100", 1)`` of a :class:`~aiofins.client.Client` over
   that session (the public API's usual read), per read;
+- ``requestnow`` / ``readnow``: ``request`` / ``read`` with the reply there at once: the
+  transport has a ``poll_now`` that hands it over, as a peer on the same core answers
+  during the send and the session's read right after the send finds the reply (one loop
+  step later if that read is not made);
 - ``reads``: the same 50 tasks calling ``plc.read("D100", 1)`` of a
   :class:`~aiofins.client.Client` over that session (the public API), per read;
 - ``dm``: ``plc.read("D0", 32768)`` (a full DM area, 33 frames of up to 999 words, pipelined
@@ -114,6 +118,20 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
 
             if case.startswith("dm"):
                 send = send_words
+            if case.endswith("now"):  # the reply at once (see the module's docstring)
+                queued: list[bytes] = []
+
+                def poll() -> None:
+                    while queued:
+                        received(queued.pop())
+
+                def send_now(frame: bytes) -> None:
+                    head = b"\xc0\x00\x02" + frame[6:9] + frame[3:6] + frame[9:12]
+                    queued.append(head + b"\x00\x00\x00\x2a")
+                    call_soon(poll)  # (if the session does not read at once)
+
+                send = send_now
+                self.poll_now = poll
 
             self.fast_send = send
 
@@ -138,11 +156,11 @@ def _workload(case: str, n: int, adaptive: bool) -> None:
             max_in_flight=50,
             **options,
         ) as session:
-            if case == "request":
+            if case in ("request", "requestnow"):
                 request = session.request
                 for _ in range(n):
                     await request(0x01, 0x01, params, idempotent=True)
-            elif case == "read":
+            elif case in ("read", "readnow"):
                 read = Client(session).read
                 for _ in range(n):
                     await read("D100", 1)

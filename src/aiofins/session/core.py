@@ -90,6 +90,10 @@ from .watcher import DeadlineWatcher, Expired
 
 logger = logging.getLogger("aiofins.session")
 _DEBUG = logging.DEBUG
+#: logging's own record of what ``logger.isEnabledFor(level)`` answered, which logging
+#: empties on any change of level (``setLevel``, ``logging.disable``): read before asking,
+#: a dict lookup where the call costs several (``{}``, always asking, if logging keeps none).
+_ENABLED: dict[int, bool] = getattr(logger, "_cache", {})
 
 _CLOSED_BREAKER = BreakerState.CLOSED
 #: The round trip is sampled on one reply in ``_SAMPLE_MASK + 1`` (and on the first ones).
@@ -446,21 +450,19 @@ class Session:
         stats._lat_count = n + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
-        if (r := p.rtt) is None:  # sent again: a reply to another transmission may follow
-            linger = max(linger, sids.resent_linger(p, now, self.rto_bounds[1]))
-            sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
-        elif not n & _SAMPLE_MASK:  # RTT sampled on every 8th reply (RFC 6298: once per RTT)
-            r.sample(latency, self.rto_bounds if self.adaptive else None)
-        if linger:  # before the wake-up: a batch sends its next command inside it
-            sids.lingering[key] = now + linger
-            sids.remember(key, frame, now, p.plan)  # (what it asked: read by _hold_copy)
-        if (fut := p.fut) is None:
-            p.wake(frame)
-        else:
+        if (r := p.rtt) is not None and not n & _SAMPLE_MASK:  # every 8th: once per RTT
+            r.sample(latency, self.rto_bounds if self.adaptive else None)  # (RFC 6298)
+        if r is None or linger:  # before the wake-up: a batch sends its next command inside it
+            self._lingers(sids, p, key, frame, now, linger)
+        if (fut := p.fut) is not None:
             try:  # noqa: SIM105 (no context manager: once per reply)
                 fut.set_result(frame)
             except InvalidStateError:  # (cancelled: the caller cleans up as it resumes)
                 pass
+        elif type(p) is AsyncioPending:  # answered before its caller waits: no future
+            p.reply = frame
+        else:
+            p.wake(frame)
         if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
         fifo = self._fifo  # the answered requests at the front of the deadlines dropped
@@ -468,6 +470,20 @@ class Session:
             fifo.popleft()
         if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
             self._deadlines_left(len(pending))
+
+    def _lingers(
+        self, sids: SidSpace, p: Pending, key: int, frame: bytes, now: float, linger: float
+    ) -> None:
+        """``p`` answered by ``frame`` ``now`` on a link with a ``linger`` (the link's, or a
+        relay error's), or after it was sent again (``p.rtt`` is ``None``: a reply to
+        another transmission may follow, so its SID lingers as long as that needs): its
+        SID lingers, and its reply is remembered with what it asked (for :meth:`_hold_copy`)."""
+        if p.rtt is None:  # sent again
+            linger = max(linger, sids.resent_linger(p, now, self.rto_bounds[1]))
+            sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
+        if linger:
+            sids.lingering[key] = now + linger
+            sids.remember(key, frame, now, p.plan)
 
     def _deadlines_left(self, in_flight: int) -> None:
         """After a reply, when the deadlines need more than dropping the answered requests
@@ -965,7 +981,8 @@ class Session:
             return None
         slots.in_flight += 1
         now = self.clock() if now is None else now
-        self._log_frames = logger.isEnabledFor(_DEBUG)  # (log_frames_now(), inlined)
+        log = _ENABLED.get(_DEBUG)  # (log_frames_now(), inlined)
+        self._log_frames = logger.isEnabledFor(_DEBUG) if log is None else log
         asyncio_made = pending is None and self._asyncio
         p = pending or (AsyncioPending() if asyncio_made else self._other_pending())
         p.slots = slots

@@ -88,7 +88,9 @@ def _drain(recv: Any, sink: FrameSink, awaited: Sized) -> OSError | None:
     errors (port unreachable) are counted and skipped; another socket error is returned.
     """
     received = sink.frame_received
-    for _ in range(_BATCH):
+    left = _BATCH  # (a count, not a range(): no object made per drain)
+    while left:
+        left -= 1
         try:
             data = recv(_RECV_SIZE)
         except (BlockingIOError, InterruptedError):
