@@ -419,11 +419,13 @@ class BlockingDriver:
         retries: int | None = None,
         window: int | None = None,
         on_response: Callable[[int, Response], object] | None = None,
+        on_frame: Callable[[int, bytes], object] | None = None,
     ) -> list[Response]:
         """Send many commands pipelined, up to ``window`` on the wire (default and at
         most: the destination's in-flight cap), as :meth:`Session.request_many` does: each
         with its own ``timeout`` and the guarantees of :meth:`request`, ``on_response(index,
-        response)`` as each normal response comes, the first error raised after the
+        response)`` as each normal response comes (or ``on_frame(index, frame)``, no
+        response made, the list returned empty), the first error raised after the
         others are given up (their SIDs quarantined). Completes without suspending."""
         session = self.session
         if dest is None:
@@ -468,8 +470,7 @@ class BlockingDriver:
                     continue
                 c = current
                 reply = self._wait(c.p)  # its result is in: returned or raised
-                response = session.response(reply, c.p.end_code)
-                if response is None:  # an error end code: busy (sent again) or raised
+                if not session.completed(c.p.end_code):  # busy (sent again) or raised
                     self._pause_or_raise(reply, c.busy, c.end, c.mrc, c.src)
                     c.busy += 1
                     c.p = self._start(
@@ -478,8 +479,11 @@ class BlockingDriver:
                     continue
                 current = None
                 flight.remove(c)
-                results[c.index] = response
                 left -= 1
+                if on_frame is not None:
+                    on_frame(c.index, reply)
+                    continue
+                response = results[c.index] = response_of(reply)
                 if on_response is not None:
                     on_response(c.index, response)
         except BaseException as exc:
@@ -492,6 +496,8 @@ class BlockingDriver:
             # (its request is missing if its first _start() raised)
             raise self._failed(exc, getattr(current, "p", None), dest, timeout) from None
         session.tell_breaker(None, timeout)
+        if on_frame is not None:
+            return []
         return results  # type: ignore[return-value]  # every one filled
 
     def _wait_any(self, flight: list[_Command]) -> None:

@@ -15,6 +15,7 @@ from array import array
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from itertools import accumulate
 
 from .chunking import plan_memory
 from .protocol.addresses import parse_span
@@ -72,6 +73,8 @@ class ReadFrames:
     unpack_from: Callable[[bytes, int], tuple[int, ...]] | None
     #: The size of that reply frame (header, command code, end code and data).
     reply_size: int
+    #: Where each frame's data goes in the whole read's bytes (the sum of the sizes before).
+    offsets: tuple[int, ...]
 
     def one(self, frame: bytes) -> list[int]:
         """The elements of a one-frame read's reply ``frame`` (its data checked for its
@@ -96,23 +99,6 @@ class ReadFrames:
             return words.tolist()
         return list(unpack_elements(raw, self.element_size))
 
-    def words_array(self, data: Sequence[bytes]) -> WordArray:
-        """The words of the replies' data as an ``array('H')`` in the host's byte order
-        (each reply checked for its size first): each frame's data copied once into its
-        place, one byte swap, no Python object per word. The plan must be of words."""
-        words = array("H", _ZERO) * (sum(self.sizes) >> 1)  # sized once: no regrowth
-        into = memoryview(words).cast("B")
-        at = 0
-        for request, size, part in zip(self.requests, self.sizes, data, strict=True):
-            if len(part) != size:
-                request.decode_response(part)  # raises DecodeError saying what is wrong
-            into[at : at + size] = part
-            at += size
-        into.release()  # the caller may grow the array: no buffer left exported
-        if _SWAP:
-            words.byteswap()
-        return words
-
 
 @lru_cache(maxsize=PLAN_CACHE_SIZE)
 def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
@@ -131,7 +117,60 @@ def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
         size,
         struct.Struct(f">{count}{code}").unpack_from if len(requests) == 1 else None,
         14 + count * size,
+        tuple(accumulate((r.count * size for r in requests[:-1]), initial=0)),
     )
+
+
+class FrameWords:
+    """The words of a read of words, as its reply frames come: :meth:`put` (a batch's
+    ``on_frame``) checks each frame's data for its size and copies it into its place in
+    one ``array('H')``, sized once (no :class:`Response`, no copy of the data per frame,
+    no Python object per word); :meth:`words` swaps the bytes once at the end.
+    ``progress(done, total)`` is told the words read so far after each frame."""
+
+    __slots__ = ("final", "into", "last", "out", "plan", "progress", "read", "total")
+
+    def __init__(self, plan: ReadFrames, progress: Callable[[int, int], object] | None) -> None:
+        self.plan = plan
+        self.progress = progress
+        self.total = sum(plan.counts)
+        self.read = 0
+        self.out = array("H", _ZERO) * (sum(plan.sizes) >> 1)
+        self.into: memoryview | None = memoryview(self.out).cast("B")
+        #: The last command's index, and its reply frame once it came (its end code is
+        #: the call's ``last_end_code``).
+        self.final = len(plan.sizes) - 1
+        self.last: bytes | None = None
+
+    def put(self, index: int, frame: bytes) -> None:
+        """Frame ``index``'s reply: its data (``frame[14:]``) into its place."""
+        plan = self.plan
+        size = plan.sizes[index]
+        if len(frame) != size + 14:
+            plan.requests[index].decode_response(frame[14:])  # raises DecodeError: what
+        at = plan.offsets[index]
+        into = self.into
+        assert into is not None  # (released only after the last frame)
+        into[at : at + size] = memoryview(frame)[14:]
+        if index == self.final:
+            self.last = frame
+        if self.progress is not None:
+            self.read += plan.counts[index]
+            self.progress(self.read, self.total)
+
+    def release(self) -> None:
+        """No buffer of the array left exported (the caller may grow it)."""
+        if self.into is not None:
+            self.into.release()
+            self.into = None
+
+    def words(self) -> WordArray:
+        """The words read, in the host's byte order (after every frame came)."""
+        self.release()
+        words = self.out
+        if _SWAP:
+            words.byteswap()
+        return words
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,6 +20,7 @@ from typing import Any, NoReturn, TypeVar, cast, overload
 import anyio
 
 from ._callplan import (
+    FrameWords,
     ReadFrames,
     WriteFrames,
     cacheable,
@@ -499,7 +500,9 @@ class Client(CommandMethods):
         route = self.route_to(dest)
         for mrc, src, params in commands:
             check_command(route, mrc, src, params)
-        return await self._execute_many(commands, dest, timeout, retries, None, idempotent)
+        return await self._execute_many(
+            commands, dest, timeout, retries, None, idempotent=idempotent
+        )
 
     async def _execute_many(
         self,
@@ -508,10 +511,11 @@ class Client(CommandMethods):
         timeout: float | None,
         retries: int | None,
         on_response: Callable[[int, Response], object] | None,
+        on_frame: Callable[[int, bytes], object] | None = None,
         idempotent: bool = True,
     ) -> list[Response]:
         """:meth:`execute_many` without the read-only check (reads call it directly), with
-        the session's ``on_response``."""
+        the session's ``on_response`` or ``on_frame`` (then no response is returned)."""
         if retries is not None or (
             timeout is not None and (type(timeout) is not float or not timeout > 0.0)
         ):  # checked unless a positive float (NaN is not > 0): one comparison per call
@@ -525,6 +529,7 @@ class Client(CommandMethods):
                 idempotent=idempotent,
                 retries=retries,
                 on_response=on_response,
+                on_frame=on_frame,
             )
         except EndCodeError as exc:
             self._add_addressing_hint(exc, target)
@@ -633,6 +638,9 @@ class Client(CommandMethods):
             if progress is not None:
                 progress(count, count)
             return plan.one(frame)
+        if plan.element_size == 2:  # words: each frame's data copied once into an array
+            words = await self._fetch_words(plan, dest, timeout, retries, progress)
+            return words.tolist()
         return plan.values(await self._fetch(plan, dest, timeout, retries, progress))
 
     def _read_plan(
@@ -680,6 +688,27 @@ class Client(CommandMethods):
 
         responses = await self._execute_many(commands, dest, timeout, retries, report)
         return [response.data for response in responses]
+
+    async def _fetch_words(
+        self,
+        plan: ReadFrames,
+        dest: FinsAddress | str | None,
+        timeout: float | None,
+        retries: int | None,
+        progress: Progress | None,
+    ) -> WordArray:
+        """The words of every frame of ``plan`` (a read of words) in one ``array('H')``:
+        the batch hands each reply frame to :meth:`FrameWords.put`, which copies its data
+        into place (no :class:`Response` per frame), reported to ``progress`` as it comes."""
+        sink = FrameWords(plan, progress)
+        try:
+            await self._execute_many(plan.commands, dest, timeout, retries, None, sink.put)
+        finally:
+            sink.release()
+        last = sink.last
+        if last is not None:  # the last command's end code, as for any call
+            self.last_end_code = end_code_of(last) if last[12] or last[13] else NORMAL
+        return sink.words()
 
     async def write(
         self,
@@ -823,7 +852,7 @@ class Client(CommandMethods):
             start_address(address, words)  # says what is wrong with the address
         start = typed_start(address, t, count)
         plan = self._read_plan(start, words, dest)
-        out = plan.words_array(await self._fetch(plan, dest, timeout, retries, progress))
+        out = await self._fetch_words(plan, dest, timeout, retries, progress)
         if t.kind == "uint16":  # one word per value, whatever the word order
             return out
         return words_to_array(out, t)

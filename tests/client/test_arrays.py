@@ -10,10 +10,13 @@ import pytest
 
 from aiofins.connection import connect
 from aiofins.protocol.arrays import word_bytes
-from aiofins.protocol.errors import AddressError, CommandError
+from aiofins.protocol.errors import AddressError, CommandError, DecodeError
 from aiofins.protocol.limits import NetworkType
+from aiofins.simulator.faults import FaultRule
 from aiofins.simulator.plc import VirtualPLC
 from aiofins.simulator.runner import Simulator
+
+from ..session.test_session_udp import Reply, reply, udp_responder, word_data
 
 pytestmark = pytest.mark.anyio
 
@@ -145,3 +148,35 @@ async def test_arrays_keep_to_each_destinations_route() -> None:
             await plc.write_array("D0", array("H", [1] * 268), dest="3.5.0")
         await plc.write_array("D10", array("H", [7, 8, 9]), dest="3.5.0")
         assert plant.station("press").plc.read("D10", 3) == [7, 8, 9]
+
+
+async def test_a_big_read_keeps_the_cpu_flags_of_its_last_reply(sim: Simulator, url: str) -> None:
+    memory(sim).memory.write_words(DM, 0, list(range(3000)))
+    sim.plan.rule = FaultRule(flags=0x40)  # non-fatal CPU error: every reply still normal
+    async with connect(url, timeout=2) as plc:
+        assert await plc.read_array("D0", 3000) == array("H", range(3000))
+        assert plc.last_end_code is not None and plc.last_end_code.raw == 0x0040
+        assert await plc.read("D0", 3000) == list(range(3000))
+        assert plc.last_end_code.raw == 0x0040
+        sim.plan.rule = FaultRule()
+        assert await plc.read_array("D0", 3000) == array("H", range(3000))
+        assert plc.last_end_code.raw == 0
+
+
+async def test_a_reply_of_the_wrong_size_is_a_decode_error_and_ends_the_read() -> None:
+    """Each frame's data is checked for its size before it is copied into the array: the
+    second frame (words 999-1997) answered a word short ends the read with the error."""
+
+    def one_short(cmd: bytes) -> list[Reply]:
+        data = word_data(cmd)
+        return [(0.0, reply(cmd, 0, data[:-2] if cmd[13:15] == b"\x03\xe7" else data))]
+
+    async with (
+        udp_responder(one_short) as peer,
+        connect(f"udp://127.0.0.1:{peer.port}?node=1", timeout=2) as plc,
+    ):
+        for read in (plc.read_array, plc.read):
+            with pytest.raises(DecodeError, match=r"expected 999 x 2 = 1998 data bytes, got 1996"):
+                await read("D0", 3000)
+            assert plc.session.stats.in_flight == 0
+        assert (await plc.read_array("D0", 998)).tolist() == [(1 << 12) ^ w for w in range(998)]

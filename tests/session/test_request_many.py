@@ -340,3 +340,73 @@ async def test_an_exception_in_on_response_ends_the_batch_and_is_raised() -> Non
         results = await s.request_many(reads(range(60, 70)))
         assert [r.data for r in results] == [expected(w) for w in range(60, 70)]
         assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_on_frame_hands_each_normal_reply_frame_and_returns_no_responses() -> None:
+    """``on_frame(index, frame)``: each command's normal reply frame itself, once, in
+    arrival order (flags 0040 included: a normal completion); a busy reply is sent again
+    and only its normal reply handed; nothing is returned (no Response is made)."""
+    held: list[bytes] = []
+    busy: set[int] = set()
+
+    def reverse_in_fours(cmd: bytes) -> list[Reply]:
+        word = word_of(cmd)
+        if word == 705 and word not in busy:  # busy once: sent again, a fresh SID
+            busy.add(word)
+            return [(0.0, reply(cmd, 0x2604))]
+        held.append(cmd)
+        if len(held) < 4:
+            return []
+        out = [(0.0, reply(c, 0x0040 if word_of(c) == 702 else 0, word_data(c)))
+               for c in reversed(held)]  # fmt: skip
+        held.clear()
+        return out
+
+    frames: list[tuple[int, bytes]] = []
+    async with (
+        udp_responder(reverse_in_fours) as peer,
+        session_for(peer, max_in_flight=4, busy_backoff=0.001) as s,
+    ):
+        results = await s.request_many(
+            reads(range(700, 740)),
+            timeout=5,
+            idempotent=True,
+            on_frame=lambda i, frame: frames.append((i, frame)),
+        )
+        assert results == []
+        assert sorted(i for i, _ in frames) == list(range(40))
+        for i, frame in frames:
+            assert frame[14:] == expected(700 + i)
+            assert frame[9] == next(c for c in reversed(peer.received) if word_of(c) == 700 + i)[9]
+            assert frame[12:14] == (b"\x00\x40" if i == 2 else b"\x00\x00")
+        assert s.stats.completed == 40 and s.stats.busy_retries == 1
+        assert [word_of(c) for c in peer.received].count(705) == 2
+        if s.on_asyncio:  # the receive callback hands them over in arrival order
+            assert [i for i, _ in frames][:4] == [3, 2, 1, 0]
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_an_exception_in_on_frame_ends_the_batch_and_is_raised() -> None:
+    calls: list[int] = []
+
+    def stop_at_third(index: int, _frame: bytes) -> None:
+        calls.append(index)
+        if len(calls) == 3:
+            raise RuntimeError("the caller's decoder failed")
+
+    async with (
+        udp_responder() as peer,
+        session_for(peer, max_in_flight=4, quarantine_factor=50.0) as s,
+    ):
+        with pytest.raises(RuntimeError, match="decoder failed"):
+            await s.request_many(reads(range(30)), timeout=5, on_frame=stop_at_third)
+        assert len(calls) == 3  # nothing handed over after the failure
+        assert len(peer.received) < 30  # the rest was not sent
+        assert_idle(s)
+        with pytest.raises(ParameterError):  # an end code error ends it the same way
+            peer.handler = lambda cmd: [(0.0, reply(cmd, 0x1103))]
+            await s.request_many(reads(range(5)), timeout=5, on_frame=stop_at_third)
+        assert len(calls) == 3
+        assert_idle(s)

@@ -49,6 +49,9 @@ _SID_WAIT = 0.01
 Command = tuple[int, int, bytes]
 #: ``on_response(index, response)``: called as each command's normal response arrives.
 OnResponse = Callable[[int, Response], object]
+#: ``on_frame(index, frame)``: each command's normal reply frame as it arrives, instead of a
+#: :class:`Response` (the caller decodes the frame: ``frame[14:]`` is the data).
+OnFrame = Callable[[int, bytes], object]
 
 __all__ = ["check_command", "end_code_error", "raise_after_a_turn", "request_many"]
 
@@ -78,7 +81,7 @@ class Batching(SidUser, Protocol):
 
     def spare_sid(self, state: DestState, now: float) -> tuple[int, ExtraSpace] | None: ...
 
-    def response(self, frame: bytes, end_code: int) -> Response | None: ...
+    def completed(self, end_code: int) -> bool: ...
 
     def busy_pause(self, frame: bytes, busy: int) -> float | None: ...
 
@@ -133,50 +136,40 @@ class BatchPending(Pending):
 
     def wake(self, frame: bytes) -> None:
         """The receive callback matched a reply to this command (already out of the pending
-        table): store its result and let the slot carry the batch's next command, or end
-        the batch. (Here rather than in a method of the batch: one call less per reply.)"""
+        table): hand its frame to the caller (``on_frame``) or store its :class:`Response`,
+        and let the slot carry the batch's next command, or end the batch. (Here rather
+        than in a method of the batch: one call less per reply.)"""
         batch = self.batch
         if batch.fut.done():
             return
         session = batch.session
-        if self.end_code:  # flags or an error: see Session.completed
-            response = session.response(frame, self.end_code)
-        else:  # 0000, the usual reply: counted as Session.completed counts it, without its call
+        end_code = self.end_code
+        if not end_code:  # 0000, the usual reply: counted as Session.completed counts it
             session.stats.completed += 1
-            response = response_of(frame)
-        if response is not None:
-            batch.results[self.index] = response
-            if batch.on_response is not None:
-                try:
-                    batch.on_response(self.index, response)
-                except BaseException as exc:  # the caller's: raised to it, not to the transport
-                    batch.finish(exc)
-                    return
-            remaining = batch.remaining = batch.remaining - 1
-            if not remaining:
-                batch.finish(None)
-                return
-            following = batch.next
-            if (
-                following < batch.count
-                and batch.held >= batch.window
-                and not batch.state.slots.waiters
-            ):
-                batch.next = following + 1  # the common case of slot_free, inlined
-                if batch.flush_handle is None:
-                    batch.flush_handle = session.loop.call_soon(batch.flush)
+        elif not session.completed(end_code):  # an error: busy (sent again) or raised
+            batch.refused(self, frame)
+            return
+        try:
+            if (on_frame := batch.on_frame) is not None:  # the caller decodes the frame
+                on_frame(self.index, frame)
             else:
-                batch.slot_free()
+                response = batch.results[self.index] = response_of(frame)
+                if batch.on_response is not None:
+                    batch.on_response(self.index, response)
+        except BaseException as exc:  # the caller's: raised to it, not to the transport
+            batch.finish(exc)
             return
-        index = self.index
-        busy = batch.busy.get(index, 0)
-        pause = session.busy_pause(frame, busy)
-        if pause is not None:
-            session.stats.busy_retries += 1
-            batch.busy[index] = busy + 1
-            batch.later(pause, index)
+        remaining = batch.remaining = batch.remaining - 1
+        if not remaining:
+            batch.finish(None)
             return
-        batch.finish(session.end_code_failure(frame, self.mrc, self.src))
+        following = batch.next
+        if following < batch.count and batch.held >= batch.window and not batch.state.slots.waiters:
+            batch.next = following + 1  # the common case of slot_free, inlined
+            if batch.flush_handle is None:
+                batch.flush_handle = session.loop.call_soon(batch.flush)
+        else:
+            batch.slot_free()
 
     def fail(self, exc: BaseException) -> None:
         self.batch.failed(self, exc)
@@ -205,6 +198,7 @@ class Batch:
         "held",
         "keep",
         "next",
+        "on_frame",
         "on_response",
         "remaining",
         "results",
@@ -227,9 +221,12 @@ class Batch:
         window: int,
         on_response: OnResponse | None = None,
         idempotent: bool = False,
+        on_frame: OnFrame | None = None,
     ) -> None:
         self.session = session
         self.on_response = on_response
+        #: Given: each normal reply frame is handed to it, no :class:`Response` kept.
+        self.on_frame = on_frame
         #: Idempotent commands sent without retries: on a link that has shown duplicates
         #: each keeps its frame (see ``Session._keep_frame``).
         self.keep = idempotent and not retries
@@ -401,6 +398,20 @@ class Batch:
 
     # -- receiving ----------------------------------------------------------------------
 
+    def refused(self, p: BatchPending, frame: bytes) -> None:
+        """``p``'s reply has an error end code: sent again after a pause if the PLC was
+        busy (2604/2605) and busy retries are left, else the batch ends with its error."""
+        session = self.session
+        index = p.index
+        busy = self.busy.get(index, 0)
+        pause = session.busy_pause(frame, busy)
+        if pause is not None:
+            session.stats.busy_retries += 1
+            self.busy[index] = busy + 1
+            self.later(pause, index)
+            return
+        self.finish(session.end_code_failure(frame, p.mrc, p.src))
+
     def failed(self, p: BatchPending, exc: BaseException) -> None:
         """``p`` timed out after every transmission (already quarantined) or the link failed."""
         if self.fut.done():
@@ -459,21 +470,12 @@ async def request_many(
     retries: int | None,
     window: int | None,
     on_response: OnResponse | None = None,
+    on_frame: OnFrame | None = None,
 ) -> list[Response]:
-    """See :meth:`Session.request_many`."""
+    """See :meth:`Session.request_many` (with ``on_frame`` the list is empty)."""
+    timeout, retries = _options(session, commands, timeout, idempotent, retries, window)
     if dest is None:
         dest = session.dest
-    if timeout is None:
-        timeout = session.timeout
-    elif timeout <= 0:
-        raise CommandError(f"timeout {shown(timeout)} must be positive")
-    if retries is None:
-        retries = session.retries if idempotent else 0
-    elif retries < 0:
-        raise CommandError(f"retries {retries} must not be negative")
-    check_commands(commands)
-    if window is not None and window < 1:
-        raise CommandError(f"window {window} must be at least 1")
     if not commands:
         return []
     transport = session.transport
@@ -486,11 +488,16 @@ async def request_many(
     limit = state.slots.limit
     width = min(limit if window is None else min(window, limit), len(commands))
     if not session.on_asyncio or transport.fast_send is None or len(commands) == 1:
-        return await _concurrent(
+        if on_frame is not None:
+            on_response = _frame_of(on_frame)
+        responses = await _concurrent(
             session, commands, dest, timeout, idempotent, retries, width, on_response
         )
+        return [] if on_frame is not None else responses
     await state.slots.acquire(timeout, f"{dest}")
-    batch = Batch(session, commands, state, timeout, retries, width, on_response, idempotent)
+    batch = Batch(
+        session, commands, state, timeout, retries, width, on_response, idempotent, on_frame
+    )
     batch.held = 1
     try:
         batch.start()
@@ -502,8 +509,43 @@ async def request_many(
         if isinstance(error, ConnectionLost):
             await raise_after_a_turn(error)
         raise error
+    if on_frame is not None:
+        return []
     results: list[Response] = batch.results  # type: ignore[assignment]  # all filled
     return results
+
+
+def _options(
+    session: Batching,
+    commands: Sequence[Command],
+    timeout: float | None,
+    idempotent: bool,
+    retries: int | None,
+    window: int | None,
+) -> tuple[float, int]:
+    """A batch's ``timeout`` and ``retries`` (the session's where not given), its commands
+    and ``window`` checked: :class:`CommandError` for what is out of range."""
+    if timeout is None:
+        timeout = session.timeout
+    elif timeout <= 0:
+        raise CommandError(f"timeout {shown(timeout)} must be positive")
+    if retries is None:
+        retries = session.retries if idempotent else 0
+    elif retries < 0:
+        raise CommandError(f"retries {retries} must not be negative")
+    check_commands(commands)
+    if window is not None and window < 1:
+        raise CommandError(f"window {window} must be at least 1")
+    return timeout, retries
+
+
+def _frame_of(on_frame: OnFrame) -> OnResponse:
+    """``on_frame`` as an ``on_response`` (the portable path makes its responses)."""
+
+    def on_response(index: int, response: Response) -> None:
+        on_frame(index, response.frame)
+
+    return on_response
 
 
 async def _concurrent(

@@ -1351,6 +1351,7 @@ class Session:
         retries: int | None = None,
         window: int | None = None,
         on_response: Callable[[int, Response], object] | None = None,
+        on_frame: Callable[[int, bytes], object] | None = None,
     ) -> list[Response]:
         """Send many commands ``(mrc, src, params)`` pipelined; their responses in order.
 
@@ -1362,7 +1363,10 @@ class Session:
         abandoned (SIDs quarantined). ``on_response(index, response)`` is called as each
         command's normal response arrives, in the order they arrive (under asyncio from
         the receive callback: keep it short); an exception it raises ends the batch the
-        same way and is raised to the caller.
+        same way and is raised to the caller. ``on_frame(index, frame)`` instead hands
+        it each normal reply frame itself (its data: ``frame[14:]``), as ``on_response``
+        would be called, and no :class:`Response` is made: the list returned is empty
+        (for a caller that decodes the frames, as ``Client.read_array`` does).
         """
         breaker = self._breaker
         if breaker.state is not _CLOSED_BREAKER:
@@ -1379,6 +1383,7 @@ class Session:
                 retries=retries,
                 window=window,
                 on_response=on_response,
+                on_frame=on_frame,
             )
         except BaseException as exc:
             self.tell_breaker(exc, self.timeout if timeout is None else timeout)
