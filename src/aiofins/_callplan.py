@@ -117,26 +117,40 @@ def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
         size,
         struct.Struct(f">{count}{code}").unpack_from if len(requests) == 1 else None,
         14 + count * size,
-        tuple(accumulate((r.count * size for r in requests[:-1]), initial=0)),
+        tuple(accumulate((r.count * size for r in requests[:-1]), initial=0)) if requests else (),
     )
 
 
 class FrameWords:
     """The words of a read of words, as its reply frames come: :meth:`put` (a batch's
     ``on_frame``) checks each frame's data for its size and copies it into its place in
-    one ``array('H')``, sized once (no :class:`Response`, no copy of the data per frame,
-    no Python object per word); :meth:`words` swaps the bytes once at the end.
-    ``progress(done, total)`` is told the words read so far after each frame."""
+    one ``array('H')``, sized once (no :class:`Response` and no Python object per word);
+    :meth:`words` swaps the bytes once at the end. ``progress(done, total)`` is told the
+    words read so far after each frame."""
 
-    __slots__ = ("final", "into", "last", "out", "plan", "progress", "read", "total")
+    __slots__ = (
+        "ends",
+        "final",
+        "into",
+        "last",
+        "out",
+        "plan",
+        "progress",
+        "read",
+        "starts",
+        "total",
+    )
 
     def __init__(self, plan: ReadFrames, progress: Callable[[int, int], object] | None) -> None:
         self.plan = plan
         self.progress = progress
-        self.total = sum(plan.counts)
         self.read = 0
+        self.total = sum(plan.counts)
+        #: Where each frame's data goes in the array's bytes, and where it ends.
+        self.starts = plan.offsets
+        self.ends = tuple(at + size for at, size in zip(plan.offsets, plan.sizes, strict=True))
         self.out = array("H", _ZERO) * (sum(plan.sizes) >> 1)
-        self.into: memoryview | None = memoryview(self.out).cast("B")
+        self.into = memoryview(self.out).cast("B")
         #: The last command's index, and its reply frame once it came (its end code is
         #: the call's ``last_end_code``).
         self.final = len(plan.sizes) - 1
@@ -144,29 +158,24 @@ class FrameWords:
 
     def put(self, index: int, frame: bytes) -> None:
         """Frame ``index``'s reply: its data (``frame[14:]``) into its place."""
-        plan = self.plan
-        size = plan.sizes[index]
-        if len(frame) != size + 14:
-            plan.requests[index].decode_response(frame[14:])  # raises DecodeError: what
-        at = plan.offsets[index]
-        into = self.into
-        assert into is not None  # (released only after the last frame)
-        into[at : at + size] = memoryview(frame)[14:]
+        at = self.starts[index]
+        end = self.ends[index]
+        if len(frame) != end - at + 14:
+            self.plan.requests[index].decode_response(frame[14:])  # raises DecodeError
+        self.into[at:end] = frame[14:]  # (a bytes slice: cheaper than a memoryview's)
         if index == self.final:
             self.last = frame
         if self.progress is not None:
-            self.read += plan.counts[index]
+            self.read += self.plan.counts[index]
             self.progress(self.read, self.total)
 
     def release(self) -> None:
         """No buffer of the array left exported (the caller may grow it)."""
-        if self.into is not None:
-            self.into.release()
-            self.into = None
+        self.into.release()
 
     def words(self) -> WordArray:
         """The words read, in the host's byte order (after every frame came)."""
-        self.release()
+        self.into.release()
         words = self.out
         if _SWAP:
             words.byteswap()
