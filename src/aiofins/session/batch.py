@@ -123,13 +123,10 @@ async def raise_after_a_turn(exc: ConnectionLost) -> NoReturn:
 class BatchPending(Pending):
     """One command of a batch on the wire; the receive callback hands its reply to the batch.
 
-    Made bare, ``BatchPending()`` (its ``__init__`` sets nothing): :meth:`Batch.flush` sets
-    the batch's fields, :meth:`Session.start` the rest."""
+    Made bare, ``BatchPending()`` (no ``__init__`` in its classes: no Python call per
+    command): :meth:`Batch.flush` sets the batch's fields, :meth:`Session.start` the rest."""
 
     __slots__ = ("batch", "index")
-
-    def __init__(self) -> None:
-        pass
 
     batch: Batch
     index: int
