@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from aiofins._callplan import (
     PLAN_CACHE_SIZE,
+    FrameWords,
     read_frames,
     typed_start,
     value_type,
@@ -73,6 +74,30 @@ def test_a_one_frame_read_decodes_its_reply_frame_in_place() -> None:
     bits = read_frames("CIO 0.03", 2, 7)
     assert bits.one(head + b"\x01\x00") == [1, 0]
     assert read_frames("D0", 1000, 999).unpack_from is None  # two frames: values() joins
+
+
+def test_frame_words_puts_each_reply_frames_data_in_its_place() -> None:
+    plan = read_frames("D0", 2000, 999)  # 999 + 999 + 2 words
+    assert plan.offsets == (0, 1998, 3996) and plan.ends == (1998, 3996, 4000)
+    assert read_frames("D0", 0, 999).offsets == () == read_frames("D0", 0, 999).ends
+    head = bytes.fromhex("c00002000200000100070101")
+    seen: list[tuple[int, int]] = []
+    sink = FrameWords(plan, lambda done, total: seen.append((done, total)))
+    words = [(w * 7) & 0xFFFF for w in range(2000)]
+    data = b"".join(w.to_bytes(2, "big") for w in words)
+    for index in (2, 0, 1):  # in the order the replies come
+        at, end = plan.offsets[index], plan.ends[index]
+        flags = b"\x00\x40" if index == 1 else b"\x00\x00"
+        sink.put(index, head + flags + data[at:end])
+    assert seen == [(2, 2000), (1001, 2000), (2000, 2000)]
+    assert sink.last is not None and sink.last[12:14] == b"\x00\x00"  # the last command's
+    out = sink.words()
+    assert out.tolist() == words
+    out.append(1)  # no buffer of it left exported
+    short = FrameWords(plan, None)
+    with pytest.raises(DecodeError, match="expected 999 x 2 = 1998 data bytes, got 1996"):
+        short.put(1, head + b"\x00\x00" + bytes(1996))
+    short.release()
 
 
 def test_write_frames_encode_what_memory_area_write_encodes() -> None:

@@ -73,8 +73,10 @@ class ReadFrames:
     unpack_from: Callable[[bytes, int], tuple[int, ...]] | None
     #: The size of that reply frame (header, command code, end code and data).
     reply_size: int
-    #: Where each frame's data goes in the whole read's bytes (the sum of the sizes before).
+    #: Where each frame's data goes in the whole read's bytes (the sum of the sizes before),
+    #: and where it ends there.
     offsets: tuple[int, ...]
+    ends: tuple[int, ...]
 
     def one(self, frame: bytes) -> list[int]:
         """The elements of a one-frame read's reply ``frame`` (its data checked for its
@@ -118,6 +120,7 @@ def read_frames(address: AddressLike, count: int, limit: int) -> ReadFrames:
         struct.Struct(f">{count}{code}").unpack_from if len(requests) == 1 else None,
         14 + count * size,
         tuple(accumulate((r.count * size for r in requests[:-1]), initial=0)) if requests else (),
+        tuple(accumulate(r.count * size for r in requests)),
     )
 
 
@@ -148,7 +151,7 @@ class FrameWords:
         self.total = sum(plan.counts)
         #: Where each frame's data goes in the array's bytes, and where it ends.
         self.starts = plan.offsets
-        self.ends = tuple(at + size for at, size in zip(plan.offsets, plan.sizes, strict=True))
+        self.ends = plan.ends
         self.out = array("H", _ZERO) * (sum(plan.sizes) >> 1)
         self.into = memoryview(self.out).cast("B")
         #: The last command's index, and its reply frame once it came (its end code is
