@@ -44,6 +44,7 @@ import anyio
 from anyio.abc import TaskGroup
 
 from ._channel import Channel, Wake
+from ._scanstep import FrameScan, OneFrame
 from .client import add_addressing_hint
 from .endpoint import parse_endpoint
 from .hooks import EventHooks, ScanDone
@@ -52,7 +53,7 @@ from .protocol.endcodes import EndCode
 from .protocol.errors import CommandError, EndCodeError, FinsError
 from .protocol.frames import END_CODE, MIN_REPLY_SIZE
 from .protocol.values import Value
-from .session.callback import CallbackBatch, CallbackPending, PreparedRequest, start_requests
+from .session.callback import CallbackBatch, CallbackPending, start_requests
 from .session.response import new_response
 from .tags import ReadPlan, TagNames, parse_tag
 from .transport.base import is_asyncio
@@ -64,9 +65,6 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger("aiofins.poller")
 
-#: A plan of one frame as a scan sends it: its command ``(mrc, src, params)`` and the
-#: decoder of its reply frame (``None``: the reply is decoded tag by tag).
-_OneFrame = tuple[tuple[int, int, bytes], Callable[[bytes], "tuple[Value, ...] | None"] | None]
 
 #: Seconds between two warnings about one group's missed scans (the count says how many).
 MISSED_WARNING_INTERVAL = 60.0
@@ -226,10 +224,10 @@ class ScanGroup:
     )
     #: The scan step of a plan of one frame on the callback path, kept between scans
     #: (made at its first such scan; dropped when its lease or client changes).
-    _step: _FrameScan | None = field(default=None, repr=False)
+    _step: FrameScan | None = field(default=None, repr=False)
     #: The plan's one frame, made once: (its command, the decoder of its reply frame, or
     #: None); ``()`` for a plan of several frames (sent as a batch); ``None``: not made yet.
-    _one: _OneFrame | tuple[()] | None = field(default=None, repr=False)
+    _one: OneFrame | tuple[()] | None = field(default=None, repr=False)
     #: A snapshot of the callback path for the group's task to deliver (backpressure).
     _undelivered: Snapshot | None = field(default=None, repr=False)
 
@@ -598,10 +596,10 @@ class Poller:
         """Start ``group``'s due scan from the timer's own step (asyncio): its frames go out
         now and the scan ends in the session's receive callback (:meth:`_scanned_soon`),
         no task woken for it. A plan of one frame gets its scan step here, kept for the
-        next scans (:class:`_FrameScan`). False (nothing started, the group's task scans
-        instead) when it cannot start at once: the group's first scan (it compiles the
-        plan), no session ready to lend, a plan the client must check first, or the
-        session's own conditions (link open, breaker closed, a slot free: see
+        next scans (:class:`~aiofins._scanstep.FrameScan`). False (nothing started, the
+        group's task scans instead) when it cannot start at once: the group's first scan
+        (it compiles the plan), no session ready to lend, a plan the client must check
+        first, or the session's own conditions (link open, breaker closed, a slot free: see
         :func:`~aiofins.session.callback.start_requests`)."""
         plan = group.plan
         lease = group._lease
@@ -621,7 +619,9 @@ class Poller:
             one = group._one = _one_frame(plan)
         if one:
             lease.release()  # (the step borrows it for each scan)
-            step = group._step = _FrameScan(self, group, lease, client, limits, one)
+            step = group._step = FrameScan(
+                self, group, lease, client, limits, one, ScanState.SCANNING, ScanState.IDLE
+            )
             return step.start()
         started = self._now()
         request: CallbackBatch | None
@@ -651,9 +651,9 @@ class Poller:
         frame: bytes | None,
         error: BaseException | None,
     ) -> None:
-        """A scan of one frame (:class:`_FrameScan`) ended whose frame the plan's decoder
-        did not take (a failure, a frame of another size, words no value of their type):
-        decoded tag by tag, as :meth:`_scanned_soon` does."""
+        """A scan of one frame (:class:`~aiofins._scanstep.FrameScan`) ended whose frame the
+        plan's decoder did not take (a failure, a frame of another size, words no value of
+        their type): decoded tag by tag, as :meth:`_scanned_soon` does."""
         if frame is None:
             self._end_scan(group, client, started, stamp, None, error)
             return
@@ -884,140 +884,8 @@ class Poller:
         return snapshot
 
 
-class _FrameScan:
-    """A group's scan of a plan of one frame on the callback path (asyncio), kept between
-    scans: the group's lease and the client it lends, the plan's command prepared on that
-    client's session (:class:`~aiofins.session.callback.PreparedRequest`) and the decoder
-    of its reply frame. Each due scan :meth:`start` borrows the client (the pool's fast
-    path: the pool sees each scan as a use, idle closing and health checks as before),
-    sends from the timer's step, and :meth:`done` ends it in the session's receive
-    callback: decode, snapshot, buffer."""
-
-    __slots__ = (
-        "client",
-        "decode",
-        "group",
-        "lease",
-        "limits",
-        "names",
-        "poller",
-        "prepared",
-        "request",
-        "stamp",
-        "started",
-    )
-
-    def __init__(
-        self,
-        poller: Poller,
-        group: ScanGroup,
-        lease: _Lease,
-        client: Client,
-        limits: object,
-        one: _OneFrame,
-    ) -> None:
-        self.poller = poller
-        self.group = group
-        self.lease = lease
-        self.client = client
-        #: The client's limits the plan was checked against.
-        self.limits = limits
-        command, self.decode = one
-        plan = group.plan
-        assert plan is not None
-        self.names = plan.tag_names
-        self.prepared = PreparedRequest(
-            client.session, command, self.done, dest=client.dest, timeout=group.timeout
-        )
-        #: The scan in flight (``None``: none), when it started (loop clock, wall clock).
-        self.request: CallbackPending | None = None
-        self.started = self.stamp = 0.0
-
-    def start(self) -> bool:
-        """Send the group's due scan now; False (nothing started, the group's task scans
-        instead) as :meth:`Poller._scan_soon` says, and the step dropped when the group's
-        lease or the client lent is no longer the one it was made for."""
-        group = self.group
-        lease = self.lease
-        if group._lease is not lease:  # (a scan_once beside it holds the lease)
-            group._step = None
-            return False
-        client = lease.borrow_ready()
-        if client is not self.client or client.limits is not self.limits:
-            lease.release()
-            group._step = None
-            return False
-        self.started = self.poller._now()
-        try:
-            request = self.prepared.send()
-        except Exception:  # a bug, not the PLC: the group's task scans (and says what)
-            logger.exception("scan group %s: the scan could not start", group.name)
-            request = None
-        if request is None:
-            lease.release()
-            return False
-        self.request = request
-        self.stamp = time.time()
-        group._lease = None  # in use (a scan_once beside this scan takes another)
-        group._enter(ScanState.SCANNING)
-        group.scans += 1
-        return True
-
-    def done(self, frame: bytes | None, error: BaseException | None) -> None:
-        """The scan's reply frame (a normal completion) or its failure, from the session:
-        decoded in one call where the plan allows (:meth:`ReadPlan.frame_decoder`), else
-        tag by tag (:meth:`Poller._scanned_frame`); its snapshot to the buffer."""
-        if self.request is None:  # (given up by the poller's exit)
-            return
-        self.request = None
-        group = self.group
-        lease = self.lease
-        lease.release()
-        if group._lease is None:
-            group._lease = lease
-        poller = self.poller
-        try:
-            decode = self.decode
-            values = None if frame is None or decode is None else decode(frame)
-            if values is None:
-                poller._scanned_frame(group, self.client, self.started, self.stamp, frame, error)
-                return
-            assert frame is not None
-            if frame[END_CODE] or frame[END_CODE + 1]:  # (CPU error flags)
-                self.client.last_end_code = EndCode(
-                    int.from_bytes(frame[END_CODE:MIN_REPLY_SIZE], "big")
-                )
-            else:
-                self.client.last_end_code = _NORMAL
-            if group._missed_unlogged or group._failing is not None:  # (to log: the rest)
-                snapshot = poller._scanned(
-                    group, self.started, self.stamp, values, None, _NO_BAD, None
-                )
-            else:  # the usual scan: _scanned's steps for a good scan with nothing to log
-                group.last_duration = poller._now() - self.started
-                snapshot = poller._good(group, self.stamp, values, self.names)
-            poller._handover(group, snapshot)
-        except Exception:  # a bug, not the PLC: logged, and the group scans on
-            logger.exception("scan group %s: the scan could not end", group.name)
-            group.errors += 1
-            if group.state is ScanState.SCANNING:
-                group._enter(ScanState.IDLE)
-
-    def give_up(self) -> None:
-        """The poller exits: the scan in flight, if any, given up (its SID quarantined),
-        the lease given back."""
-        request = self.request
-        if request is not None:
-            self.request = None
-            request.cancel()
-            self.lease.release()
-            if self.group._lease is None:
-                self.group._lease = self.lease
-
-
 _GOOD, _STALE, _ERROR = Quality.GOOD, Quality.STALE, Quality.ERROR
 _NORMAL = EndCode(0)
-_NO_BAD: dict[str, str] = {}  # (read only: a good scan's tags that are no value of their type)
 #: Scan times this close are due now: event loops round timers (uvloop to 1 ms), and a timer
 #: that fires a little early must not make the timer task spin until the exact time.
 _TIMER_SLACK = 0.001
@@ -1062,7 +930,7 @@ class GoodReadings(Mapping[str, TagReading]):
         return dict(zip(self._names.names, self._values, strict=True))
 
 
-def _one_frame(plan: ReadPlan) -> _OneFrame | tuple[()]:
+def _one_frame(plan: ReadPlan) -> OneFrame | tuple[()]:
     """A plan of one frame: its command and the decoder of its reply (``None``: decoded
     tag by tag); ``()`` for a plan of several frames."""
     commands = plan.scan_commands()[0]
