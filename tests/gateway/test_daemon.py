@@ -337,7 +337,7 @@ async def test_two_shards_publish_every_plc_exactly_once_between_them(broker: Br
             return {m.topic.split("/")[1] for m in sub.messages if m.topic.endswith("/status")}
 
         # Statuses (QoS 1, their own outboxes) may arrive after the first scans.
-        await sub.wait_for(lambda: published() == names == announced(), timeout=30)
+        await sub.wait_for(lambda: published() == names == announced())
         mine = [{p.name for p in gw.plcs} for gw in gateways]
         assert mine[0] | mine[1] == names and not mine[0] & mine[1]
         assert 60 < len(mine[0]) < 140  # rendezvous hashing spreads them

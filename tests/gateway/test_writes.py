@@ -263,7 +263,7 @@ async def test_an_mqtt5_message_expiry_shortens_the_age(broker: Broker) -> None:
             await pub.publish(
                 f"{SET}/sp", '{"value": 2, "id": "short"}', qos=1, properties=expiring
             )
-            await sub.wait_for(lambda: len(sub.messages) == 2, timeout=30)
+            await sub.wait_for(lambda: len(sub.messages) == 2)
             first, short = sub.on(f"{SET}/sp/reply")
             assert first["ok"] is True and short["id"] == "short" and short["ok"] is False
             assert "expired" in short["error"]
