@@ -999,8 +999,8 @@ class Session:
             return self._unsent(p, exc, timeout, pending)
         if (poll := transport.poll_now) is not None and pending is None:
             self._read_after_send(poll, p)
-        if asyncio_made and p.reply is None and p.fut is None:  # no answer yet: a future
-            p.fut = self._new_future()
+        if asyncio_made and not p.done:  # not answered (nor failed) yet: a future to wait on
+            p.fut = self._new_future()  # (a test of p.fut here: None to mypyc, see above)
         return p
 
     def _unsent(
