@@ -9,7 +9,7 @@ import os
 import sys
 import time
 
-from .world import Episode, run, suspect
+from .world import EXPOSED, UNFIXED, Episode, run, suspect
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,7 +72,9 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     for kind, count in sorted(kinds.items()):
-        print(f"  {count} x {kind}")
+        allowed = " (exposed)" if kind in EXPOSED else " (unfixed)" if kind in UNFIXED else ""
+        rate = count / steps * 1e6 if steps else 0.0
+        print(f"  {count} x {kind}{allowed}: {rate:.2f} per million steps")
     return 1 if violations else 0
 
 

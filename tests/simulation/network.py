@@ -71,6 +71,9 @@ class Network:
         self.unaddressed = 0
         #: Bumped to drop every late reply not yet sent (the schedule's faults end).
         self.epoch = 0
+        #: Ground truth of the duplicates: every reply copy the network made, as (when it
+        #: arrives, the socket it goes to, its bytes), in the order they were made.
+        self.copies: list[tuple[float, Address, bytes]] = []
 
     def add_unit(self, unit: Unit) -> None:
         self.units[unit.address] = unit
@@ -123,8 +126,25 @@ class Network:
             return []
         delay = self._delay(faults)
         if to_unit is None and faults and "dup" in faults and rng.random() < faults["dup"]:
-            return [delay, delay + rng.random() * DUPLICATE_LAG]
+            lag = delay + rng.random() * DUPLICATE_LAG
+            self.copies.append((self.loop.time() + lag, packet.dest, packet.data))
+            return [delay, lag]
         return [delay]
+
+    def copy_answered(self, data: bytes, start: float, end: float, head: bytes = b"") -> str:
+        """Ground truth for a wrong answer returned between ``start`` and ``end``: whether a
+        copy the network made of a reply holding ``data`` (after the command code and end
+        code; ``head``: what the reply's bytes from its command code on begin with, for a
+        write's) arrived meanwhile: ``"first"`` if it was the first copy ever to reach its
+        socket (the link had shown no duplicate), ``"copy"`` if not, ``""`` if none came."""
+        for at, dest, frame in self.copies:
+            if not start - 1e-9 <= at <= end + 1e-9:
+                continue
+            if frame[14:] != data or not frame[10:].startswith(head):
+                continue
+            earlier = any(a < at and d == dest for a, d, _ in self.copies)
+            return "copy" if earlier else "first"
+        return ""
 
     def _delay(self, faults: dict[str, float]) -> float:
         d = BASE_DELAY + self.rng.random() * JITTER

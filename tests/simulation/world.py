@@ -55,6 +55,8 @@ from .loop import VirtualTimeLoop, WorldStuck
 from .network import DUPLICATE_LAG, Network
 from .plant import DM, FINS_PORT, REMOTE_NETWORK, WINDOW, Target, Unit, ethernet
 
+#: A write's reply from its command code on: 0102, end code 0000 (and no data).
+WRITE_REPLY = bytes.fromhex("01020000")
 #: A call must have ended this long (virtual seconds) after its deadline.
 DEADLINE_SLACK = 1e-6
 #: The session's default breaker cooldown ceiling and reconnect backoff ceiling.
@@ -227,6 +229,9 @@ class Result:
     config: Config | None = None
     #: The command that replays this run.
     command: str = ""
+    #: What the network's ground truth says caused a wrong answer (see
+    #: :meth:`~.network.Network.copy_answered`): ``"first"``, ``"copy"`` or ``""``.
+    cause: str = ""
 
     def reproducer(self) -> str:
         """One line: the command that replays the run, where it failed, the schedule."""
@@ -282,6 +287,8 @@ class World:
         self.violation: Violation | None = None
         self.violation_step = 0
         self.violation_time = 0.0
+        #: The ground truth of a wrong answer (:attr:`Result.cause`).
+        self.cause = ""
         self.digest = 0
         self.manual = manual
         self.replay = list(schedule) if schedule is not None else None
@@ -570,6 +577,7 @@ class World:
         h = op.target.history
         if op.kind == "write":
             if not h.writes.get(op.write):
+                self.cause = self.net.copy_answered(b"", op.start, self.now(), WRITE_REPLY)
                 self.fail("at most once", f"op {op.id}: write reported ok, never executed")
             return
         if op.kind == "read":
@@ -586,6 +594,7 @@ class World:
                 op.start <= t <= op.end and d == data  # type: ignore[operator]
                 for t, d in h.reads.get(params, ())
             ) and not any(op.start <= t <= op.end and d == data for t, d in h.spoiled):  # type: ignore[operator]
+                self.cause = self.net.copy_answered(data, op.start, self.now())
                 self.fail(
                     "never wrong",
                     f"op {op.id} ({op.path} {op.kind} {params.hex()} from {h.address}) returned"
@@ -997,6 +1006,7 @@ class World:
             schedule=list(self.schedule),
             config=self.config,
             command=self.command,
+            cause=self.cause if self.violation else "",
         )
 
 
@@ -1016,29 +1026,47 @@ SIGNS = (
     ("defect 3 (a relay error reaches another request)", "RelayError("),
     ("no free SID after the faults (defect 4/5 family)", "all 256 are in flight, quarantined"),
     ("a background task started from a callback (NoEventLoopError)", "NoEventLoopError"),
-    ("defect 5 (a late duplicate taken for a new reply)", "write reported ok, never executed"),
 )
+#: A wrong answer the network's ground truth shows was a copy of an earlier reply
+#: (:attr:`Result.cause`; see "Guarantees" in docs/session.md for the rule).
+DUPLICATE = "defect 5 (a late duplicate taken for a new reply)"
+#: ... the very first copy to reach its socket: the link had shown no duplicate, and the
+#: copy came to a SID that a request of the same command and reply length had reused
+#: meanwhile. No client can tell it from the request's own reply (a one-byte SID);
+#: docs/session.md states it as exposed.
+FIRST_COPY = "defect 5: the link's first copy, before it showed any duplicate"
+#: ... a copy of an earlier write's reply to a write without retries: every write's reply
+#: is the same bytes, and it cannot be sent again to tell (exposed, docs/session.md).
+WRITE_COPY = "defect 5: a copy of a write's reply to a write without retries"
 
 
 #: Kinds of violation not yet fixed on main: the slice and the state machine allow them,
 #: and each has a world in ``scenarios.UNFIXED_WORLDS`` that test_defects.py runs as a
 #: strict xfail, so that a fix is noticed (its world passes, the xfail fails): the fix
 #: removes the kind here and its world there.
-UNFIXED: frozenset[str] = frozenset(
-    {
-        "defect 5 (a late duplicate taken for a new reply)",
-    }
-)  # (fixed: "no free SID after the faults", the relay family: dup, issue #22)
+UNFIXED: frozenset[str] = frozenset({DUPLICATE})
+# (fixed: "no free SID after the faults", the relay family: dup, issue #22)
+
+#: Kinds of violation no client can avoid, each decided from the network's ground truth and
+#: stated as exposed in docs/session.md: the slice and the state machine allow them, the
+#: long-run summary counts them (per million steps).
+EXPOSED: frozenset[str] = frozenset({FIRST_COPY, WRITE_COPY})
 
 
 def suspect(result: Result) -> str:
-    """The known defect a violation points to (its words, its world), or ``"unknown"``."""
+    """The known defect a violation points to (its words, the network's ground truth, its
+    world), or ``"unknown"``. A wrong answer that the ground truth shows was a copy of an
+    earlier reply is named so whatever the world (a fixed reply port's included)."""
     line = result.reproducer()
     for name, sign in SIGNS:
         if sign in line:
             return name
+    if result.cause:
+        if "write reported ok" in line:
+            return WRITE_COPY  # (a write is never sent again: the harness opts in no retries)
+        return FIRST_COPY if result.cause == "first" else DUPLICATE
     if result.config is not None and result.config.fixed:
         return "defect 2 (a reply for another space)"
-    if ":dup:" in line and "never wrong" in line:
-        return "defect 5 (a late duplicate taken for a new reply)"
+    if ":dup:" in line and ("never wrong" in line or "at most once" in line):
+        return DUPLICATE
     return "unknown"
