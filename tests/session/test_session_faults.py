@@ -235,7 +235,7 @@ async def test_aclose_fails_in_flight_and_queued_requests() -> None:
 _ANSWERS = {"duplicate": "good", "corrupt": "good", "reorder": "good", "good": "good"}
 
 
-@pytest.mark.anyio
+@on_virtual_time  # attempts of 1 s against a peer in the same process: not on a loaded wall clock
 async def test_random_faults_never_misdeliver_and_never_hang() -> None:
     """Drop, hold back, duplicate, reorder, corrupt and answer with an error at random; check
     every call.

@@ -105,6 +105,7 @@ async def test_duplicates_delayed_past_a_sid_wrap_never_reach_another_read() -> 
         assert session.stats.duplicates > 20
 
 
+@on_virtual_time  # the readers must outrun 256 SIDs per linger: not on a loaded wall clock
 async def test_a_late_duplicate_teaches_the_linger(caplog: pytest.LogCaptureFixture) -> None:
     """Without a floor, the first duplicate seen 0.2 s after its reply makes SIDs linger
     twice that from then on (logged); later duplicates as late reach no other read."""

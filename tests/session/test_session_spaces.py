@@ -171,6 +171,7 @@ async def test_an_idle_space_is_closed_and_its_node_cools() -> None:
         assert second.space == 2 and second.node not in (node, 2)
 
 
+@on_virtual_time  # 20 readers must outrun 256 SIDs per second: not on a loaded wall clock
 async def test_a_second_fins_tcp_connection_gets_its_node_from_the_plc() -> None:
     plc = VirtualPLC()
     plc.write("D0", [(1 << 12) ^ w for w in range(1000)])
