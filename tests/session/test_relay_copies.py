@@ -210,3 +210,62 @@ async def test_a_copy_of_a_late_relay_error_finds_its_sid_still_quarantined() ->
         stats = session.stats
         assert (stats.completed, stats.end_code_errors, stats.timeouts) == (1, 1, 1)
         assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (2, 0, 0)
+
+
+@pytest.mark.parametrize(
+    ("dest", "word"),
+    [(GATEWAY, 356), (CELL, 2256)],
+    ids=["the-relay-s-own-cpu", "the-cell-again"],
+)
+@on_virtual_time
+async def test_a_relay_error_later_than_the_evidence_reaches_no_request_that_reused_its_sid(
+    dest: FinsAddress, word: int
+) -> None:
+    """The cell (2.2.0) is down: the gateway answers a read of it (SID 0) with 0205 and bit
+    15, and the network delays that relay error 0.8 s. The read times out at 0.1 s (SID 0
+    quarantined); the cell is up again and answers the next reads (SIDs 1 to 255) at once:
+    the destination answers requests sent after SID 0 was given up on, so SID 0's
+    quarantine ends 0.5 s later, at 0.6 s (the evidence rule: the cell's own reply to the
+    older read could only come as a reordered datagram). The relay error comes from the
+    relay, on the relay's timer, not from the cell: at 0.8 s it found a read that took SID 0
+    at 0.7 s, whose reply takes 0.2 s (of the gateway's CPU, whose key the relay error
+    carries exactly; or of the cell, by SID and command code), and raised the cell's 0205
+    to it (the soak's seed 50135). A SID whose quarantine ended on that evidence is now in
+    doubt for a relay error under its number and command code until the quarantine's full
+    term: the relay error is taken for the older read's (counted as late), and the read
+    gets its own words at 0.9 s."""
+    relay_errors = 0
+
+    def fate(packet: Packet) -> Sequence[float]:
+        nonlocal relay_errors
+        data = packet.data
+        if packet.source[0] != "10.0.0.10" or len(data) < 14:
+            return [0.0]
+        if data[12] & 0x80:
+            relay_errors += 1
+            return [0.8]
+        return [0.2] if data[14:] == word.to_bytes(2, "big") else [0.0]
+
+    async with plant_session(fate, timeout=0.1, retries=0) as (session, plant, received):
+        plant.station("cell").state = StationState.DOWN
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read(0), dest=CELL)
+        plant.station("cell").state = StationState.UP
+        for n in range(1, 256):  # the cell's SIDs come round to 0 again
+            r = await session.request(0x01, 0x01, read(n), dest=CELL)
+            assert r.data == (2000 + n).to_bytes(2, "big")
+        assert anyio.current_time() == pytest.approx(0.1, abs=1e-6)
+        await anyio.sleep(0.6)
+        r = await session.request(0x01, 0x01, read(256), dest=dest, timeout=1.0)
+        assert r.data == word.to_bytes(2, "big")
+        assert anyio.current_time() == pytest.approx(0.9, abs=1e-6)
+        assert relay_errors == 1
+        assert plant.counts["refused:0205"] == 1
+        sent = [(f[3:6], f[9]) for f in received]
+        assert sent == [
+            *((b"\x02\x02\x00", n) for n in range(256)),
+            (bytes((dest.network, dest.node, 0)), 0),  # SID 0 again, after its quarantine
+        ]
+        stats = session.stats
+        assert (stats.completed, stats.timeouts, stats.end_code_errors) == (256, 1, 0)
+        assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 0, 0)

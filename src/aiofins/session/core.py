@@ -531,6 +531,10 @@ class Session:
                 pending[key] = p
                 self.stats.malformed += 1
                 return None, linger
+            if sids.relay_doubt and sids.relay_doubted(key & 0xFF, mrc << 8 | src, self.clock()):
+                pending[key] = p  # the late relay error of an older request under the SID
+                self.stats.late_replies += 1
+                return None, linger
             return p, max(linger, RELAY_LINGER)
         if linger and p.plan is not None and self._held(p, key, frame, sids):
             return None, linger

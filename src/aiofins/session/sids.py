@@ -69,6 +69,7 @@ class SidSpace:
         "pending",
         "quarantine",
         "recent",
+        "relay_doubt",
         "replies",
         "routed",
         "short_at",
@@ -85,6 +86,11 @@ class SidSpace:
         #: on and its command (MRC << 8 | SRC), until the destination answers a request
         #: sent after that (see :meth:`answered_after`).
         self.given_up: dict[int, dict[int, tuple[float, int]]] = {}
+        #: ``SID << 16 | command`` -> until when: a SID whose quarantine the evidence rule
+        #: ended early (:meth:`answered_after`) while a relay error to its request, which
+        #: comes on the relay's timer, may still come; a relay error under that SID number
+        #: and command code is taken for that request's (see :meth:`relay_doubted`).
+        self.relay_doubt: dict[int, float] = {}
         #: SID key -> when it may be used again (answered: a duplicate may follow).
         self.lingering: dict[int, float] = {}
         #: SID key -> when its last request was answered (to count and time duplicates);
@@ -224,22 +230,54 @@ class SidSpace:
         a late reply to one of them could only be a reordered datagram, which the grace
         covers. So an outage's quarantines end on the evidence that the PLC answers, not
         ``min_quarantine`` (15 s) later. Called by the receive path while any SID given
-        up on has not seen such evidence (:attr:`given_up`)."""
+        up on has not seen such evidence (:attr:`given_up`).
+
+        That evidence says nothing of a relay error to an older request: a relay point sends
+        it on its own timer, not the destination's, and it may come after the quarantine
+        ended so. Each SID whose quarantine ends early is put in doubt for a relay error
+        under its number and command code until the quarantine's full term
+        (:attr:`relay_doubt`, :meth:`relay_doubted`)."""
         dest = key & ~0xFF
         mine = self.given_up.get(dest)
         if mine is None:
             return
         end = now + LATE_REPLY_GRACE
-        quarantine = self.quarantine
-        for k, (at, _) in list(mine.items()):
+        quarantine, doubt = self.quarantine, self.relay_doubt
+        for k, (at, command) in list(mine.items()):
             if at > sent_at:
                 continue
             del mine[k]
             until = quarantine.get(k)
             if until is not None and until > end:
                 quarantine[k] = end
+                if len(doubt) >= 256:  # (bounded: the expired go first)
+                    for d in [d for d, u in doubt.items() if u <= now] or list(doubt)[:1]:
+                        del doubt[d]
+                d = (k & 0xFF) << 16 | command
+                if doubt.get(d, 0.0) < until:
+                    doubt[d] = until
         if not mine:
             del self.given_up[dest]
+
+    def relay_doubted(self, sid: int, command: int, now: float) -> bool:
+        """Whether a relay error under ``sid`` for ``command`` (``MRC << 8 | SRC``) is taken
+        for the request given up on under that SID whose quarantine ended on the evidence
+        that its destination answers (:meth:`answered_after`), rather than for a request
+        that took the SID since. A relay error carries the relay's address, not the
+        destination's, and no request number, so nothing tells the two apart; the older is
+        the one that may come late (the relay-error rule, docs/session.md), and the newer
+        gets its own reply or times out. The doubt then ends
+        :data:`~.matching.LATE_REPLY_GRACE` (or the linger) later: a copy of that relay
+        error may follow."""
+        d = sid << 16 | command
+        until = self.relay_doubt.get(d)
+        if until is None:
+            return False
+        if until <= now:
+            del self.relay_doubt[d]
+            return False
+        self.relay_doubt[d] = min(until, now + max(LATE_REPLY_GRACE, self.linger))
+        return True
 
     def drain(self) -> list[Pending]:
         """Every request in flight, taken out of the table (the link failed)."""
@@ -261,6 +299,7 @@ class SidSpace:
         """A fresh socket or connection: no late reply can reach it, every SID is free."""
         self.quarantine.clear()
         self.given_up.clear()
+        self.relay_doubt.clear()
         self.lingering.clear()
         self.held.clear()
         self.replies.clear()
@@ -288,6 +327,14 @@ class SidSpace:
         now = self.clock()
         grace = max(LATE_REPLY_GRACE, self.linger)
         if relay_error:  # its key is the relay's: a copy is of the SID's last answer
+            sid = key & 0xFF
+            if (
+                self.relay_doubt
+                and self.relay_doubted(sid, int.from_bytes(frame[10:12], "big"), now)
+                and not any(k & 0xFF == sid for k in self.quarantine)
+            ):  # the late relay error of a request given up on, its SID free since
+                stats.late_replies += 1
+                return "late", 0.0
             key = self.last_answered(key)
         kind, key = count_unmatched(
             stats, self.quarantine, self.answers, key, frame, now, relay_error, grace
