@@ -23,6 +23,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quiet", action="store_true", help="print only violations and totals")
     parser.add_argument("--defect", type=int, help="run the world of issue 22's defect N")
     parser.add_argument("--unfixed", action="store_true", help="run the unfixed families' worlds")
+    parser.add_argument(
+        "--regressions", action="store_true", help="run the pinned worlds of fixed families"
+    )
     parser.add_argument("--log", action="store_true", help="show the library's warnings")
     args = parser.parse_args(argv)
     if not args.log:
@@ -43,6 +46,16 @@ def main(argv: list[str] | None = None) -> int:
             for result in run_unfixed(kind):
                 shown += result.violation is not None
                 print(result.reproducer() if result.violation else "  no violation")
+        return 1 if shown else 0
+    if args.regressions:
+        from .scenarios import REGRESSIONS, run_regression
+
+        shown = 0
+        for name, (what, *_) in REGRESSIONS.items():
+            print(f"{name}: {what}")
+            result = run_regression(name)
+            shown += result.violation is not None
+            print(result.reproducer() if result.violation else "  no violation")
         return 1 if shown else 0
     seeds = [args.seed] if args.seed is not None else range(args.first, args.first + args.seeds)
     schedule = (

@@ -121,3 +121,109 @@ def run_unfixed(kind: str) -> list[Result]:
         world.command = f"python -m tests.simulation --unfixed  # its seed {seed}"
         results.append(world.run())
     return results
+
+
+def episodes(schedule: str) -> list[Episode]:
+    """A schedule as printed (``start+duration:unit:kind:p``, comma-separated)."""
+    return [Episode.parse(e) for e in schedule.split(",")]
+
+
+#: Worlds in which the soak found a violation of a family fixed since, each pinned to the
+#: last digit (the configuration the seed drew, its fault schedule up to the violation,
+#: steps, seed) so that a change of the generator leaves it alone: (what it showed, the
+#: configuration, the schedule, steps, seed). test_defects.py runs each: it must stay
+#: clean (``python -m tests.simulation --regressions``).
+REGRESSIONS: dict[str, tuple[str, Config, list[Episode], int, int]] = {
+    "seed 50135 (a relay error after a quarantine ended on the destination's answer)": (
+        "a SID storm: 1 unit relaying to network 2, 1 SID space, 2 sessions x 32 tasks,"
+        " timeout 0.1 s, 1 retry; relay errors (30 %, half of them sent 0.15 s late) among"
+        " delay, silence, loss and duplicates. A read of 2.11.0 (SID 0x41) cancelled after"
+        " 3 ms; 2.11.0 answered a younger read, so SID 0x41's quarantine ended 0.5 s later;"
+        " the relay error to the cancelled read came 0.54 s after it was sent (0.15 s at the"
+        " relay, 0.39 s on the delaying link), 0.03 s after that, and was raised to a"
+        " request_many's read of the relay's own CPU 0.1.0 that had taken SID 0x41 (its key"
+        " exactly): the SID is now in doubt for a relay error until its quarantine's full"
+        " term (docs/session.md, the relay-error rule)",
+        replace(
+            BASE,
+            relays=frozenset({1}),
+            timeout=0.1,
+            retries=1,
+            max_sid_spaces=1,
+            connect_sessions=2,
+            connect_tasks=32,
+            poller_groups=1,
+            think=0.003,
+            mean_gap=0.01,
+            storm=True,
+        ),
+        episodes(
+            "0.027406572568198027+0.36736819233657486:u1:delay:0.1,"
+            "0.21350492451089262+0.23386567477390308:u1:silence:1.0,"
+            "0.3370773679112434+0.18711210826446012:u1:relay:0.3,"
+            "0.4348322566392067+0.31043818354834696:u1:loss:1.0,"
+            "0.6073160733585724+0.482484905938853:u1:dup:1.0,"
+            "0.8509255625189065+0.24222571220627215:u1:relay:0.05,"
+            "0.9761108193143642+0.19726558225918728:u1:dup:0.7,"
+            "1.0861466390953416+0.08313535462784799:u1:dup:1.0,"
+            "1.1291401140478836+0.26470478671704695:u1:delay:0.2,"
+            "1.265417896567629+0.37867238716350465:u1:delay:0.1,"
+            "1.4554889007005838+0.2602338958152401:u1:silence:1.0,"
+            "1.5935434017275447+0.1282520221100285:u1:silence:1.0,"
+            "1.6839789538741867+0.10844539708749062:u1:delay:0.4,"
+            "1.7434453123316849+0.1324118896583661:u1:loss:0.3,"
+            "1.8112367904681064+0.06042649270249746:u1:loss:0.7,"
+            "1.8466356237129176+0.20477378793872364:u1:silence:1.0,"
+            "1.9577219857993573+0.43681743416856195:u1:loss:0.7,"
+            "2.2111299642175926+0.1798834086282276:u1:loss:0.3,"
+            "2.3093855043629627+0.2782125550517162:u1:silence:1.0,"
+            "2.454979614449356+0.2534256796279036:u1:silence:1.0,"
+            "2.6186423521171527+0.10520056495039717:u1:dup:0.3,"
+            "2.675790442323829+0.07271871430365318:u1:relay:0.3,"
+            "2.720943867737138+0.46232346051119994:u1:dup:0.7,"
+            "2.955154628606264+0.07118811515173418:u1:relay:0.1,"
+            "2.998719360717675+0.36127268381577166:u1:delay:0.1,"
+            "3.1796450762316715+0.3617609321100875:u1:dup:0.7,"
+            "3.367042251050663+0.364328797996689:u1:dup:0.05,"
+            "3.5547589893252614+0.4003764625991707:u1:delay:0.2,"
+            "3.762862052188349+0.4149204614549599:u1:delay:0.4,"
+            "4.002759350000995+0.19098441901195884:u1:delay:0.1,"
+            "4.105230574665203+0.25787918652663183:u1:dup:1.0,"
+            "4.238780496889935+0.1943284143322016:u1:dup:0.05,"
+            "4.341331123881562+0.43994732254624086:u1:dup:0.7,"
+            "4.571713183009002+0.2811430144862148:u1:silence:1.0,"
+            "4.71507768561266+0.09548928643445564:u1:delay:0.1,"
+            "4.763672488006599+0.21130014416850007:u1:dup:0.3,"
+            "4.880837756787513+0.20693660766824545:u1:dup:0.05,"
+            "5.003283302354607+0.4382111189750616:u1:relay:0.1,"
+            "5.23423874907022+0.4210864351165159:u1:delay:0.2,"
+            "5.451433160162373+0.34915577514516727:u1:delay:0.1,"
+            "5.626552420224346+0.13794439976248196:u1:delay:0.4,"
+            "5.731222145976344+0.23950730141288185:u1:relay:0.1,"
+            "5.851753732720442+0.11020166829709553:u1:silence:1.0,"
+            "5.9083150527439185+0.24895582017875934:u1:relay:0.3,"
+            "6.04725274240456+0.21746049907624548:u1:silence:1.0,"
+            "6.172526447067643+0.3545674837103943:u1:delay:0.1,"
+            "6.356074108581622+0.23189102508977105:u1:delay:0.1,"
+            "6.489350381371528+0.20431007916094196:u1:loss:1.0,"
+            "6.616713408941131+0.43008655790541145:u1:loss:1.0,"
+            "6.845023892812652+0.1986678664180716:u1:silence:1.0,"
+            "6.967190809493982+0.10514066082462604:u1:silence:1.0,"
+            "7.030841481469267+0.4199176670087777:u1:relay:0.05,"
+            "7.242363994003894+0.37833743591544816:u1:delay:0.4,"
+            "7.434117265777775+0.05687680862623727:u1:silence:1.0,"
+            "7.46268722122576+0.4385575801480499:u1:relay:0.3,"
+            "7.697684359870358+0.18088841732695843:u1:delay:0.1"
+        ),
+        17000,
+        50135,
+    ),
+}
+
+
+def run_regression(name: str) -> Result:
+    """The run of the pinned world ``name`` of :data:`REGRESSIONS`."""
+    _, config, schedule, steps, seed = REGRESSIONS[name]
+    world = World(seed, steps, schedule=schedule, config=config)
+    world.command = f"python -m tests.simulation --regressions  # {name}"
+    return world.run()

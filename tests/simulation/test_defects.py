@@ -5,14 +5,15 @@ was marked ``xfail(strict=True)`` naming it until the fix landed (then strict xf
 and the mark went). All five are fixed on main.
 
 The families the soak found and main has not fixed yet (``world.UNFIXED``, allowed by the
-slice) run the same way: each its world, a strict xfail, so that the fix is noticed.
+slice) run the same way: each its world, a strict xfail, so that the fix is noticed; and
+the soak's worlds of families fixed since (``scenarios.REGRESSIONS``) must stay clean.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from .scenarios import DEFECTS, UNFIXED_WORLDS, run_defect, run_unfixed
+from .scenarios import DEFECTS, REGRESSIONS, UNFIXED_WORLDS, run_defect, run_regression, run_unfixed
 from .world import UNFIXED, suspect
 
 
@@ -43,6 +44,14 @@ def test_defect_5_late_duplicates_while_sids_wrap() -> None:
 
 def test_every_defect_has_a_world() -> None:
     assert sorted(DEFECTS) == [1, 2, 3, 4, 5]
+
+
+@pytest.mark.parametrize("name", sorted(REGRESSIONS))
+def test_a_pinned_world_of_a_fixed_family_stays_clean(name: str) -> None:
+    """Each world the soak found a violation in, fixed since (scenarios.REGRESSIONS)."""
+    result = run_regression(name)
+    assert result.violation is None, result.reproducer()
+    assert result.steps >= REGRESSIONS[name][3]
 
 
 @pytest.mark.parametrize(
