@@ -9,6 +9,7 @@ from aiofins.protocol.errors import CommandError, FinsTimeout, ParameterError
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 
+from ..virtual_time import on_virtual_time
 from .test_session_udp import (
     PLC,
     Reply,
@@ -410,4 +411,51 @@ async def test_an_exception_in_on_frame_ends_the_batch_and_is_raised() -> None:
             peer.handler = lambda cmd: [(0.0, reply(cmd, 0x1103))]
             await s.request_many(reads(range(5)), timeout=5, on_frame=stop_at_third)
         assert len(calls) == 3
+        assert_idle(s)
+
+
+@on_virtual_time
+async def test_a_burst_short_of_sids_sends_those_with_one_and_the_rest_as_sids_come_free() -> None:
+    """A burst of a batch meets the destination's SIDs nearly all quarantined (a batch
+    timed out): the commands that find a SID go out together, each on its own free SID;
+    the others wait for one (counted) and go out as the quarantine ends; every result is
+    its own command's."""
+    async with (
+        udp_responder(lambda cmd: []) as peer,
+        session_for(peer, max_in_flight=200, max_sid_spaces=1, min_quarantine=1.0) as s,
+    ):
+        with pytest.raises(FinsTimeout):
+            await s.request_many(reads(range(200)), timeout=0.2)
+        quarantined = set(s._quarantine)
+        assert len(quarantined) == 200 and len(peer.received) == 200
+        peer.received.clear()
+        peer.handler = answer
+        results = await s.request_many(reads(range(1000, 1200)), timeout=5)
+        assert [r.data for r in results] == [expected(w) for w in range(1000, 1200)]
+        sent = [c for c in peer.received if word_of(c) >= 1000]  # (not the 1st batch's last)
+        assert sorted(word_of(c) for c in sent) == list(range(1000, 1200))
+        assert not {key_of(c) for c in sent} & quarantined
+        if s.on_asyncio:  # one burst: those with a SID first, in order
+            assert [word_of(c) for c in sent[:56]] == list(range(1000, 1056))
+        assert s.stats.sid_exhausted > 0 and s.stats.completed == 200
+        assert_idle(s)
+
+
+@pytest.mark.anyio
+async def test_the_answered_commands_of_a_batch_leave_the_deadlines_by_the_next_burst() -> None:
+    """A batch's replies leave the deadline structure's upkeep to its next burst (once per
+    burst, not per reply): answered requests in it stay within what one burst answers
+    (twice the window with those in flight), and none is left when the batch is done."""
+    window = 8
+    most = 0
+
+    def kept(_index: int, _frame: bytes) -> None:
+        nonlocal most
+        most = max(most, len(s._fifo) + len(s._heap))
+
+    async with udp_responder() as peer, session_for(peer, max_in_flight=window) as s:
+        await s.request_many(reads(range(500)), timeout=5, on_frame=kept)
+        assert 0 < most <= 2 * window
+        assert not s._fifo and not s._heap
+        assert s.stats.completed == 500
         assert_idle(s)

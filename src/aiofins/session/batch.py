@@ -75,6 +75,18 @@ class Batching(SidUser, Protocol):
 
     def log_frames_now(self) -> None: ...
 
+    def start_burst(
+        self,
+        ps: Sequence[Pending],
+        commands: Sequence[Command],
+        state: DestState,
+        retries: int,
+        now: float,
+        end: float,
+    ) -> list[bytes]: ...
+
+    def drop_answered(self) -> None: ...
+
     async def ensure_open(self, timeout: float | None = None) -> None: ...
 
     def dest_state(self, dest: FinsAddress) -> DestState: ...
@@ -258,6 +270,8 @@ class Batch:
         asked once for all of it (see :meth:`Session.log_frames_now`); each command is
         started (the request hooks and the frame's log run then) and the burst sent."""
         self.flush_handle = None
+        session = self.session
+        session.drop_answered()  # (the replies since the last burst left it to this)
         first, last = self.started, self.next
         again = self.again
         if (first == last and not again) or self.fut.done():
@@ -268,29 +282,21 @@ class Batch:
             due: Sequence[int] = [*again, *range(first, last)]
         else:
             due = range(first, last)
-        session = self.session
         session.log_frames_now()
-        start, state, commands, retries = session.start, self.state, self.commands, self.retries
-        sid_waits = self.sid_waits
+        commands, state, retries = self.commands, self.state, self.retries
         now = session.clock()
         end = now + self.timeout
-        frames = []
+        ps: list[BatchPending] = []
         for index in due:
-            mrc, src, params = commands[index]
-            p = BatchPending()  # session.start() sets the fields of every request
+            p = BatchPending()  # session.start_burst() sets the fields of every request
             p.fut = None
             p.slots = None  # the batch holds its slots (see held)
             p.batch = self
             p.index = index
-            frame = start(p, state, mrc, src, params, retries, now, end, None)
-            if frame is None:  # no free SID of the transport's own
-                self.sid_elsewhere(p, now, end)
-                continue
-            if self.keep and session.sids.linger:
-                p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
-            if sid_waits:
-                sid_waits.pop(index, None)
-            frames.append(frame)
+            ps.append(p)
+        frames = session.start_burst(ps, [commands[i] for i in due], state, retries, now, end)
+        if len(frames) < len(ps) or self.sid_waits or (self.keep and session.sids.linger):
+            self.started_each(ps, frames, now, end)
         if not frames:
             return
         transport = session.transport
@@ -306,6 +312,35 @@ class Batch:
                 fast_send(frame)
         except BaseException as exc:  # (cleanup() gives up what this batch has in flight)
             self.finish(exc)
+
+    def started_each(
+        self, ps: list[BatchPending], frames: list[bytes], now: float, end: float
+    ) -> None:
+        """After :meth:`Session.start_burst <aiofins.session.Session.start_burst>` started
+        the first ``len(frames)`` of ``ps`` (sent ``now``, until ``end``): what the unusual
+        cases need per command. Each of those kept its frame where the duplicate rule needs
+        it (see ``Session._keep_frame``) and stopped waiting for a SID; the rest are
+        started one by one (:meth:`Session.start`), those finding no free SID of the
+        transport's own going to :meth:`sid_elsewhere`."""
+        session = self.session
+        keep = self.keep and session.sids.linger
+        sid_waits = self.sid_waits
+        started = len(frames)
+        for i, p in enumerate(ps):
+            if i < started:
+                frame = frames[i]
+            else:
+                mrc, src, params = self.commands[p.index]
+                got = session.start(p, self.state, mrc, src, params, self.retries, now, end, None)
+                if got is None:  # no free SID of the transport's own
+                    self.sid_elsewhere(p, now, end)
+                    continue
+                frame = got
+                frames.append(frame)
+            if keep:
+                p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
+            if sid_waits:
+                sid_waits.pop(p.index, None)
 
     def sid_elsewhere(self, p: BatchPending, now: float, end: float) -> None:
         """Command ``p.index`` found every SID of the transport's own taken: sent at once on
@@ -455,6 +490,7 @@ class Batch:
         while self.held:
             self.held -= 1
             slots.release()
+        self.session.drop_answered()  # (what the replies left to a next burst)
 
 
 async def request_many(

@@ -55,7 +55,7 @@ from ..protocol.frames import (
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
-from .batch import raise_after_a_turn, request_many
+from .batch import BatchPending, raise_after_a_turn, request_many
 from .breaker import BreakerState, CircuitBreaker, admit_call, call_answered, call_ended
 from .clock import Clock, Clocks, backend_clocks
 from .link import Link
@@ -463,11 +463,26 @@ class Session:
             p.reply = frame
         else:
             p.wake(frame)
+            if self._hooks is None and type(p) is BatchPending and p.batch.remaining:
+                return  # its batch drops the answered from the deadlines per burst (drop_answered)
         if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
         fifo = self._fifo  # the answered requests at the front of the deadlines dropped
         while fifo and fifo[0].done:
             fifo.popleft()
+        if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
+            self._deadlines_left(len(pending))
+
+    def drop_answered(self) -> None:
+        """What :meth:`frame_received` does with the deadlines after a reply: the answered
+        requests at the front of the FIFO dropped, the rest (:meth:`_deadlines_left`) when
+        needed. A batch's reply with more of the batch to come (and no hooks) leaves this
+        to its batch, which calls it once per burst (:meth:`Batch.flush
+        <aiofins.session.batch.Batch.flush>`), and as it ends; its last reply does it."""
+        fifo = self._fifo
+        while fifo and fifo[0].done:
+            fifo.popleft()
+        pending = self.sids.pending
         if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
             self._deadlines_left(len(pending))
 
@@ -867,6 +882,63 @@ class Session:
             watcher.arm(deadline, now)
         if self._log_frames or self._hooks is not None:
             self._sent_told(p, frame)
+
+    def start_burst(
+        self,
+        ps: Sequence[Pending],
+        commands: Sequence[tuple[int, int, bytes]],
+        state: DestState,
+        retries: int,
+        now: float,
+        end: float,
+    ) -> list[bytes]:
+        """:meth:`start` each of ``ps`` (command ``commands[i]`` for ``ps[i]``) to
+        ``state``'s destination on the session's own transport, all sent ``now`` with the
+        call's deadline ``end`` and no per-attempt cap (a batch's burst): their frames, in
+        order, for the caller to send; fewer than ``ps`` when one finds no free SID (it and
+        those after it are not registered: the caller starts them one by one).
+
+        The first goes through :meth:`start` (and :meth:`_register`: its plan, deadline,
+        the deadline structure, the watcher, the hooks and the log); the others share its
+        send time, deadline and retransmission plan, so what :meth:`_register` decided for
+        it is copied, not decided again: each takes a SID (:meth:`SidSpace.take`), gets its
+        frame and fields, and goes where the first went in the deadlines (the watcher is
+        armed for that deadline already); the hooks and the log told as for the first."""
+        frames: list[bytes] = []
+        if not ps:
+            return frames
+        first = ps[0]
+        mrc, src, params = commands[0]
+        frame = self.start(first, state, mrc, src, params, retries, now, end, None)
+        if frame is None:
+            return frames
+        frames.append(frame)
+        sids = self.sids
+        take, pending, prefix = sids.take, sids.pending, state.prefix
+        deadline, plan = first.deadline, first.plan
+        wait = plan[4] if isinstance(plan, tuple) else 0.0
+        fifo = self._fifo
+        add = fifo.append if fifo and fifo[-1] is first else self._deadlines.add
+        told = self._log_frames or self._hooks is not None
+        for i in range(1, len(ps)):
+            key = take(state, now)
+            if key is None:
+                break
+            p = ps[i]
+            mrc, src, params = commands[i]
+            frame = pack_head(prefix, key & 0xFF, mrc, src) + params
+            p.key, p.mrc, p.src, p.rtt, p.space = key, mrc, src, state, None
+            p.done = p.abandoned = False
+            p.reply = None
+            p.attempts = 1
+            p.end, p.deadline, p.sent_at = end, deadline, now
+            p.plan = (frame, retries, end, None, wait) if plan is not None else None
+            add(p)
+            if told:
+                self._sent_told(p, frame)
+            pending[key] = p
+            frames.append(frame)
+        return frames
 
     def _sent_told(self, p: Pending, frame: bytes) -> None:
         """The hooks (:class:`RequestSent`) and the DEBUG log told that ``p`` is sent."""
