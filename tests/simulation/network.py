@@ -74,6 +74,11 @@ class Network:
         #: Ground truth of the duplicates: every reply copy the network made, as (when it
         #: arrives, the socket it goes to, its bytes), in the order they were made.
         self.copies: list[tuple[float, Address, bytes]] = []
+        #: Ground truth of the original replies over UDP: each as (when it was sent, when
+        #: it arrives, the socket it goes to, the socket its command came from, its bytes).
+        self.originals: list[tuple[float, float, Address, object, bytes]] = []
+        #: Where the command of the UDP reply being sent came from (set by :meth:`_send`).
+        self._answering: object = None
 
     def add_unit(self, unit: Unit) -> None:
         self.units[unit.address] = unit
@@ -128,8 +133,15 @@ class Network:
         if to_unit is None and faults and "dup" in faults and rng.random() < faults["dup"]:
             lag = delay + rng.random() * DUPLICATE_LAG
             self.copies.append((self.loop.time() + lag, packet.dest, packet.data))
+            self._original(packet, delay)
             return [delay, lag]
+        if to_unit is None:
+            self._original(packet, delay)
         return [delay]
+
+    def _original(self, packet: Packet, delay: float) -> None:
+        now = self.loop.time()
+        self.originals.append((now, now + delay, packet.dest, self._answering, packet.data))
 
     def copy_answered(self, data: bytes, start: float, end: float, head: bytes = b"") -> str:
         """Ground truth for a wrong answer returned between ``start`` and ``end``: whether a
@@ -144,6 +156,25 @@ class Network:
                 continue
             earlier = any(a < at and d == dest for a, d, _ in self.copies)
             return "copy" if earlier else "first"
+        return ""
+
+    def original_answered(self, data: bytes, start: float, end: float, head: bytes = b"") -> str:
+        """Ground truth for a wrong answer returned between ``start`` and ``end`` that no
+        copy explains (:meth:`copy_answered`): whether an original UDP reply holding
+        ``data`` (as there) arrived meanwhile, and what it was: ``"misrouted"`` if it went
+        to another socket than the one its command came from (a fixed reply port: issue
+        #22's defect 2), ``"late"`` if it went back to its command's socket but was sent
+        before the call began (the reply to an earlier request, given up on: its SID was
+        reused while it was on its way), ``""`` if neither."""
+        for sent, at, dest, sender, frame in self.originals:
+            if not start - 1e-9 <= at <= end + 1e-9:
+                continue
+            if frame[14:] != data or not frame[10:].startswith(head):
+                continue
+            if sender != dest:
+                return "misrouted"
+            if sent < start:
+                return "late"
         return ""
 
     def _delay(self, faults: dict[str, float]) -> float:
@@ -174,7 +205,9 @@ class Network:
             return
         port = self.ports[unit.address]
         if not port.sock.closed:
+            self._answering = to
             port.sock.sendto(frame, dest)
+            self._answering = None
 
     def flush(self) -> None:
         """Drop every reply not yet sent late."""

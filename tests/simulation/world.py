@@ -230,7 +230,9 @@ class Result:
     #: The command that replays this run.
     command: str = ""
     #: What the network's ground truth says caused a wrong answer (see
-    #: :meth:`~.network.Network.copy_answered`): ``"first"``, ``"copy"`` or ``""``.
+    #: :meth:`~.network.Network.copy_answered`): ``"first"``, ``"copy"``; else of an
+    #: original reply (:meth:`~.network.Network.original_answered`): ``"late"``,
+    #: ``"misrouted"``; ``""``: none.
     cause: str = ""
 
     def reproducer(self) -> str:
@@ -577,7 +579,7 @@ class World:
         h = op.target.history
         if op.kind == "write":
             if not h.writes.get(op.write):
-                self.cause = self.net.copy_answered(b"", op.start, self.now(), WRITE_REPLY)
+                self.cause = self._answered_by(b"", op.start, WRITE_REPLY)
                 self.fail("at most once", f"op {op.id}: write reported ok, never executed")
             return
         if op.kind == "read":
@@ -594,7 +596,7 @@ class World:
                 op.start <= t <= op.end and d == data  # type: ignore[operator]
                 for t, d in h.reads.get(params, ())
             ) and not any(op.start <= t <= op.end and d == data for t, d in h.spoiled):  # type: ignore[operator]
-                self.cause = self.net.copy_answered(data, op.start, self.now())
+                self.cause = self._answered_by(data, op.start)
                 self.fail(
                     "never wrong",
                     f"op {op.id} ({op.path} {op.kind} {params.hex()} from {h.address}) returned"
@@ -602,6 +604,13 @@ class World:
                     f" {op.start:.4f} and {op.end:.4f} returned that",
                 )
                 return
+
+    def _answered_by(self, data: bytes, start: float, head: bytes = b"") -> str:
+        """The network's ground truth for a wrong answer (see :attr:`Result.cause`)."""
+        net, now = self.net, self.now()
+        return net.copy_answered(data, start, now, head) or net.original_answered(
+            data, start, now, head
+        )
 
     def _check_error(self, op: Op) -> None:
         exc = op.error
@@ -1038,6 +1047,14 @@ FIRST_COPY = "defect 5: the link's first copy, before it showed any duplicate"
 #: ... a copy of an earlier write's reply to a write without retries: every write's reply
 #: is the same bytes, and it cannot be sent again to tell (exposed, docs/session.md).
 WRITE_COPY = "defect 5: a copy of a write's reply to a write without retries"
+#: An original reply (no copy: the network's ground truth) sent before the call began, to
+#: an earlier request given up on, reached the SID the call reused while it was on its way:
+#: the quarantine ended too soon (soak seed 50239: ended on the evidence that the PLC
+#: answered a younger request, while the older command was still delayed on its way).
+LATE_REPLY = "a late original reply to a SID reused after its request was given up on"
+#: An original reply that went to another socket than its command's (a fixed reply port)
+#: answered a request of the space that received it.
+MISROUTED = "defect 2 (a reply for another space)"
 
 
 #: Kinds of violation not yet fixed on main: the slice and the state machine allow them,
@@ -1061,12 +1078,17 @@ def suspect(result: Result) -> str:
     for name, sign in SIGNS:
         if sign in line:
             return name
+    if result.cause == "late":
+        return LATE_REPLY
+    if result.cause == "misrouted":
+        return MISROUTED
     if result.cause:
         if "write reported ok" in line:
             return WRITE_COPY  # (a write is never sent again: the harness opts in no retries)
         return FIRST_COPY if result.cause == "first" else DUPLICATE
-    if result.config is not None and result.config.fixed:
-        return "defect 2 (a reply for another space)"
+    c = result.config
+    if c is not None and c.fixed and c.max_sid_spaces > 1:  # (one space: no other to reach)
+        return MISROUTED
     if ":dup:" in line and ("never wrong" in line or "at most once" in line):
         return DUPLICATE
     return "unknown"
