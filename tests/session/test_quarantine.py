@@ -1,20 +1,24 @@
 """A quarantine ends on evidence that the PLC answers again, not on a fixed time (issue #22,
-defect 4). On trio's virtual clock: the 18 s of each run take no wall time and every count
-is exact."""
+defect 4), and not before a reply to its request could still come on this link (the soak's
+seed 50239). On virtual time: the 18 s of a run take no wall time and every count is
+exact."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import anyio
 import pytest
 from trio.testing import MockClock
 
-from aiofins.protocol.errors import FinsError
+from aiofins.memnet import MemoryNetwork, Packet
+from aiofins.protocol.errors import FinsError, FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.simulator import VirtualPLC
-from aiofins.transport import MemoryTransport
+from aiofins.transport import MemoryTransport, UdpTransport
 
-pytestmark = pytest.mark.anyio
+from ..virtual_time import on_virtual_time
 
 TIMEOUT = 0.2
 READ_D0 = bytes((0x82, 0, 0, 0, 0, 1))
@@ -26,6 +30,7 @@ def anyio_backend() -> object:
     return ("trio", {"clock": MockClock(autojump_threshold=0)})
 
 
+@pytest.mark.anyio
 @pytest.mark.parametrize(("readers", "breaker_threshold"), [(255, 0), (255, 5), (50, 5)])
 async def test_after_1_2_s_of_silence_every_read_succeeds_again(
     readers: int, breaker_threshold: int
@@ -85,3 +90,105 @@ async def test_after_1_2_s_of_silence_every_read_succeeds_again(
         assert len([t for t in good if t > recovered]) >= readers * int((18.0 - recovered) / 0.06)
         probes = session.stats.sid_probes  # (one per timeout while every SID is given up on)
         assert probes >= 1 if readers == 255 else probes == 0
+
+
+PLC = ("10.0.0.1", 9600)
+
+
+def read(word: int, count: int) -> bytes:
+    """0101 parameters: ``count`` DM words from ``word``."""
+    return bytes((0x82, word >> 8, word & 0xFF, 0, count >> 8, count & 0xFF))
+
+
+def held(word: int, count: int) -> bytes:
+    """What the PLC holds there: D\\ *n* holds 1000 + *n*."""
+    return b"".join((1000 + w).to_bytes(2, "big") for w in range(word, word + count))
+
+
+@pytest.mark.parametrize("shown", ["answered", "late"])
+@on_virtual_time
+async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_answer(
+    shown: str,
+) -> None:
+    """The quarantine's evidence rule (the soak's seed 50239, one UDP socket). A read of
+    D10 x 2 is given up on after 0.05 s; its command is 0.4 s on its way to the PLC and
+    its reply 0.25 s on the way back, so the PLC takes it after a younger read and its
+    words come 0.65 s after it was sent. The younger read, of D20 x 2, sent when the
+    first was given up on, is answered at once: the evidence that the PLC answers ended
+    the first read's quarantine 0.5 s later, at 2.55 s. At 2.6 s 255 reads, whose replies
+    take 0.2 s, took every SID but the younger read's, the quarantined one included: the
+    late reply answered the read under it with D10's words (two words, like its own).
+
+    The link had shown a round trip that long before: a read answered after 0.65 s
+    (``answered``), or one given up on whose reply came 0.65 s after it was sent
+    (``late``). A quarantine now ends on that evidence no sooner than twice the slowest
+    round trip the link has shown after its request was sent (2.0 + 1.3 s): the 255 reads
+    leave the quarantined SID alone, take the younger read's, and each gets its own words;
+    the late reply is counted as late."""
+    plc = VirtualPLC()
+    plc.write("D0", [1000 + w for w in range(600)])
+    commands = {1: 0.3, 10: 0.4}  # word read -> how long its command takes to the PLC
+    replies = {1: 0.35, 10: 0.25}  # first word read -> how long its reply takes back
+    replies.update((w, 0.2) for w in range(100, 355))
+    received: list[bytes] = []
+
+    def fate(packet: Packet) -> Sequence[float]:
+        data = packet.data
+        if packet.dest == PLC:
+            return [commands.get(int.from_bytes(data[13:15], "big"), 0.0)]
+        return [replies.get(int.from_bytes(data[14:16], "big") - 1000, 0.0)]
+
+    async with MemoryNetwork(fate=fate) as net:
+        sock = net.datagram_socket(*PLC)
+
+        async def serve() -> None:
+            while True:
+                data, source = await sock.receive()
+                received.append(data)
+                reply = plc.handle_frame(data)
+                if reply is not None:
+                    sock.sendto(reply, source)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(serve)
+            transport = UdpTransport(PLC[0], local_host="10.0.0.200", network=net)
+            async with Session(
+                transport,
+                source=FinsAddress(0, 200, 0),
+                dest=FinsAddress(0, 1, 0),
+                max_sid_spaces=1,
+                max_in_flight=255,
+                timeout=1.0,
+                retries=0,
+            ) as session:
+                if shown == "answered":  # a round trip of 0.65 s, in time
+                    r = await session.request(0x01, 0x01, read(1, 1))
+                    assert r.data == held(1, 1)
+                    assert anyio.current_time() == pytest.approx(0.65, abs=1e-5)
+                else:  # given up on at 0.1 s; its reply comes 0.65 s after its send
+                    with pytest.raises(FinsTimeout):
+                        await session.request(0x01, 0x01, read(1, 1), timeout=0.1)
+                await anyio.sleep(2.0 - anyio.current_time())
+                with pytest.raises(FinsTimeout):
+                    await session.request(0x01, 0x01, read(10, 2), timeout=0.05)
+                r = await session.request(0x01, 0x01, read(20, 2))
+                assert r.data == held(20, 2)
+                assert anyio.current_time() == pytest.approx(2.05, abs=1e-5)
+                await anyio.sleep(0.55)
+                words: dict[int, bytes] = {}
+
+                async def reader(word: int) -> None:
+                    words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
+
+                async with anyio.create_task_group() as readers:
+                    for word in range(100, 355):
+                        readers.start_soon(reader, word)
+                assert anyio.current_time() == pytest.approx(2.8, abs=1e-5)
+                assert words == {word: held(word, 2) for word in range(100, 355)}
+                # the SIDs as the PLC took them: 0 (D1), 2 (D20) before 1 (D10, delayed),
+                # then 3..255, 0 and 2 again (1 still quarantined)
+                assert [f[9] for f in received] == [0, 2, 1, *range(3, 256), 0, 2]
+                stats, late = session.stats, int(shown == "late")
+                assert (stats.completed, stats.timeouts) == (257 - late, 1 + late)
+                assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
+            tg.cancel_scope.cancel()

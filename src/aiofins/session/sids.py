@@ -72,7 +72,9 @@ class SidSpace:
         "relay_doubt",
         "replies",
         "routed",
+        "sent",
         "short_at",
+        "slowest",
     )
 
     def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
@@ -83,14 +85,26 @@ class SidSpace:
         #: SID key -> when it may be used again (requests given up on).
         self.quarantine: dict[int, float] = {}
         #: Destination (its key's upper bytes) -> SID key -> when its request was given up
-        #: on and its command (MRC << 8 | SRC), until the destination answers a request
-        #: sent after that (see :meth:`answered_after`).
-        self.given_up: dict[int, dict[int, tuple[float, int]]] = {}
+        #: on, its command (MRC << 8 | SRC) and when it was sent (when it was given up on,
+        #: if it was sent again: its last transmission went out before then), until the
+        #: destination answers a request sent after it was given up on (see
+        #: :meth:`answered_after`).
+        self.given_up: dict[int, dict[int, tuple[float, int, float]]] = {}
         #: ``SID << 16 | command`` -> until when: a SID whose quarantine the evidence rule
         #: ended early (:meth:`answered_after`) while a relay error to its request, which
         #: comes on the relay's timer, may still come; a relay error under that SID number
         #: and command code is taken for that request's (see :meth:`relay_doubted`).
         self.relay_doubt: dict[int, float] = {}
+        #: SID key -> when the request last given up on under it was sent, if it was sent
+        #: once (a late reply's round trip is timed from it; one entry per key, like
+        #: :attr:`answers`).
+        self.sent: dict[int, float] = {}
+        #: The slowest round trip (seconds) the link has shown: a reply to a request sent
+        #: once (Karn: the reply to which transmission is unknown otherwise), answered or
+        #: late, from the request's send. A quarantine ends on the evidence that the
+        #: destination answers no sooner than :data:`LINGER_FACTOR` times this after its
+        #: request was sent (see :meth:`answered_after`).
+        self.slowest = 0.0
         #: SID key -> when it may be used again (answered: a duplicate may follow).
         self.lingering: dict[int, float] = {}
         #: SID key -> when its last request was answered (to count and time duplicates);
@@ -217,20 +231,32 @@ class SidSpace:
         if self.held:
             self.held.pop(key, None)
         self.quarantine[key] = until
+        now = self.clock()
+        sent = p.sent_at
+        if p.rtt is not None:  # sent once: a late reply to it is a round trip of the link
+            self.sent[key] = sent
+        else:  # sent again (Karn): its last transmission went out before now
+            self.sent.pop(key, None)
+            sent = now
         mine = self.given_up.get(key & ~0xFF)
         if mine is None:
             mine = self.given_up[key & ~0xFF] = {}
-        mine[key] = (self.clock(), (p.mrc << 8) | p.src)
+        mine[key] = (now, (p.mrc << 8) | p.src, sent)
 
     def answered_after(self, key: int, sent_at: float, now: float) -> None:
         """The destination of ``key`` answered a request first sent at ``sent_at``: the
         quarantine of each of its SIDs given up on before then ends
-        :data:`~.matching.LATE_REPLY_GRACE` from ``now``. The destination answers again,
-        and it took (and answered or lost) those older commands before the younger one:
-        a late reply to one of them could only be a reordered datagram, which the grace
-        covers. So an outage's quarantines end on the evidence that the PLC answers, not
-        ``min_quarantine`` (15 s) later. Called by the receive path while any SID given
-        up on has not seen such evidence (:attr:`given_up`).
+        :data:`~.matching.LATE_REPLY_GRACE` from ``now``, or :data:`LINGER_FACTOR` times
+        the slowest round trip the link has shown (:attr:`slowest`) after its request was
+        sent, whichever is later. The destination answers again, so a command it lost
+        (an outage's) will never be answered; but one still on its way, delayed, reaches
+        it after the younger one and is answered after it, as late as the link's round
+        trips (soak seed 50239: a read given up on after 18 ms, its command 0.40 s on its
+        way and its reply 0.25 s, answered a read that reused its SID 0.54 s after the
+        younger read's answer). So an outage's quarantines end on the evidence that the
+        PLC answers, not ``min_quarantine`` (15 s) later, and a slow link's when a reply
+        to their requests could no longer come. Called by the receive path while any SID
+        given up on has not seen such evidence (:attr:`given_up`).
 
         That evidence says nothing of a relay error to an older request: a relay point sends
         it on its own timer, not the destination's, and it may come after the quarantine
@@ -242,14 +268,18 @@ class SidSpace:
         if mine is None:
             return
         end = now + LATE_REPLY_GRACE
+        wait = LINGER_FACTOR * self.slowest
         quarantine, doubt = self.quarantine, self.relay_doubt
-        for k, (at, command) in list(mine.items()):
+        for k, (at, command, sent) in list(mine.items()):
             if at > sent_at:
                 continue
             del mine[k]
             until = quarantine.get(k)
-            if until is not None and until > end:
-                quarantine[k] = end
+            if until is None:
+                continue
+            ends = max(end, sent + wait)
+            if until > ends:
+                quarantine[k] = ends
                 if len(doubt) >= 256:  # (bounded: the expired go first)
                     for d in [d for d, u in doubt.items() if u <= now] or list(doubt)[:1]:
                         del doubt[d]
@@ -300,6 +330,7 @@ class SidSpace:
         self.quarantine.clear()
         self.given_up.clear()
         self.relay_doubt.clear()
+        self.sent.clear()
         self.lingering.clear()
         self.held.clear()
         self.replies.clear()
@@ -339,7 +370,11 @@ class SidSpace:
         kind, key = count_unmatched(
             stats, self.quarantine, self.answers, key, frame, now, relay_error, grace
         )
-        if kind == "duplicate":
+        if kind == "late":
+            sent = self.sent.get(key)
+            if sent is not None and now - sent > self.slowest:
+                self.slowest = now - sent  # (the link's round trips, see answered_after)
+        elif kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
                 linger = min(MAX_LINGER, LINGER_FACTOR * (now + done_at))
