@@ -269,3 +269,46 @@ async def test_a_relay_error_later_than_the_evidence_reaches_no_request_that_reu
         stats = session.stats
         assert (stats.completed, stats.timeouts, stats.end_code_errors) == (256, 1, 0)
         assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (1, 0, 0)
+
+
+@on_virtual_time
+async def test_a_late_relay_error_is_no_round_trip_of_the_link() -> None:
+    """A read of 2.9.0 (SID 0) times out at 0.1 s; its relay error comes at 2 s, from the
+    relay's timer, not from the destination: it ends SID 0's quarantine (late), and
+    taught the link's slowest round trip, 2 s, so that a quarantine ended by the evidence
+    that the destination answers lasted 4 s after its request was sent (soak seed 50135,
+    relay errors 1.2 to 5.8 s late: every SID quarantined in the recovery phase). A read of
+    the cell (SID 1) at 2.1 s whose reply is lost times out at 2.2 s; the cell answers the
+    next read at once, so SID 1's quarantine ends at 2.7 s: at 2.75 s 256 reads of the
+    cell take every SID in turn, SID 1 included."""
+
+    def fate(packet: Packet) -> Sequence[float]:
+        data = packet.data
+        if packet.source[0] != "10.0.0.10" or len(data) < 14:
+            return [0.0]
+        if data[12] & 0x80:
+            return [2.0]
+        return [] if data[14:] == (2005).to_bytes(2, "big") else [0.0]
+
+    async with plant_session(fate, timeout=0.1, retries=0) as (session, plant, received):
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read(0), dest=MISSING)
+        await anyio.sleep(1.8)
+        assert session.stats.late_replies == 0
+        await anyio.sleep(0.2)
+        assert session.stats.late_replies == 1
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read(5), dest=CELL)
+        r = await session.request(0x01, 0x01, read(6), dest=CELL)
+        assert r.data == (2006).to_bytes(2, "big")
+        assert anyio.current_time() == pytest.approx(2.2, abs=1e-6)
+        await anyio.sleep(0.55)
+        for n in range(7, 7 + 256):
+            r = await session.request(0x01, 0x01, read(n), dest=CELL)
+            assert r.data == (2000 + n).to_bytes(2, "big")
+        sids = [f[9] for f in received]
+        assert sids[:3] == [0, 1, 2]
+        assert sorted(sids[3:]) == list(range(256))
+        stats = session.stats
+        assert (stats.completed, stats.timeouts, stats.late_replies) == (257, 2, 1)
+        assert plant.counts["refused:0205"] == 1

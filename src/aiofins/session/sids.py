@@ -371,7 +371,9 @@ class SidSpace:
             stats, self.quarantine, self.answers, key, frame, now, relay_error, grace
         )
         if kind == "late":
-            sent = self.sent.get(key)
+            # (not a relay error's: it comes on the relay point's timer, not as a round
+            # trip, and its key is any SID quarantined under its number)
+            sent = None if relay_error else self.sent.get(key)
             if sent is not None and now - sent > self.slowest:
                 self.slowest = now - sent  # (the link's round trips, see answered_after)
         elif kind == "duplicate":
