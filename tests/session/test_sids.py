@@ -94,6 +94,61 @@ def test_abandon_quarantines_and_drain_empties_the_table() -> None:
     assert space.drain() == [q] and space.pending == {}
 
 
+def given_up(space: SidSpace, key: int, sent: float, at: float, once: bool = True) -> None:
+    """A request of 0101 under ``key``, sent at ``sent`` (``once``: not sent again), given
+    up on at ``at`` (``space``'s clock must read ``at``): quarantined for 15 s."""
+    p = record(key)
+    p.sent_at = sent
+    p.rtt = dest() if once else None
+    space.pending[key] = p
+    space.abandon(p, at + 15)
+
+
+def reply(key: int, command: int = 0x0101) -> bytes:
+    """A reply under ``key``'s SID to ``command``, end code 0000."""
+    return bytes((0xC0, 0, 2, 0, 254, 0, 0, 1, 0, key & 0xFF, command >> 8, command & 0xFF, 0, 0))
+
+
+def test_the_evidence_ends_a_quarantine_no_sooner_than_twice_the_slowest_round_trip() -> None:
+    """A late reply before any evidence, with its request's command, shows the link's
+    slowest round trip (0.65 s); the destination's answer to a younger request then ends
+    the quarantines 0.5 s later, but none sooner than twice that after its request was
+    sent (soak seed 50239: a delayed command reaches the PLC after a younger one). A late
+    reply after the evidence (a reply under a wrong SID, say, in the term the evidence
+    left), or with another command, teaches nothing: it made the term grow twice as long
+    each time."""
+    now = [10.1]
+    space, stats = SidSpace(clock=lambda: now[0]), SessionStats({})
+    given_up(space, 0x10001, 10.0, 10.1)
+    now[0] = 10.65
+    assert space.unmatched(stats, 0x10001, reply(0x10001)) == ("late", 0.0)
+    assert space.slowest == pytest.approx(0.65)
+    now[0] = 11.05
+    given_up(space, 0x10002, 11.0, 11.05)
+    given_up(space, 0x10003, 11.0, 11.05, once=False)  # sent again: from its give-up
+    now[0] = 11.1
+    space.answered_after(0x10004, 11.06, 11.1)  # a younger request answered
+    assert space.quarantine[0x10002] == pytest.approx(11.0 + 1.3)
+    assert space.quarantine[0x10003] == pytest.approx(11.05 + 1.3)
+    assert space.given_up == {}
+    now[0] = 12.2
+    assert space.unmatched(stats, 0x10002, reply(0x10002)) == ("late", 0.0)
+    assert space.quarantine[0x10002] == pytest.approx(12.2 + LATE_REPLY_GRACE)
+    assert space.slowest == pytest.approx(0.65)  # after the evidence: taught nothing
+    now[0] = 13.05
+    given_up(space, 0x10006, 13.0, 13.05)
+    given_up(space, 0x10007, 13.0, 13.05, once=False)
+    now[0] = 14.0
+    assert space.unmatched(stats, 0x10006, reply(0x10006, 0x0102)) == ("late", 0.0)
+    assert space.unmatched(stats, 0x10007, reply(0x10007)) == ("late", 0.0)
+    assert space.slowest == pytest.approx(0.65)  # another command; sent twice (Karn)
+    given_up(space, 0x10008, 13.0, 14.0)
+    now[0] = 14.2
+    assert space.unmatched(stats, 0x10008, reply(0x10008)) == ("late", 0.0)
+    assert space.slowest == pytest.approx(1.2)
+    assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (5, 0, 0)
+
+
 def answered(space: SidSpace, key: int, at: float, reply: bytes = b"reply") -> None:
     """``key``'s request was answered with ``reply`` at ``at`` (negative: after a
     retransmission)."""

@@ -72,7 +72,6 @@ class SidSpace:
         "relay_doubt",
         "replies",
         "routed",
-        "sent",
         "short_at",
         "slowest",
     )
@@ -85,23 +84,19 @@ class SidSpace:
         #: SID key -> when it may be used again (requests given up on).
         self.quarantine: dict[int, float] = {}
         #: Destination (its key's upper bytes) -> SID key -> when its request was given up
-        #: on, its command (MRC << 8 | SRC) and when it was sent (when it was given up on,
-        #: if it was sent again: its last transmission went out before then), until the
-        #: destination answers a request sent after it was given up on (see
+        #: on, its command (MRC << 8 | SRC), when it was first sent and whether only once,
+        #: until the destination answers a request sent after it was given up on (see
         #: :meth:`answered_after`).
-        self.given_up: dict[int, dict[int, tuple[float, int, float]]] = {}
+        self.given_up: dict[int, dict[int, tuple[float, int, float, bool]]] = {}
         #: ``SID << 16 | command`` -> until when: a SID whose quarantine the evidence rule
         #: ended early (:meth:`answered_after`) while a relay error to its request, which
         #: comes on the relay's timer, may still come; a relay error under that SID number
         #: and command code is taken for that request's (see :meth:`relay_doubted`).
         self.relay_doubt: dict[int, float] = {}
-        #: SID key -> when the request last given up on under it was sent, if it was sent
-        #: once (a late reply's round trip is timed from it; one entry per key, like
-        #: :attr:`answers`).
-        self.sent: dict[int, float] = {}
-        #: The slowest round trip (seconds) the link has shown: a reply to a request sent
-        #: once (Karn: the reply to which transmission is unknown otherwise), answered or
-        #: late, from the request's send. A quarantine ends on the evidence that the
+        #: The slowest round trip (seconds) the link has shown, from a request's send to its
+        #: reply, of requests sent once (Karn: which transmission a reply answers is
+        #: unknown otherwise): answered, or given up on and answered late before any
+        #: evidence (see :meth:`unmatched`). A quarantine ends on the evidence that the
         #: destination answers no sooner than :data:`LINGER_FACTOR` times this after its
         #: request was sent (see :meth:`answered_after`).
         self.slowest = 0.0
@@ -231,17 +226,10 @@ class SidSpace:
         if self.held:
             self.held.pop(key, None)
         self.quarantine[key] = until
-        now = self.clock()
-        sent = p.sent_at
-        if p.rtt is not None:  # sent once: a late reply to it is a round trip of the link
-            self.sent[key] = sent
-        else:  # sent again (Karn): its last transmission went out before now
-            self.sent.pop(key, None)
-            sent = now
         mine = self.given_up.get(key & ~0xFF)
         if mine is None:
             mine = self.given_up[key & ~0xFF] = {}
-        mine[key] = (now, (p.mrc << 8) | p.src, sent)
+        mine[key] = (self.clock(), (p.mrc << 8) | p.src, p.sent_at, p.rtt is not None)
 
     def answered_after(self, key: int, sent_at: float, now: float) -> None:
         """The destination of ``key`` answered a request first sent at ``sent_at``: the
@@ -270,14 +258,15 @@ class SidSpace:
         end = now + LATE_REPLY_GRACE
         wait = LINGER_FACTOR * self.slowest
         quarantine, doubt = self.quarantine, self.relay_doubt
-        for k, (at, command, sent) in list(mine.items()):
+        for k, (at, command, sent, once) in list(mine.items()):
             if at > sent_at:
                 continue
             del mine[k]
             until = quarantine.get(k)
             if until is None:
                 continue
-            ends = max(end, sent + wait)
+            # (sent again: its last transmission went out before it was given up on)
+            ends = max(end, (sent if once else at) + wait)
             if until > ends:
                 quarantine[k] = ends
                 if len(doubt) >= 256:  # (bounded: the expired go first)
@@ -330,7 +319,6 @@ class SidSpace:
         self.quarantine.clear()
         self.given_up.clear()
         self.relay_doubt.clear()
-        self.sent.clear()
         self.lingering.clear()
         self.held.clear()
         self.replies.clear()
@@ -373,9 +361,8 @@ class SidSpace:
         if kind == "late":
             # (not a relay error's: it comes on the relay point's timer, not as a round
             # trip, and its key is any SID quarantined under its number)
-            sent = None if relay_error else self.sent.get(key)
-            if sent is not None and now - sent > self.slowest:
-                self.slowest = now - sent  # (the link's round trips, see answered_after)
+            if not relay_error:
+                self.late_round_trip(key, frame, now)
         elif kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
@@ -385,6 +372,22 @@ class SidSpace:
             elif done_at is not None:  # the network duplicated a reply
                 return kind, self.learn(now - done_at, now)
         return kind, 0.0
+
+    def late_round_trip(self, key: int, frame: bytes, now: float) -> None:
+        """A late reply ``frame`` came ``now`` under ``key``, quarantined: the round trip
+        it shows (from its request's send) makes :attr:`slowest`, if longer. Only while
+        the request given up on under ``key`` has seen no evidence (:attr:`given_up`),
+        was sent once and asked the command ``frame`` answers: a reply the PLC sends
+        under a wrong SID is taken for the late reply of any quarantined SID, and one that
+        came in the term the evidence left a quarantine (twice :attr:`slowest`) taught a
+        round trip twice as long each time (a simulated PLC answering under wrong SIDs
+        after a delay of 0.4 s: 3 s)."""
+        mine = self.given_up.get(key & ~0xFF)
+        given = mine.get(key) if mine else None
+        if given is None or not given[3] or given[1] != (frame[10] << 8 | frame[11]):
+            return
+        if now - given[2] > self.slowest:
+            self.slowest = now - given[2]
 
     def last_answered(self, key: int) -> int:
         """The key of the request last answered under ``key``'s SID number, any
