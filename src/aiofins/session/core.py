@@ -440,8 +440,7 @@ class Session:
             return  # (a copy of the SID's last reply, held back: see _hold_copy)
         p.done, p.end_code = True, raw
         now = self.clock()
-        latency = now - p.sent_at
-        if latency > sids.slowest and p.rtt is not None:  # the link's slowest round trip
+        if (latency := now - p.sent_at) > sids.slowest and p.rtt is not None:  # (slowest RTT)
             sids.slowest = latency
         if sids.held or sids.given_up:
             self._answered_after_doubt(sids, key, frame, p.sent_at, now)
