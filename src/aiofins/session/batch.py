@@ -19,7 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any, NoReturn, Protocol
+from typing import Any, NoReturn, Protocol, cast
 
 import anyio
 import anyio.lowlevel
@@ -77,8 +77,8 @@ class Batching(SidUser, Protocol):
 
     def start_burst(
         self,
-        ps: Sequence[Pending],
-        commands: Sequence[Command],
+        ps: list[Pending],
+        commands: list[Command],
         state: DestState,
         retries: int,
         now: float,
@@ -286,7 +286,8 @@ class Batch:
         commands, state, retries = self.commands, self.state, self.retries
         now = session.clock()
         end = now + self.timeout
-        ps: list[BatchPending] = []
+        ps: list[Pending] = []
+        mine: list[Command] = []
         for index in due:
             p = BatchPending()  # session.start_burst() sets the fields of every request
             p.fut = None
@@ -294,7 +295,8 @@ class Batch:
             p.batch = self
             p.index = index
             ps.append(p)
-        frames = session.start_burst(ps, [commands[i] for i in due], state, retries, now, end)
+            mine.append(commands[index])
+        frames = session.start_burst(ps, mine, state, retries, now, end)
         if len(frames) < len(ps) or self.sid_waits or (self.keep and session.sids.linger):
             self.started_each(ps, frames, now, end)
         if not frames:
@@ -313,9 +315,7 @@ class Batch:
         except BaseException as exc:  # (cleanup() gives up what this batch has in flight)
             self.finish(exc)
 
-    def started_each(
-        self, ps: list[BatchPending], frames: list[bytes], now: float, end: float
-    ) -> None:
+    def started_each(self, ps: list[Pending], frames: list[bytes], now: float, end: float) -> None:
         """After :meth:`Session.start_burst <aiofins.session.Session.start_burst>` started
         the first ``len(frames)`` of ``ps`` (sent ``now``, until ``end``): what the unusual
         cases need per command. Each of those kept its frame where the duplicate rule needs
@@ -326,7 +326,8 @@ class Batch:
         keep = self.keep and session.sids.linger
         sid_waits = self.sid_waits
         started = len(frames)
-        for i, p in enumerate(ps):
+        for i, made in enumerate(ps):
+            p = cast(BatchPending, made)  # (flush made each: list[Pending] for start_burst)
             if i < started:
                 frame = frames[i]
             else:

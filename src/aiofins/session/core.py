@@ -886,8 +886,8 @@ class Session:
 
     def start_burst(
         self,
-        ps: Sequence[Pending],
-        commands: Sequence[tuple[int, int, bytes]],
+        ps: list[Pending],
+        commands: list[tuple[int, int, bytes]],
         state: DestState,
         retries: int,
         now: float,
@@ -895,16 +895,14 @@ class Session:
     ) -> list[bytes]:
         """:meth:`start` each of ``ps`` (command ``commands[i]`` for ``ps[i]``) to
         ``state``'s destination on the session's own transport, all sent ``now`` with the
-        call's deadline ``end`` and no per-attempt cap (a batch's burst): their frames, in
-        order, for the caller to send; fewer than ``ps`` when one finds no free SID (it and
-        those after it are not registered: the caller starts them one by one).
+        call's deadline ``end``, no per-attempt cap (a batch's burst): their frames, in
+        order; fewer when one finds no free SID (it and those after it not registered).
 
-        The first goes through :meth:`start` (and :meth:`_register`: its plan, deadline,
-        the deadline structure, the watcher, the hooks and the log); the others share its
-        send time, deadline and retransmission plan, so what :meth:`_register` decided for
-        it is copied, not decided again: each takes a SID (:meth:`SidSpace.take`), gets its
-        frame and fields, and goes where the first went in the deadlines (the watcher is
-        armed for that deadline already); the hooks and the log told as for the first."""
+        The first goes through :meth:`start` and :meth:`_register`; the others share its
+        send time, deadline and plan, so what :meth:`_register` decided for it is copied,
+        not decided again: each takes a SID (:meth:`SidSpace.take`), gets its frame and
+        fields, and goes where the first went in the deadlines (the watcher is armed for
+        that deadline already); the hooks and the log told as for the first."""
         frames: list[bytes] = []
         if not ps:
             return frames
@@ -915,26 +913,32 @@ class Session:
             return frames
         frames.append(frame)
         sids = self.sids
-        take, pending, prefix = sids.take, sids.pending, state.prefix
+        pending, prefix = sids.pending, state.prefix
         deadline, plan = first.deadline, first.plan
         wait = plan[4] if isinstance(plan, tuple) else 0.0
         fifo = self._fifo
-        add = fifo.append if fifo and fifo[-1] is first else self._deadlines.add
+        in_order = bool(fifo) and fifo[-1] is first  # (else it went to the heap: so do these)
         told = self._log_frames or self._hooks is not None
         for i in range(1, len(ps)):
-            key = take(state, now)
+            key = sids.take(state, now)  # (methods called, not bound: mypyc calls them natively)
             if key is None:
                 break
             p = ps[i]
             mrc, src, params = commands[i]
             frame = pack_head(prefix, key & 0xFF, mrc, src) + params
-            p.key, p.mrc, p.src, p.rtt, p.space = key, mrc, src, state, None
+            p.key, p.mrc, p.src = key, mrc, src
+            p.rtt, p.space = state, None
             p.done = p.abandoned = False
             p.reply = None
             p.attempts = 1
-            p.end, p.deadline, p.sent_at = end, deadline, now
+            p.end = end
+            p.deadline = deadline
+            p.sent_at = now
             p.plan = (frame, retries, end, None, wait) if plan is not None else None
-            add(p)
+            if in_order:
+                fifo.append(p)
+            else:
+                self._deadlines.add(p)
             if told:
                 self._sent_told(p, frame)
             pending[key] = p
