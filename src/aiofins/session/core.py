@@ -444,8 +444,7 @@ class Session:
             sids.slowest = latency
         if sids.held or sids.given_up:
             self._answered_after_doubt(sids, key, frame, p.sent_at, now)
-        sids.recent[key] = now
-        sids.answers[key] = frame
+        sids.recent[key], sids.answers[key] = now, frame
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         n = stats._lat_count
         stats._lat_count = n + 1
