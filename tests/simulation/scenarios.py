@@ -74,6 +74,11 @@ def run_defect(number: int) -> Result:
     return world.run()
 
 
+def episodes(schedule: str) -> list[Episode]:
+    """A schedule as printed (``start+duration:unit:kind:p``, comma-separated)."""
+    return [Episode.parse(e) for e in schedule.split(",")]
+
+
 #: A world for each kind of violation in ``world.UNFIXED``: (what it shows, the
 #: configuration, the schedule, steps, seeds). It fails on main while the family is not
 #: fixed (any of its seeds showing a violation of that kind); test_defects.py runs it as a
@@ -106,6 +111,53 @@ UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]
         20000,
         (30485,),
     ),
+    "a late original reply to a SID reused after its request was given up on": (
+        "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
+        " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"
+        " at 1.58 s; a read of D45 (SID 96) sent at 1.86 s was given up on at 1.96 s, and"
+        " a younger read's answer at 2.04 s ended its quarantine at 2.54 s: the link had"
+        " shown round trips of 0.34 s at most, so twice that after its send was sooner."
+        " Its command reached the PLC at 2.25 s and its reply came at 2.57 s (a round trip"
+        " of 0.71 s, the link's first that long), to a read of D23 that had taken SID 96"
+        " at 2.54 s: the exposed case of the evidence rule (docs/session.md). Late replies"
+        " that came meanwhile showed longer round trips; extending the quarantines the"
+        " evidence had ended, as extend_lingers does for lingers, would close it",
+        replace(
+            BASE,
+            fixed=frozenset({1}),
+            timeout=0.1,
+            retries=0,
+            max_sid_spaces=4,
+            connect_sessions=2,
+            connect_tasks=32,
+            pool_tasks=1,
+            think=0.001,
+            mean_gap=0.01,
+            storm=True,
+        ),
+        episodes(
+            "0.012546165651021037+0.1857046853482769:u1:silence:1.0,"
+            "0.10772656395190822+0.20102551130827567:u1:loss:0.05,"
+            "0.2092151298191521+0.2232185046945856:u1:silence:1.0,"
+            "0.32127880322197+0.12808467215375371:u1:delay:0.1,"
+            "0.3919841487279117+0.266842228708881:u1:loss:0.05,"
+            "0.5367836185472752+0.3918453623218305:u1:dup:0.3,"
+            "0.7368938123814637+0.317143479108178:u1:loss:0.7,"
+            "0.8977365801501672+0.07316158401029119:u1:dup:1.0,"
+            "0.9474014854051016+0.1837970486207367:u1:dup:0.7,"
+            "1.0499223756070177+0.36934906954076874:u1:loss:1.0,"
+            "1.2482030909988109+0.23005985373585003:u1:dup:0.3,"
+            "1.3643012654525746+0.15860329951413982:u1:silence:1.0,"
+            "1.4466746057586894+0.23175967643009876:u1:silence:1.0,"
+            "1.5818302990175304+0.3876628076387149:u1:delay:0.4,"
+            "1.7790193579791318+0.3705177641778211:u1:relay:0.3,"
+            "1.9709113748148657+0.4219624812888785:u1:relay:0.3,"
+            "2.1822689177822827+0.42736821131313046:u1:delay:0.4,"
+            "2.397441915033426+0.2776599585448193:u1:loss:0.05"
+        ),
+        6000,
+        (53003,),
+    ),
 }
 # (The "no free SID after the faults" family's world, soak seed 20047's: fixed by a598f59,
 # only a copy of a SID's last reply teaches the linger; tests/session/test_duplicates.py.)
@@ -121,11 +173,6 @@ def run_unfixed(kind: str) -> list[Result]:
         world.command = f"python -m tests.simulation --unfixed  # its seed {seed}"
         results.append(world.run())
     return results
-
-
-def episodes(schedule: str) -> list[Episode]:
-    """A schedule as printed (``start+duration:unit:kind:p``, comma-separated)."""
-    return [Episode.parse(e) for e in schedule.split(",")]
 
 
 #: Worlds in which the soak found a violation of a family fixed since, each pinned to the
