@@ -243,3 +243,135 @@ async def test_a_copy_of_a_reply_the_sid_carried_two_uses_earlier_is_held_back()
         assert (stats.completed, stats.duplicates, stats.unsolicited) == (513, 2, 0)
         assert (stats.retries, stats.timeouts) == (again, 0)
         assert session.sids.linger == pytest.approx(1.4)
+
+
+def a_copy_of_an_older_reply(late: float, taught_by: int = -1) -> Handler:
+    """A peer whose first reply (word 0, SID 0) the network copies ``late`` s later; with
+    ``taught_by``, that word's reply is copied 0.15 s later too (the link's first duplicate
+    the session can see at once); the read of word 512 (SID 0's third use) is answered 0.6 s
+    after it is first sent, its retransmissions at once. Every other read at once."""
+    seen: set[bytes] = set()
+
+    def handler(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        good = reply(cmd, 0, word_data(cmd))
+        if word == 0:
+            return [(0.0, good), (late, good)]
+        if word == taught_by:
+            return [(0.0, good), (0.15, good)]
+        if word == 512 and cmd not in seen:
+            seen.add(cmd)
+            return [(0.6, good)]
+        return [(0.0, good)]
+
+    return handler
+
+
+@on_virtual_time
+async def test_the_link_s_first_duplicate_may_copy_a_reply_older_than_its_sid_s_last() -> None:
+    """Issue #22, defect 5 (soak seeds 43005 and 43015): at a high rate a SID comes round
+    before the copy of its reply does, so the first copy a link shows is most often of a
+    reply older than its SID's last. It is a duplicate all the same (the space keeps its
+    recent replies on every link, :attr:`SidSpace.heard`), and teaches the linger from the
+    reply it copies: 2 x 0.3 s. (Before: unsolicited, and the link never learnt a linger.)"""
+    async with (
+        udp_responder(a_copy_of_an_older_reply(0.3)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0) as session,
+    ):
+        for word in range(300):
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[256][9] == 0  # SID 0 again: its last reply is word 256's
+        await anyio.sleep(0.5)  # word 0's copy comes
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (300, 1, 0)
+        assert session.sids.linger == pytest.approx(0.6)
+
+
+@on_virtual_time
+async def test_a_copy_of_a_reply_heard_before_the_link_s_first_duplicate_is_held_back() -> None:
+    """Issue #22, defect 5 (soak seed 30485): word 0's reply (SID 0) is copied 0.7 s late;
+    SID 0 carries word 256 at once, the link shows its first duplicate (word 300's, 0.15 s
+    late) after that, and SID 0's third request (word 512, its reply 0.6 s late) is on its
+    way when the copy of word 0's comes. The replies heard before the first duplicate start
+    each SID's history then (not only its last reply, word 256's): the copy is held back,
+    the read sent once more, and its own reply answers it (before: word 0's data)."""
+    async with (
+        udp_responder(a_copy_of_an_older_reply(0.7, taught_by=300)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(513):
+            if word == 301:
+                await anyio.sleep(0.35)  # word 300's copy comes, SID 0's linger ends
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[512][9] == peer.received[256][9] == peer.received[0][9] == 0
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x02\x00"]
+        assert resent == [peer.received[512]] * (1 + again)  # same frame and SID
+        stats = session.stats
+        assert (stats.completed, stats.unsolicited) == (513, 0)
+        assert (stats.retries, stats.timeouts) == (again, 0)
+        assert session.sids.linger == pytest.approx(1.4)
+
+
+@on_virtual_time
+async def test_a_read_not_marked_idempotent_is_sent_again_rather_than_take_a_copy() -> None:
+    """Issue #22, defect 5 (soak seeds 30117 and 43004: ``execute_many`` of reads, not
+    marked idempotent, without retries): a read changes nothing in the PLC, so on a link
+    that has shown duplicates the duplicate rule may send it once more whatever the caller
+    said. The copy of SID 0's first reply comes to the read of word 256 (a batch of two
+    reads): held back, the read sent again, its own reply answers it (before: word 0's
+    data). Nothing else is sent twice."""
+    async with (
+        udp_responder(copies_of_the_first_reply(0.5, 0.6, taught=0.15)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(256):
+            if word == 2:
+                await anyio.sleep(0.2)  # the duplicate of word 1's reply comes
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word))
+            assert r.data == expected(word), word
+        both = [(0x01, 0x01, read_params(256)), (0x01, 0x01, read_params(257))]
+        responses = await session.request_many(both)
+        assert [r.data for r in responses] == [expected(256), expected(257)]
+        assert peer.received[256][9] == peer.received[0][9] == 0  # SID 0 again
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x01\x00"]
+        assert resent == [peer.received[256]] * (1 + again)  # same frame and SID
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (258, 2, 0)
+        assert (stats.retries, stats.timeouts) == (again, 0)
+
+
+@on_virtual_time
+async def test_a_copy_that_finds_its_sid_reused_by_another_command_teaches_the_linger() -> None:
+    """Issue #22, defect 5 (soak seed 44025): the network copies the reply to a write (SID
+    0) 0.3 s late; by then SID 0 carries a read (word 256, its reply 0.5 s late). The copy
+    has the write's command code, so it answers no read; it is a byte-for-byte copy of the
+    SID's last reply all the same, the link's first duplicate: counted as one, it teaches
+    the linger (2 x 0.3 s) rather than pass for a stray reply (before: mismatched, linger
+    0, and the next copies on the link went unseen)."""
+
+    def handler(cmd: bytes) -> list[Reply]:
+        if cmd[10:12] == b"\x01\x02":  # the write
+            good = reply(cmd, 0, b"")
+            return [(0.0, good), (0.3, good)]
+        late = 0.5 if int.from_bytes(cmd[13:15], "big") == 256 else 0.0
+        return [(late, reply(cmd, 0, word_data(cmd)))]
+
+    async with (
+        udp_responder(handler) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        await session.request(0x01, 0x02, read_params(0) + b"\x12\x34")
+        for word in range(1, 257):
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[256][9] == peer.received[0][9] == 0  # SID 0 again
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.mismatched) == (257, 1, 0)
+        assert (stats.unsolicited, stats.retries, stats.timeouts) == (0, 0, 0)
+        assert session.sids.linger == pytest.approx(0.6)

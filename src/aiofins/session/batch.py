@@ -36,6 +36,7 @@ from ..protocol.header import FinsAddress
 from .messages import no_free_sid, no_response
 from .options import shown
 from .response import Response, response_of
+from .sids import may_send_again
 from .slots import DestState, Pending
 from .spaces import ExtraSpace, SidUser
 
@@ -205,6 +206,7 @@ class Batch:
         "fut",
         "handles",
         "held",
+        "idempotent",
         "keep",
         "next",
         "on_frame",
@@ -236,9 +238,11 @@ class Batch:
         self.on_response = on_response
         #: Given: each normal reply frame is handed to it, no :class:`Response` kept.
         self.on_frame = on_frame
-        #: Idempotent commands sent without retries: on a link that has shown duplicates
-        #: each keeps its frame (see ``Session._keep_frame``).
-        self.keep = idempotent and not retries
+        #: Commands sent without retries: on a link that has shown duplicates each that
+        #: may be sent again (idempotent, or a read: :func:`~.sids.may_send_again`) keeps
+        #: its frame (see ``Session._keep_frame``).
+        self.keep = not retries
+        self.idempotent = idempotent
         self.commands = commands
         self.count = len(commands)
         self.state = state
@@ -328,17 +332,17 @@ class Batch:
         started = len(frames)
         for i, made in enumerate(ps):
             p = cast(BatchPending, made)  # (flush made each: list[Pending] for start_burst)
+            mrc, src, params = self.commands[p.index]
             if i < started:
                 frame = frames[i]
             else:
-                mrc, src, params = self.commands[p.index]
                 got = session.start(p, self.state, mrc, src, params, self.retries, now, end, None)
                 if got is None:  # no free SID of the transport's own
                     self.sid_elsewhere(p, now, end)
                     continue
                 frame = got
                 frames.append(frame)
-            if keep:
+            if keep and may_send_again(self.idempotent, mrc, src, params):
                 p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
             if sid_waits:
                 sid_waits.pop(p.index, None)
@@ -358,7 +362,11 @@ class Batch:
             mrc, src, params = self.commands[index]
             frame = session.start(p, state, mrc, src, params, self.retries, now, end, None, space)
             assert frame is not None
-            if self.keep and space.sids.linger:
+            if (
+                self.keep
+                and space.sids.linger
+                and may_send_again(self.idempotent, mrc, src, params)
+            ):
                 p.plan = (frame, 0, end, None, end - now)  # (Session._keep_frame)
             self.sid_waits.pop(index, None)
             self.send_on(space, p, frame)

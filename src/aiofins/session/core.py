@@ -73,7 +73,7 @@ from .response import (
     _set_frame,
     response_of,
 )
-from .sids import SidSpace
+from .sids import SidSpace, may_send_again
 from .slots import (
     AsyncioPending,
     DestState,
@@ -454,6 +454,8 @@ class Session:
             r.sample(latency, self.rto_bounds if self.adaptive else None)  # (RFC 6298)
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
+        else:  # (what a copy may be of when the link shows its first duplicate)
+            sids.heard.append((key, frame, now, p.plan))
         if (fut := p.fut) is not None:
             try:  # noqa: SIM105 (no context manager: once per reply)
                 fut.set_result(frame)
@@ -539,7 +541,11 @@ class Session:
             del pending[key]
         if mrc != p.mrc or src != p.src or icf not in RESPONSE_ICFS:
             pending[key] = p
-            self.stats.mismatched += 1
+            if (grew := sids.mismatched(self.stats, key, frame)) is not None:  # a copy
+                where = self.transport.description
+                self._linger_logged = log_duplicate(
+                    where, self.spaces, sids, key, grew, self._linger_logged
+                )
             return None, linger
         if raw >= RELAY_ERROR_BIT:
             if len(frame) < MIN_RELAY_REPLY_SIZE:
@@ -1071,7 +1077,7 @@ class Session:
         if frame is None:  # no SID free at once: call() waits for one
             self._slot_back(p)
             return None
-        if not retries and idempotent and self.sids.linger:  # (a read on a duplicating link)
+        if not retries and self.sids.linger and may_send_again(idempotent, mrc, src, params):
             p.plan = (frame, 0, p.end, cap, p.end - now)  # (see _keep_frame)
         try:
             send(frame)
@@ -1311,7 +1317,7 @@ class Session:
         except BaseException:
             self._slot_back(p)
             raise
-        if not retries and idempotent and self.sids.linger:  # (shared by every space)
+        if not retries and self.sids.linger and may_send_again(idempotent, mrc, src, params):
             self._keep_frame(p, frame, cap, now)
         try:
             if (fast_send := transport.fast_send) is not None:

@@ -20,10 +20,12 @@ or connections would own one per socket.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from time import monotonic
 
+from ..protocol.guard import changes
 from .clock import Clock
 from .matching import LATE_REPLY_GRACE, count_unmatched
 from .response import SessionStats
@@ -42,11 +44,25 @@ HOLD_WINDOW = 1.0
 #: hold window are kept (at most this many per SID key, the newest; see
 #: :meth:`SidSpace.remember`): a late copy of any of them is held back, not only of the last.
 KEPT_REPLIES = 8
+#: On a link that has shown no duplicate yet, the last this many replies of a SID space are
+#: kept (:attr:`SidSpace.heard`): a copy of any of them within the hold window is the link's
+#: first duplicate, told apart from a stray reply, and at that first duplicate they start
+#: each SID's :attr:`SidSpace.replies` (see :meth:`SidSpace.extend_lingers`).
+HEARD_REPLIES = KEPT_REPLIES * 256
 #: Longest pause between two looks for a free SID while all 256 are taken.
 SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
 #: at a high rate SIDs come free and run short many times a second within one shortage.
 SHORTAGE_EPISODE = 60.0
+
+
+def may_send_again(idempotent: bool, mrc: int, src: int, params: bytes) -> bool:
+    """Whether the duplicate rule may send a request without retries once more, same
+    frame and SID, when a reply to it copies one of its SID's earlier replies (see the
+    session's ``_hold_copy``): the caller marked it idempotent, or the command changes
+    nothing in the PLC (:func:`~aiofins.protocol.guard.changes`: a read), whatever the
+    caller said. Asked only on a link that has shown duplicates."""
+    return idempotent or changes(mrc, src, params) is None
 
 
 class SidSpace:
@@ -61,6 +77,7 @@ class SidSpace:
         "asked",
         "clock",
         "given_up",
+        "heard",
         "held",
         "linger",
         "linger_resent",
@@ -118,6 +135,12 @@ class SidSpace:
         #: plan of the request it answered), on a link that has shown duplicates only
         #: (see :meth:`remember`; at most :data:`KEPT_REPLIES` per key).
         self.replies: dict[int, list[tuple[bytes, float, Plan | Retransmission | None]]] = {}
+        #: The space's last replies while the link has shown no duplicate (no linger), oldest
+        #: first, as (SID key, the reply, when it came, the plan of the request it answered);
+        #: at most :data:`HEARD_REPLIES` (frames kept by reference, not copied).
+        self.heard: deque[tuple[int, bytes, float, Plan | Retransmission | None]] = deque(
+            maxlen=HEARD_REPLIES
+        )
         #: The linger after a completion the link has shown necessary (late duplicates).
         self.linger = min_linger
         #: The same after a retransmission (learnt from replies to earlier transmissions).
@@ -322,6 +345,7 @@ class SidSpace:
         self.lingering.clear()
         self.held.clear()
         self.replies.clear()
+        self.heard.clear()
 
     def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:
         """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
@@ -363,7 +387,13 @@ class SidSpace:
             # trip, and its key is any SID quarantined under its number)
             if not relay_error:
                 self.late_round_trip(key, frame, now)
-        elif kind == "duplicate":
+        elif kind == "unsolicited" and not relay_error:
+            at = self.copy_of_older(key, frame, now)
+            if at is not None:  # a copy of a reply the SID carried before its last one
+                stats.unsolicited -= 1
+                stats.duplicates += 1
+                return "duplicate", self.learn(now - at, now)
+        if kind == "duplicate":
             done_at = self.recent.get(key)
             if done_at is not None and done_at < 0:  # the reply to another transmission
                 linger = min(MAX_LINGER, LINGER_FACTOR * (now + done_at))
@@ -388,6 +418,46 @@ class SidSpace:
             return
         if now - given[2] > self.slowest:
             self.slowest = now - given[2]
+
+    def copy_of_older(self, key: int, frame: bytes, now: float) -> float | None:
+        """When the reply under ``key`` came that ``frame``, which no request waits for, is
+        a copy of, byte for byte: one of the SID's recent replies (:attr:`replies`), or
+        while the link has shown no duplicate one the space heard (:attr:`heard`) within
+        the hold window. ``None``: none (unsolicited). A copy of an older reply than the
+        SID's last is the network's duplicate as surely as one of the last; at a high rate
+        the SID has most often carried newer requests by the time it comes."""
+        found = self.copied(key, frame)
+        if found is not None:
+            return found[0]
+        for k, reply, at, _ in reversed(self.heard):
+            if now - at >= HOLD_WINDOW:
+                return None
+            if k == key and reply == frame:
+                return at
+        return None
+
+    def mismatched(self, stats: SessionStats, key: int, frame: bytes) -> float | None:
+        """A reply ``frame`` under ``key`` whose command code (or ICF) is not that of the
+        request in flight under it: a copy, byte for byte, of a reply the SID carried
+        before (its last, or an earlier one: :meth:`copy_of_older`) is the network's
+        duplicate, which came after the SID was reused for another command: counted as a
+        duplicate, it teaches the linger (returns what :meth:`learn` does; 0.0 for a copy
+        of the reply to a retransmission). Anything else is counted as mismatched
+        (``None``)."""
+        now = self.clock()
+        at: float | None
+        if self.answers.get(key) == frame:
+            at = self.recent.get(key)
+            if at is not None and at < 0:  # (the reply to another transmission)
+                stats.duplicates += 1
+                return 0.0
+        else:
+            at = self.copy_of_older(key, frame, now)
+        if at is None:
+            stats.mismatched += 1
+            return None
+        stats.duplicates += 1
+        return self.learn(now - at, now)
 
     def last_answered(self, key: int) -> int:
         """The key of the request last answered under ``key``'s SID number, any
@@ -425,6 +495,7 @@ class SidSpace:
         of one of its replies may still come."""
         self.asked[key] = asked
         if not self.linger:
+            self.heard.append((key, frame, now, asked))
             return
         replies = self.replies.get(key)
         if replies is None:
@@ -466,6 +537,24 @@ class SidSpace:
         self.held[key] = lateness
         return True
 
+    def start_replies(self, now: float, window: float) -> None:
+        """The link's first duplicate: the replies :attr:`heard` within ``window`` start
+        each SID's :attr:`replies` (and :attr:`asked` its last question); :attr:`heard`
+        is emptied (from now on :meth:`remember` keeps each SID's replies)."""
+        replies, asked = self.replies, self.asked
+        for key, frame, at, plan in self.heard:
+            if now - at >= window:
+                continue
+            kept = replies.get(key)
+            if kept is None:
+                replies[key] = [(frame, at, plan)]
+            else:
+                kept.append((frame, at, plan))
+                if len(kept) > KEPT_REPLIES:
+                    del kept[0]
+            asked[key] = plan
+        self.heard.clear()
+
     def extend_lingers(self, now: float) -> None:
         """The linger grew (a duplicate came later than it): the SIDs answered within the
         new linger, free again or about to be under the old one, linger the new one too,
@@ -473,12 +562,15 @@ class SidSpace:
         one; without this, a SID answered just before the duplicate was seen could be
         reused under the old linger and take a later duplicate of its old reply for the
         new request's (issue #22, defect 5: another read's words after a SID wrap).
-        The last replies within the hold window of SIDs that have no recent replies kept
-        yet (the link's first duplicate) start their :attr:`replies`."""
+        At the link's first duplicate the replies the space heard within the hold window
+        (:attr:`heard`) start each SID's :attr:`replies` (its last :data:`KEPT_REPLIES`),
+        and the last replies of SIDs that have none kept yet (heard beyond its bound)."""
         linger = self.linger
         lingering, pending = self.lingering, self.pending
         window = max(HOLD_WINDOW, LINGER_FACTOR * linger)
         replies, answers = self.replies, self.answers
+        if self.heard:
+            self.start_replies(now, window)
         for key, done_at in self.recent.items():
             if done_at > 0 and now - done_at < linger and key not in pending:
                 until = done_at + linger
