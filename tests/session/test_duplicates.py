@@ -10,6 +10,7 @@ import pytest
 from aiofins.protocol.errors import FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
+from aiofins.session.sids import LINGER_FLOOR
 from aiofins.simulator import VirtualPLC
 from aiofins.transport import MemoryTransport
 
@@ -375,3 +376,147 @@ async def test_a_copy_that_finds_its_sid_reused_by_another_command_teaches_the_l
         assert (stats.completed, stats.duplicates, stats.mismatched) == (257, 1, 0)
         assert (stats.unsolicited, stats.retries, stats.timeouts) == (0, 0, 0)
         assert session.sids.linger == pytest.approx(0.6)
+
+
+def copies_of(copied: dict[int, float], late: dict[int, float] | None = None) -> Handler:
+    """A peer whose reply to the first read of each word of ``copied`` the network copies
+    that many seconds later, and which answers the second read of each word of ``late``
+    that many seconds late (its first and every other read: at once; a write: at once,
+    or 0.3 s late to word 900)."""
+    late = late or {}
+    seen: set[int] = set()
+
+    def handler(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        if cmd[10:12] == b"\x01\x02":
+            return [(0.3 if word == 900 else 0.0, reply(cmd, 0, b""))]
+        good = reply(cmd, 0, word_data(cmd))
+        first = word not in seen
+        seen.add(word)
+        if first and word in copied:
+            return [(0.0, good), (copied[word], good)]
+        if not first and word in late:
+            return [(late.pop(word), good)]
+        return [(0.0, good)]
+
+    return handler
+
+
+@on_virtual_time
+async def test_the_linger_ends_once_the_link_has_shown_no_duplicate_for_a_second() -> None:
+    """Issue #22 (soak seeds 30117 and 50279: no free SID long after the faults ended):
+    the link duplicated one reply 0.3 s late, so SIDs linger 0.6 s after a reply; 1.2 s
+    later no other duplicate has come (:data:`~aiofins.session.sids.QUIET_SPAN`, 1 s):
+    the linger falls back to its floor (1 ms) when a request first finds the next SID
+    lingering, and the SIDs answered meanwhile are free 1 ms after their reply. 512 reads
+    take 1 ms, not 0.6 s (before: the 257th waited for SID 0's linger). The next
+    duplicate teaches the linger again."""
+    async with (
+        udp_responder(copies_of({1: 0.3, 2000: 0.3})) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(256):
+            await session.request(0x01, 0x01, read_params(word))
+        await anyio.sleep(1.5)  # word 1's copy comes at 0.3 s
+        assert session.sids.linger == pytest.approx(0.6)
+        start = anyio.current_time()
+        for word in range(1000, 1512):
+            r = await session.request(0x01, 0x01, read_params(word))
+            assert r.data == expected(word), word
+        assert anyio.current_time() - start < 0.01
+        assert session.sids.linger == LINGER_FLOOR
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.sid_exhausted) == (768, 1, 1)
+        await session.request(0x01, 0x01, read_params(2000))
+        await anyio.sleep(0.5)  # its copy comes
+        assert session.sids.linger == pytest.approx(0.6)
+        assert (stats.completed, stats.duplicates, stats.timeouts) == (769, 2, 0)
+        assert len(peer.received) == 769
+
+
+@on_virtual_time
+async def test_the_linger_lasts_while_duplicates_come() -> None:
+    """The quiet span runs from the link's last duplicate, whether or not it made the
+    linger grow: word 1's reply is copied 0.3 s late, word 500's (read at 0.8 s) 0.3 s
+    late too, at 1.1 s. A burst of reads at 1.2 s (SIDs 1 to 255, then SID 0, which word
+    500's read took) finds the SIDs it answered lingering the full 0.6 s: its 257th read
+    waits for SID 1's linger to end at 1.8 s (had the quiet span run from the first
+    duplicate, the linger would have ended at 1.3 s)."""
+    async with (
+        udp_responder(copies_of({1: 0.3, 500: 0.3})) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(256):
+            await session.request(0x01, 0x01, read_params(word))
+        await anyio.sleep(0.8)
+        await session.request(0x01, 0x01, read_params(500))
+        await anyio.sleep(0.4)  # its copy comes at 1.1 s
+        start = anyio.current_time()
+        for word in range(1000, 1255):
+            await session.request(0x01, 0x01, read_params(word))
+        assert anyio.current_time() - start < 0.01
+        await session.request(0x01, 0x01, read_params(2000))  # SID 0: free at 1.4 s
+        await session.request(0x01, 0x01, read_params(2001))  # SID 1: free at 1.8 s
+        assert anyio.current_time() - start == pytest.approx(0.6, abs=0.011)
+        assert session.sids.linger == pytest.approx(0.6)
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.sid_exhausted) == (514, 2, 2)
+        assert len(peer.received) == 514
+
+
+@on_virtual_time
+async def test_a_late_reply_to_a_read_given_up_on_teaches_no_linger() -> None:
+    """Issue #22 (soak seed 30117): a read of word 7 under SID 0 is given up on (its reply
+    comes 1 s late); the next answer ends its quarantine 0.5 s later, and SID 0 carries a
+    write when the late reply comes. That reply is byte for byte SID 0's last one (the
+    first read of word 7), but a read under SID 0 was given up on since: it may be (and
+    is) that read's late reply (the write's own comes 0.3 s after it was sent), so it is
+    counted as mismatched and teaches no linger (before: a duplicate 1 s late, every SID
+    lingering 2 s)."""
+    async with (
+        udp_responder(copies_of({}, late={7: 1.0})) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=0.2, retries=0) as session,
+    ):
+        await session.request(0x01, 0x01, read_params(7))
+        for word in range(100, 355):
+            await session.request(0x01, 0x01, read_params(word))
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read_params(7))  # SID 0 again
+        await anyio.sleep(0.01)
+        await session.request(0x01, 0x01, read_params(400))  # the quarantine ends at 0.71
+        await anyio.sleep(0.54)
+        for word in range(401, 655):
+            await session.request(0x01, 0x01, read_params(word))
+        write = read_params(900) + b"\x12\x34"
+        await session.request(0x01, 0x02, write, timeout=1.0)  # SID 0, at 0.75 s
+        assert peer.received[-1][9] == peer.received[256][9] == peer.received[0][9] == 0
+        stats = session.stats
+        assert (stats.completed, stats.timeouts, stats.mismatched) == (512, 1, 1)
+        assert (stats.duplicates, stats.late_replies, stats.unsolicited) == (0, 0, 0)
+        assert session.sids.linger == 0.0
+
+
+@on_virtual_time
+async def test_a_read_in_flight_when_the_link_first_shows_a_duplicate_is_held_back_too() -> None:
+    """Issue #22, defect 5 (soak seed 50267): the read of word 256 (SID 0 again, without
+    retries) is sent before the link has shown any duplicate, so it keeps no plan; the
+    link's first duplicate (word 1's reply, 0.15 s late) comes while it waits, and then
+    the copy of SID 0's last reply (word 0's, 0.5 s late). A read may be sent again
+    whatever its plan: the copy is held back, the read sent once more (where the
+    transport sends synchronously) and its own reply answers it (before: word 0's
+    data)."""
+    async with (
+        udp_responder(copies_of_the_first_reply(0.5, 0.6, taught=0.15)) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(257):
+            r = await session.request(0x01, 0x01, read_params(word))
+            assert r.data == expected(word), word
+        assert peer.received[256][9] == peer.received[0][9] == 0  # SID 0 again
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x01\x00"]
+        assert resent == [peer.received[256]] * (1 + again)  # same frame and SID
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (257, 2, 0)
+        assert (stats.retries, stats.timeouts) == (again, 0)
+        assert session.sids.linger == pytest.approx(1.0)

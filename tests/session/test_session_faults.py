@@ -389,6 +389,7 @@ def _recorder(key: int, mrc: int, src: int) -> HeldPending:
     p.deadline = p.end = p.sent_at = 0.0
     p.attempts = 1
     p.plan = p.rtt = p.space = None
+    p.frame = b""
     return p
 
 

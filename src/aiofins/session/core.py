@@ -80,8 +80,6 @@ from .slots import (
     EventPending,
     HeldPending,
     Pending,
-    Plan,
-    Retransmission,
     SlotQueue,
 )
 from .spaces import ExtraSpace, InFlight, SidSpaces, start_when_free
@@ -416,27 +414,24 @@ class Session:
     def frame_received(
         self, frame: bytes, _addr: object = None, space: ExtraSpace | None = None
     ) -> None:
-        """Each whole frame the transport received (``space``: the extra SID space's; the
-        unused 2nd argument: asyncio calls this as ``datagram_received``); never raises."""
+        """A whole frame received (``space``: an extra space's, ``_addr`` unused); never raises."""
         if self._log_frames:
             log_frame(self.transport.description, "received", frame)
         try:
             icf, to, key, mrc, src, raw = unpack_reply_head(frame)
         except StructError:  # shorter than a reply's header, command code and end code
-            self.stats.malformed += 1
-            return
+            return self._malformed()
         sids = self.sids if space is None else space.sids
         if to & ADDRESS_MASK != sids.ours and self._misdirected(frame, to, sids):
             return
-        pending = sids.pending
-        p = pending.pop(key, None)
+        p = (pending := sids.pending).pop(key, None)
         linger = sids.linger
         if p is None or mrc != p.mrc or src != p.src or icf not in _ICFS or raw >= _RELAY:
             p, linger = self._matched(frame, p, key, icf, mrc, src, raw, sids, linger)
             if p is None:
                 return
             key = p.key
-        elif linger and p.plan is not None and self._held(p, key, frame, sids):
+        elif linger and self._held(p, key, frame, sids):
             return  # (a copy of the SID's last reply, held back: see _hold_copy)
         p.done, p.end_code = True, raw
         now = self.clock()
@@ -455,7 +450,7 @@ class Session:
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
         else:  # (what a copy may be of when the link shows its first duplicate)
-            sids.heard.append((key, frame, now, p.plan))
+            sids.heard.append((key, frame, now, p.frame))
         if (fut := p.fut) is not None:
             try:  # noqa: SIM105 (no context manager: once per reply)
                 fut.set_result(frame)
@@ -488,6 +483,10 @@ class Session:
         if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
             self._deadlines_left(len(pending))
 
+    def _malformed(self) -> None:
+        """A frame shorter than a reply's head came: counted, dropped (never raised)."""
+        self.stats.malformed += 1
+
     def _lingers(
         self, sids: SidSpace, p: Pending, key: int, frame: bytes, now: float, linger: float
     ) -> None:
@@ -500,7 +499,7 @@ class Session:
             sids.recent[key] = -now  # (negative: its duplicates teach this linger only)
         if linger:
             sids.lingering[key] = now + linger
-            sids.remember(key, frame, now, p.plan)
+            sids.remember(key, frame, now, p.frame)
 
     def _deadlines_left(self, in_flight: int) -> None:
         """After a reply, when the deadlines need more than dropping the answered requests
@@ -557,7 +556,7 @@ class Session:
                 self.stats.late_replies += 1
                 return None, linger
             return p, max(linger, RELAY_LINGER)
-        if linger and p.plan is not None and self._held(p, key, frame, sids):
+        if linger and self._held(p, key, frame, sids):
             return None, linger
         return p, linger
 
@@ -583,10 +582,10 @@ class Session:
         return p
 
     def _held(self, p: Pending, key: int, frame: bytes, sids: SidSpace) -> bool:
-        """On a link with a linger, a reply to ``p`` (which may be sent again) that is a
-        byte-for-byte copy of its SID's last reply, or of one of its recent replies
-        (:attr:`SidSpace.replies <aiofins.session.sids.SidSpace.replies>`): whether it is
-        held back (see :meth:`_hold_copy`; ``p`` put back in the pending table)."""
+        """On a link with a linger, a reply to ``p`` that is a byte-for-byte copy of its
+        SID's last reply, or of one of its recent replies (:attr:`SidSpace.replies
+        <aiofins.session.sids.SidSpace.replies>`): whether it is held back (see
+        :meth:`_hold_copy`; ``p`` put back in the pending table)."""
         if sids.answers.get(key) == frame:
             held = self._hold_copy(p, key, sids, sids.asked.get(key))
         elif sids.replies and (older := sids.copied(key, frame)) is not None:
@@ -613,13 +612,13 @@ class Session:
         p: Pending,
         key: int,
         sids: SidSpace,
-        old: Plan | Retransmission | None,
+        old: bytes | None,
         done_at: float | None = None,
     ) -> bool:
-        """A reply to ``p`` (a request that may be sent again) is a copy, byte for byte,
-        of the reply its SID was last answered with (or of an earlier recent one, which
-        came at ``done_at``), to a request whose plan was ``old``: whether it is held back
-        (``p`` waits on; counted as a duplicate) rather than answer ``p``. The duplicate
+        """A reply to ``p`` is a copy, byte for byte, of the reply its SID was last
+        answered with (or of an earlier recent one, which came at ``done_at``), to a
+        request that sent ``old``: whether it is held back (``p`` waits on; counted as a
+        duplicate) rather than answer ``p``. The duplicate
         rule of docs/session.md ("SIDs: quarantine and linger").
 
         It is that reply's late duplicate, or ``p``'s own reply holding the same bytes;
@@ -629,17 +628,22 @@ class Session:
         of that reply (:meth:`SidSpace.hold
         <aiofins.session.sids.SidSpace.hold>`), it is held, and ``p`` is sent again at once
         (same frame and SID, where the transport sends synchronously; else at its next
-        retransmission): its next reply answers it, whatever it holds."""
-        plan = p.plan
-        sent = plan[0] if isinstance(plan, tuple) else getattr(plan, "frame", None)
-        if old is not None and sent == (old[0] if isinstance(old, tuple) else old.frame):
+        retransmission): its next reply answers it, whatever it holds. Only a request that
+        may be sent again: one with a plan (retries, or its frame kept on a duplicating
+        link: :meth:`_keep_frame`), or a read sent before the link showed a duplicate
+        (:func:`~.sids.may_send_again`; soak seed 50267: a read in flight when the link's
+        first duplicate was seen took a copy of its SID's last reply)."""
+        sent = p.frame
+        if p.plan is None and not may_send_again(False, p.mrc, p.src, sent[12:]):
+            return False  # (a write without retries: see "What stays exposed")
+        if sent == old:
             return False  # the same question: the same answer is no surprise
         if not sids.hold(key, self.clock(), done_at):
             return False
         self.stats.duplicates += 1
         transport = self.transport if p.space is None else p.space.transport
         fast_send = transport.fast_send
-        if fast_send is not None and sent is not None:
+        if fast_send is not None:
             p.rtt = None  # Karn: the reply can no longer be timed
             p.attempts += 1
             self.stats.retries += 1
@@ -861,6 +865,7 @@ class Session:
         per-attempt ``cap``."""
         p.done = p.abandoned = False
         p.reply = None
+        p.frame = frame
         p.attempts = 1
         p.end = end
         if retries:
@@ -902,7 +907,6 @@ class Session:
         ``state``'s destination on the session's own transport, all sent ``now`` with the
         call's deadline ``end``, no per-attempt cap (a batch's burst): their frames, in
         order; fewer when one finds no free SID (it and those after it not registered).
-
         The first goes through :meth:`start` and :meth:`_register`; the others share its
         send time, deadline and plan, so what :meth:`_register` decided for it is copied,
         not decided again: each takes a SID (:meth:`SidSpace.take`), gets its frame and
@@ -935,6 +939,7 @@ class Session:
             p.rtt, p.space = state, None
             p.done = p.abandoned = False
             p.reply = None
+            p.frame = frame
             p.attempts = 1
             p.end = end
             p.deadline = deadline

@@ -12,6 +12,10 @@ arrive:
 - **lingering** (in :attr:`SidSpace.lingering`): answered, and a duplicate of its reply (the
   network's, or the reply to a retransmission) could still come.
 
+The linger after a reply is learnt from the duplicates the link shows, and ends on evidence:
+once no duplicate has come for a quiet span (see :meth:`SidSpace.calm`) it falls back to a
+floor, so that a link which stopped duplicating gets its SIDs back.
+
 A fresh socket or connection starts a clean space (:meth:`SidSpace.forget`): nothing late
 can reach it. A session owns one space per transport; a destination with several sockets
 or connections would own one per socket.
@@ -27,9 +31,9 @@ from time import monotonic
 
 from ..protocol.guard import changes
 from .clock import Clock
-from .matching import LATE_REPLY_GRACE, count_unmatched
+from .matching import LATE_REPLY_GRACE, RELAY_LINGER, count_unmatched
 from .response import SessionStats
-from .slots import DestState, Pending, Plan, Retransmission
+from .slots import DestState, Pending
 
 _NONE: frozenset[int] = frozenset()
 #: A duplicate reply seen ``x`` seconds after its request completed makes SIDs linger
@@ -49,6 +53,21 @@ KEPT_REPLIES = 8
 #: first duplicate, told apart from a stray reply, and at that first duplicate they start
 #: each SID's :attr:`SidSpace.replies` (see :meth:`SidSpace.extend_lingers`).
 HEARD_REPLIES = KEPT_REPLIES * 256
+#: The linger of a link that has shown duplicates once none has come for a quiet span
+#: (:meth:`SidSpace.calm`), unless ``min_linger`` is longer: above 0, so that what the link
+#: showed stays known (the duplicate rule stays on, each SID's replies kept), and short
+#: enough that 256 SIDs never run short (256,000 requests a second per destination).
+LINGER_FLOOR = 0.001
+#: A link's linger lasts while it shows duplicates: once none has come for this many seconds
+#: it falls back to :data:`LINGER_FLOOR` (see :meth:`SidSpace.calm`). As long as a linger of
+#: 1 s (duplicates 0.5 s late), so that with duplicates up to that late every copy of a reply
+#: answered before the last duplicate has come by then; it does not grow with the linger, so
+#: that a link that stopped duplicating has its SIDs back within the recovery bound (2 x the
+#: timeout + the breaker's longest cooldown) however long its linger grew.
+QUIET_SPAN = 1.0
+#: Per SID key, the give-ups of this many commands are remembered (:attr:`SidSpace.abandoned`):
+#: the request's own and the SID probes' two (which ask another command than it).
+ABANDONED_COMMANDS = 4
 #: Longest pause between two looks for a free SID while all 256 are taken.
 SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
@@ -73,9 +92,12 @@ class SidSpace:
     """
 
     __slots__ = (
+        "abandoned",
         "answers",
         "asked",
         "clock",
+        "copy_at",
+        "floor",
         "given_up",
         "heard",
         "held",
@@ -92,6 +114,36 @@ class SidSpace:
         "short_at",
         "slowest",
     )
+
+    # What the link's duplicates taught (documented here, set in __init__):
+    #: SID key -> the frame (what it asked) of the request its last reply answered.
+    asked: dict[int, bytes]
+    #: SID key -> how late after the SID's previous reply a copy of that reply came to its
+    #: new request, held back (see :meth:`hold`).
+    held: dict[int, float]
+    #: SID key -> its recent replies, oldest first, as (the reply, when it came, what its
+    #: request sent), on a link that has shown duplicates (see :meth:`remember`; at most
+    #: :data:`KEPT_REPLIES` per key).
+    replies: dict[int, list[tuple[bytes, float, bytes]]]
+    #: The space's last :data:`HEARD_REPLIES` replies while the link has shown no duplicate,
+    #: oldest first, as (SID key, the reply, when it came, what its request sent); frames
+    #: kept by reference, not copied.
+    heard: deque[tuple[int, bytes, float, bytes]]
+    #: The linger after a completion the link has shown necessary (late duplicates); back
+    #: to :attr:`floor` once it has shown none for a while (:meth:`calm`).
+    linger: float
+    #: The same after a retransmission (learnt from replies to earlier transmissions).
+    linger_resent: float
+    #: What the linger falls back to (:meth:`calm`): ``min_linger``, at least
+    #: :data:`LINGER_FLOOR`.
+    floor: float
+    #: When the link last showed a duplicate of a reply (``-inf``: never).
+    copy_at: float
+    #: SID key -> command (MRC << 8 | SRC) -> when a request of it was last given up on
+    #: under the key (the last :data:`ABANDONED_COMMANDS` commands): a reply with that
+    #: command, byte for byte one the SID carried before, may be that request's late reply,
+    #: not a copy (:meth:`late_reply`).
+    abandoned: dict[int, dict[int, float]]
 
     def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
         #: The session's clock (see :mod:`.clock`).
@@ -117,6 +169,7 @@ class SidSpace:
         #: destination answers no sooner than :data:`LINGER_FACTOR` times this after its
         #: request was sent (see :meth:`answered_after`).
         self.slowest = 0.0
+        self.abandoned = {}
         #: SID key -> when it may be used again (answered: a duplicate may follow).
         self.lingering: dict[int, float] = {}
         #: SID key -> when its last request was answered (to count and time duplicates);
@@ -125,26 +178,14 @@ class SidSpace:
         #: SID key -> the reply its last request was answered with: a duplicate is a copy
         #: of it, byte for byte (at most one frame per key: 256 per destination).
         self.answers: dict[int, bytes] = {}
-        #: SID key -> the retransmission plan (its frame: what it asked) of the request
-        #: that reply answered (``None``: one that could not be sent again).
-        self.asked: dict[int, Plan | Retransmission | None] = {}
-        #: SID key -> how late after the SID's previous reply a copy of that reply came
-        #: to its new request, held back (see :meth:`hold`).
-        self.held: dict[int, float] = {}
-        #: SID key -> its recent replies, oldest first, as (the reply, when it came, the
-        #: plan of the request it answered), on a link that has shown duplicates only
-        #: (see :meth:`remember`; at most :data:`KEPT_REPLIES` per key).
-        self.replies: dict[int, list[tuple[bytes, float, Plan | Retransmission | None]]] = {}
-        #: The space's last replies while the link has shown no duplicate (no linger), oldest
-        #: first, as (SID key, the reply, when it came, the plan of the request it answered);
-        #: at most :data:`HEARD_REPLIES` (frames kept by reference, not copied).
-        self.heard: deque[tuple[int, bytes, float, Plan | Retransmission | None]] = deque(
-            maxlen=HEARD_REPLIES
-        )
-        #: The linger after a completion the link has shown necessary (late duplicates).
+        self.asked = {}
+        self.held = {}
+        self.replies = {}
+        self.heard = deque(maxlen=HEARD_REPLIES)
         self.linger = min_linger
-        #: The same after a retransmission (learnt from replies to earlier transmissions).
         self.linger_resent = 0.0
+        self.floor = max(min_linger, LINGER_FLOOR)
+        self.copy_at = -math.inf
         #: Requests go to more than one destination: a SID is then kept unique across them,
         #: as a relay error (from the relay point, not the destination) is matched by SID.
         self.routed = False
@@ -214,6 +255,8 @@ class SidSpace:
         a scan of up to 256 keys."""
         base, sid = state.base, state.cursor
         now = self.clock()
+        if self.linger > self.floor and now - self.copy_at >= QUIET_SPAN:
+            self.calm(now)
         taken: AbstractSet[int] = _NONE
         if self.routed:
             taken = {k & 0xFF for k in self.pending} | self.relay_taken(now)
@@ -224,6 +267,29 @@ class SidSpace:
                 state.cursor = sid
                 return key
         return None
+
+    def calm(self, now: float) -> None:
+        """The link has shown no duplicate for :data:`QUIET_SPAN` (1 s): the linger falls
+        back to :attr:`floor`, and the SIDs lingering under the link's linger are free
+        :attr:`floor` after their reply (a SID a relay error answered:
+        :data:`~.matching.RELAY_LINGER` after it); those lingering longer for another
+        reason (a reply to a retransmission) keep their linger. The next duplicate
+        teaches the linger again at once (:meth:`learn`). Checked when a SID is looked
+        for beyond the next in round-robin order (:meth:`allocate`): a linger costs
+        nothing until SIDs run short, and a link that stopped duplicating never keeps
+        them all taken (issue #22: soak seeds 30117 and 50279 found no free SID long
+        after the faults)."""
+        old, floor = self.linger, self.floor
+        self.linger = floor
+        recent, answers, lingering = self.recent, self.answers, self.lingering
+        for key, until in lingering.items():
+            done_at = recent.get(key)
+            if done_at is None or done_at < 0 or until > done_at + old or until <= now:
+                continue
+            reply = answers.get(key)
+            end = done_at + (RELAY_LINGER if reply is not None and reply[12] & 0x80 else floor)
+            if end < until:
+                lingering[key] = end
 
     def free_in(self, state: DestState, now: float) -> float:
         """Seconds until the next quarantine or linger of ``state``'s SIDs ends (at least
@@ -252,7 +318,16 @@ class SidSpace:
         mine = self.given_up.get(key & ~0xFF)
         if mine is None:
             mine = self.given_up[key & ~0xFF] = {}
-        mine[key] = (self.clock(), (p.mrc << 8) | p.src, p.sent_at, p.rtt is not None)
+        now, command = self.clock(), (p.mrc << 8) | p.src
+        mine[key] = (now, command, p.sent_at, p.rtt is not None)
+        gave = self.abandoned.get(key)
+        if gave is None:
+            gave = self.abandoned[key] = {}
+        else:
+            gave.pop(command, None)  # (the newest last)
+            if len(gave) >= ABANDONED_COMMANDS:
+                del gave[next(iter(gave))]
+        gave[command] = now
 
     def answered_after(self, key: int, sent_at: float, now: float) -> None:
         """The destination of ``key`` answered a request first sent at ``sent_at``: the
@@ -346,6 +421,7 @@ class SidSpace:
         self.held.clear()
         self.replies.clear()
         self.heard.clear()
+        self.abandoned.clear()
 
     def resent_linger(self, p: Pending, now: float, rto_max: float) -> float:
         """How long the SID of ``p``, answered after a retransmission, lingers: a reply to
@@ -389,8 +465,8 @@ class SidSpace:
                 self.late_round_trip(key, frame, now)
         elif kind == "unsolicited" and not relay_error:
             at = self.copy_of_older(key, frame, now)
-            if at is not None:  # a copy of a reply the SID carried before its last one
-                stats.unsolicited -= 1
+            if at is not None and not self.late_reply(key, frame, at):  # a copy of an older
+                stats.unsolicited -= 1  # reply than the SID's last one
                 stats.duplicates += 1
                 return "duplicate", self.learn(now - at, now)
         if kind == "duplicate":
@@ -399,8 +475,12 @@ class SidSpace:
                 linger = min(MAX_LINGER, LINGER_FACTOR * (now + done_at))
                 if linger > self.linger_resent:
                     self.linger_resent = linger
-            elif done_at is not None:  # the network duplicated a reply
-                return kind, self.learn(now - done_at, now)
+            elif done_at is not None:
+                if not relay_error and self.late_reply(key, frame, done_at):
+                    stats.duplicates -= 1
+                    stats.late_replies += 1
+                    return "late", 0.0
+                return kind, self.learn(now - done_at, now)  # the network duplicated a reply
         return kind, 0.0
 
     def late_round_trip(self, key: int, frame: bytes, now: float) -> None:
@@ -418,6 +498,18 @@ class SidSpace:
             return
         if now - given[2] > self.slowest:
             self.slowest = now - given[2]
+
+    def late_reply(self, key: int, frame: bytes, since: float) -> bool:
+        """Whether ``frame``, byte for byte a reply the SID of ``key`` carried at ``since``,
+        may instead be the late reply to a request given up on under ``key`` after that
+        with the same command (:attr:`abandoned`): a write's reply is the same bytes every
+        time, and so is a read's of values that did not change. Then it is no evidence of
+        a duplicate and teaches no linger: taken for one, the late reply to a request given
+        up on in an outage (after its quarantine ended on the evidence that the PLC
+        answers, or under the SID probe's other command) taught a linger of seconds
+        (issue #22: soak seed 30117, 0.8 and 1.8 s)."""
+        gave = self.abandoned.get(key)
+        return gave is not None and gave.get((frame[10] << 8) | frame[11], since) > since
 
     def copy_of_older(self, key: int, frame: bytes, now: float) -> float | None:
         """When the reply under ``key`` came that ``frame``, which no request waits for, is
@@ -443,7 +535,9 @@ class SidSpace:
         duplicate, which came after the SID was reused for another command: counted as a
         duplicate, it teaches the linger (returns what :meth:`learn` does; 0.0 for a copy
         of the reply to a retransmission). Anything else is counted as mismatched
-        (``None``)."""
+        (``None``), a reply that may be the late one of a request given up on under the
+        SID included (:meth:`late_reply`: the SID probe asks another command than the
+        request it was given up on for this)."""
         now = self.clock()
         at: float | None
         if self.answers.get(key) == frame:
@@ -453,7 +547,7 @@ class SidSpace:
                 return 0.0
         else:
             at = self.copy_of_older(key, frame, now)
-        if at is None:
+        if at is None or self.late_reply(key, frame, at):
             stats.mismatched += 1
             return None
         stats.duplicates += 1
@@ -474,9 +568,11 @@ class SidSpace:
         return last
 
     def learn(self, lateness: float, now: float) -> float:
-        """A duplicate came ``lateness`` seconds after the reply it copies: the linger
-        grows to :data:`LINGER_FACTOR` times that (at most :data:`MAX_LINGER`) if longer.
-        Returns ``lateness`` if it grew, else 0.0."""
+        """A duplicate came ``lateness`` seconds after the reply it copies (noted: the
+        linger lasts while duplicates come, see :meth:`calm`): the linger grows to
+        :data:`LINGER_FACTOR` times that (at most :data:`MAX_LINGER`) if longer. Returns
+        ``lateness`` if it grew, else 0.0."""
+        self.copy_at = now
         linger = min(MAX_LINGER, LINGER_FACTOR * lateness)
         if linger <= self.linger:
             return 0.0
@@ -484,11 +580,9 @@ class SidSpace:
         self.extend_lingers(now)
         return lateness
 
-    def remember(
-        self, key: int, frame: bytes, now: float, asked: Plan | Retransmission | None
-    ) -> None:
+    def remember(self, key: int, frame: bytes, now: float, asked: bytes) -> None:
         """``key``'s SID, which lingers, was answered ``now`` with ``frame`` to a request
-        whose plan is ``asked`` (kept in :attr:`asked`). On a link that has shown
+        whose frame was ``asked`` (kept in :attr:`asked`). On a link that has shown
         duplicates, ``frame`` is kept among the SID's recent replies (:attr:`replies`):
         those older than the hold window (see :meth:`hold`) go, and the oldest beyond
         :data:`KEPT_REPLIES`. At a high rate a SID comes round several times while a copy
@@ -506,9 +600,9 @@ class SidSpace:
             del replies[0]
         replies.append((frame, now, asked))
 
-    def copied(self, key: int, frame: bytes) -> tuple[float, Plan | Retransmission | None] | None:
+    def copied(self, key: int, frame: bytes) -> tuple[float, bytes] | None:
         """When the recent reply of :attr:`replies` under ``key`` that ``frame`` is a copy
-        of, byte for byte, came, and the plan of the request it answered (the newest if
+        of, byte for byte, came, and the frame of the request it answered (the newest if
         several; ``None``: none)."""
         replies = self.replies.get(key)
         if replies:
@@ -542,17 +636,17 @@ class SidSpace:
         each SID's :attr:`replies` (and :attr:`asked` its last question); :attr:`heard`
         is emptied (from now on :meth:`remember` keeps each SID's replies)."""
         replies, asked = self.replies, self.asked
-        for key, frame, at, plan in self.heard:
+        for key, frame, at, sent in self.heard:
             if now - at >= window:
                 continue
             kept = replies.get(key)
             if kept is None:
-                replies[key] = [(frame, at, plan)]
+                replies[key] = [(frame, at, sent)]
             else:
-                kept.append((frame, at, plan))
+                kept.append((frame, at, sent))
                 if len(kept) > KEPT_REPLIES:
                     del kept[0]
-            asked[key] = plan
+            asked[key] = sent
         self.heard.clear()
 
     def extend_lingers(self, now: float) -> None:
@@ -567,7 +661,7 @@ class SidSpace:
         and the last replies of SIDs that have none kept yet (heard beyond its bound)."""
         linger = self.linger
         lingering, pending = self.lingering, self.pending
-        window = max(HOLD_WINDOW, LINGER_FACTOR * linger)
+        window = max(HOLD_WINDOW, LINGER_FACTOR * self.linger)
         replies, answers = self.replies, self.answers
         if self.heard:
             self.start_replies(now, window)
@@ -577,4 +671,4 @@ class SidSpace:
                 if lingering.get(key, 0.0) < until:
                     lingering[key] = until
             if key not in replies and now - abs(done_at) < window and key in answers:
-                replies[key] = [(answers[key], abs(done_at), self.asked.get(key))]
+                replies[key] = [(answers[key], abs(done_at), self.asked.get(key, b""))]

@@ -94,6 +94,9 @@ class Pending:
     #: (:class:`HeldPending`); ``None`` otherwise (then ``await (p.fut or p.wait())``).
     reply: bytes | None
     end_code: int
+    #: The frame as first sent (what it asked; ``b""`` before it is sent): the duplicate
+    #: rule compares it with what a copy's request asked, and may send it again.
+    frame: bytes
 
     __slots__ = (
         "abandoned",
@@ -102,6 +105,7 @@ class Pending:
         "done",
         "end",
         "end_code",
+        "frame",
         "fut",
         "key",
         "mrc",
@@ -129,6 +133,7 @@ class Pending:
         self.fut = None
         self.attempts = 1
         self.plan = None
+        self.frame = b""
         self.reply = None
         self.rtt = None
         self.abandoned = False

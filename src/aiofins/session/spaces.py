@@ -249,9 +249,11 @@ class SidSpaces:
         return soonest
 
     def share_linger(self, sids: SidSpace) -> None:
-        """``sids`` has seen a duplicate reply: the lingers it has learnt hold for every
-        space (the peer duplicates replies, whichever socket they go to)."""
+        """``sids`` has seen a duplicate reply: the lingers it has learnt, and when it saw
+        the duplicate (a linger lasts while they come: :meth:`SidSpace.calm`), hold for
+        every space (the peer duplicates replies, whichever socket they go to)."""
         for other in (self.primary, *(s.sids for s in self.extra)):
+            other.copy_at = max(other.copy_at, sids.copy_at)
             if sids.linger > other.linger:
                 other.linger = sids.linger
                 other.extend_lingers(other.clock())
@@ -288,8 +290,9 @@ class SidSpaces:
             return None
         self._numbers += 1
         space = ExtraSpace(self, self._numbers, transport, self.min_linger)
-        space.sids.linger = self.primary.linger  # the peer's duplicates: learnt already
-        space.sids.linger_resent = self.primary.linger_resent
+        learnt, primary = space.sids, self.primary  # the peer's duplicates: learnt already
+        learnt.linger, learnt.copy_at = primary.linger, primary.copy_at
+        learnt.linger_resent = primary.linger_resent
         if transport.own_source_node:
             peer = self._peer()
             node = SOURCE_NODES.claim(peer, avoid)
