@@ -80,87 +80,27 @@ def episodes(schedule: str) -> list[Episode]:
 
 
 #: A world for each kind of violation in ``world.UNFIXED``: (what it shows, the
-#: configuration, the schedule, steps, seeds). It fails on main while the family is not
-#: fixed (any of its seeds showing a violation of that kind); test_defects.py runs it as a
-#: strict xfail. Pinned configurations and schedules (found by the soak), so that a change
-#: of the generator leaves them alone.
-UNFIXED_WORLDS: dict[str, tuple[str, Config, list[Episode], int, tuple[int, ...]]] = {
+#: configuration, the schedule (``None``: the seed's own), steps, seeds). It fails on main
+#: while the family is not fixed (any of its seeds showing a violation of that kind);
+#: test_defects.py runs it as a strict xfail. Pinned configurations and schedules (found by
+#: the soak), so that a change of the generator leaves them alone.
+UNFIXED_WORLDS: dict[str, tuple[str, Config | None, list[Episode] | None, int, tuple[int, ...]]] = {
     "defect 5 (a late duplicate taken for a new reply)": (
-        "4 spaces, 1 session x 32 tasks, timeout 0.1 s, retries 0: 5 % of replies"
-        " duplicated up to 0.3 s late from the start; at ~4,000 reads a second a SID comes"
-        " round every few ms, and a copy 87 ms late of a reply the SID carried five uses"
-        " ago, received before the link's first duplicate was seen (so neither kept nor"
-        " compared: the session keeps the recent replies of each SID only once the link"
-        " has shown duplicates), answers a read of the same length: it returns the other"
-        " read's words (soak seed 30485 itself, its schedule to the last digit; the worlds"
-        " of seed 30263, late replies then duplicates, of seed 40079, a copy of the SID's"
-        " last reply to a read without retries, and this configuration's seed 4, a copy of"
-        " an older reply once the link had shown duplicates, pass since this family was"
-        " narrowed)",
-        replace(
-            BASE,
-            timeout=0.1,
-            max_sid_spaces=4,
-            connect_sessions=1,
-            connect_tasks=32,
-            think=0.001,
-            mean_gap=0.01,
-            storm=True,
-        ),
-        [Episode(0.00711489360145835, 0.38255768741480084, 1, "dup", 0.05)],
-        20000,
-        (30485,),
-    ),
-    "a late original reply to a SID reused after its request was given up on": (
-        "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
-        " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"
-        " at 1.58 s; a read of D45 (SID 96) sent at 1.86 s was given up on at 1.96 s, and"
-        " a younger read's answer at 2.04 s ended its quarantine at 2.54 s: the link had"
-        " shown round trips of 0.34 s at most, so twice that after its send was sooner."
-        " Its command reached the PLC at 2.25 s and its reply came at 2.57 s (a round trip"
-        " of 0.71 s, the link's first that long), to a read of D23 that had taken SID 96"
-        " at 2.54 s: the exposed case of the evidence rule (docs/session.md). Late replies"
-        " that came meanwhile showed longer round trips; extending the quarantines the"
-        " evidence had ended, as extend_lingers does for lingers, would close it",
-        replace(
-            BASE,
-            fixed=frozenset({1}),
-            timeout=0.1,
-            retries=0,
-            max_sid_spaces=4,
-            connect_sessions=2,
-            connect_tasks=32,
-            pool_tasks=1,
-            think=0.001,
-            mean_gap=0.01,
-            storm=True,
-        ),
-        episodes(
-            "0.012546165651021037+0.1857046853482769:u1:silence:1.0,"
-            "0.10772656395190822+0.20102551130827567:u1:loss:0.05,"
-            "0.2092151298191521+0.2232185046945856:u1:silence:1.0,"
-            "0.32127880322197+0.12808467215375371:u1:delay:0.1,"
-            "0.3919841487279117+0.266842228708881:u1:loss:0.05,"
-            "0.5367836185472752+0.3918453623218305:u1:dup:0.3,"
-            "0.7368938123814637+0.317143479108178:u1:loss:0.7,"
-            "0.8977365801501672+0.07316158401029119:u1:dup:1.0,"
-            "0.9474014854051016+0.1837970486207367:u1:dup:0.7,"
-            "1.0499223756070177+0.36934906954076874:u1:loss:1.0,"
-            "1.2482030909988109+0.23005985373585003:u1:dup:0.3,"
-            "1.3643012654525746+0.15860329951413982:u1:silence:1.0,"
-            "1.4466746057586894+0.23175967643009876:u1:silence:1.0,"
-            "1.5818302990175304+0.3876628076387149:u1:delay:0.4,"
-            "1.7790193579791318+0.3705177641778211:u1:relay:0.3,"
-            "1.9709113748148657+0.4219624812888785:u1:relay:0.3,"
-            "2.1822689177822827+0.42736821131313046:u1:delay:0.4,"
-            "2.397441915033426+0.2776599585448193:u1:loss:0.05"
-        ),
-        6000,
-        (53003,),
+        "a SID storm (one SID space, SIDs reused every few ms, most in flight) whose link"
+        " duplicates every reply up to 0.3 s late: the link's first copies each come to a"
+        " SID carrying a read, so the session takes each for that read's reply and sees"
+        " no duplicate (linger 0, nothing held); the fourth in 12 ms, a copy of its SID's"
+        " last reply, answers a read of other words (soak seed 50040, its own world; the"
+        " session sees its first duplicate 3 ms later)",
+        None,
+        None,
+        13000,
+        (50040,),
     ),
 }
 # (The "no free SID after the faults" family's world, soak seed 20047's: fixed by a598f59,
-# only a copy of a SID's last reply teaches the linger; tests/session/test_duplicates.py.)
+# only a copy of a SID's last reply teaches the linger; tests/session/test_duplicates.py.
+# Defect 5's earlier worlds (soak seed 30485 and others) pass: REGRESSIONS below.)
 assert set(UNFIXED_WORLDS) == UNFIXED, "every unfixed family needs its world (and no more)"
 
 
@@ -178,9 +118,10 @@ def run_unfixed(kind: str) -> list[Result]:
 #: Worlds in which the soak found a violation of a family fixed since, each pinned to the
 #: last digit (the configuration the seed drew, its fault schedule up to the violation,
 #: steps, seed) so that a change of the generator leaves it alone: (what it showed, the
-#: configuration, the schedule, steps, seed). test_defects.py runs each: it must stay
-#: clean (``python -m tests.simulation --regressions``).
-REGRESSIONS: dict[str, tuple[str, Config, list[Episode], int, int]] = {
+#: configuration, the schedule, steps, seed; a configuration and schedule of ``None``: the
+#: seed's own world, which replays with ``--seed N --steps M``). test_defects.py runs each:
+#: it must stay clean (``python -m tests.simulation --regressions``).
+REGRESSIONS: dict[str, tuple[str, Config | None, list[Episode] | None, int, int]] = {
     "seed 50135 (a relay error after a quarantine ended on the destination's answer)": (
         "a SID storm: 1 unit relaying to network 2, 1 SID space, 2 sessions x 32 tasks,"
         " timeout 0.1 s, 1 retry; relay errors (30 %, half of them sent 0.15 s late) among"
@@ -360,6 +301,126 @@ REGRESSIONS: dict[str, tuple[str, Config, list[Episode], int, int]] = {
         9000,
         50239,
     ),
+    "seed 30485 (defect 5: a copy of a reply heard before the first duplicate)": (
+        "defect 5: 4 spaces, 1 session x 32 tasks, timeout 0.1 s, retries 0, 5 % of replies"
+        " duplicated up to 0.3 s late from the start; at ~4,000 reads a second a SID comes"
+        " round every few ms, and a copy 87 ms late of a reply the SID carried five uses"
+        " ago, received before the link's first duplicate was seen, answered a read of the"
+        " same length (soak seed 30485, its schedule to the last digit)",
+        replace(
+            BASE,
+            timeout=0.1,
+            max_sid_spaces=4,
+            connect_sessions=1,
+            connect_tasks=32,
+            think=0.001,
+            mean_gap=0.01,
+            storm=True,
+        ),
+        [Episode(0.00711489360145835, 0.38255768741480084, 1, "dup", 0.05)],
+        20000,
+        30485,
+    ),
+    "seed 43005 (defect 5: the first copies, of older replies, taught no linger)": (
+        "defect 5 behind a fixed reply port: the link's first copies were of replies older"
+        " than their SIDs' last (a SID comes round before its copy does), taken for"
+        " unsolicited, and the link never learnt a linger; then a copy answered a read",
+        None,
+        None,
+        20000,
+        43005,
+    ),
+    "seed 43004 (defect 5: a read of execute_many took a copy)": (
+        "defect 5 behind a fixed reply port: a copy 7 ms late, later than the linger learnt"
+        " so far, answered a read of execute_many (not marked idempotent, no retries)",
+        None,
+        None,
+        20000,
+        43004,
+    ),
+    "seed 44025 (defect 5: a copy under a SID reused by another command)": (
+        "defect 5: the link's first copies came to SIDs reused by requests in flight (a"
+        " write's reply to a read: mismatched, unseen), and the fourth, to a read of the"
+        " same length, answered it",
+        None,
+        None,
+        20000,
+        44025,
+    ),
+    "seed 30117 (defect 5 through a relay; then no free SID: a linger for good)": (
+        "defect 5 through a relay: a copy 1.5 ms late, later than the linger learnt so far,"
+        " answered a read of execute_many (not marked idempotent, no retries); with that"
+        " fixed, no free SID after the faults: 3 destinations through a relay, one SID"
+        " space, a linger learnt for good (late replies to requests given up on, taken for"
+        " copies 0.8 and 1.8 s late, made it 3.6 s)",
+        None,
+        None,
+        20000,
+        30117,
+    ),
+    "seed 50279 (no free SID after the faults: a linger learnt for good)": (
+        "no free SID 4 s after the faults: a linger learnt for good (a write's reply under"
+        " a wrong SID, byte for byte another SID's last reply, taken for a copy 2.3 s late)",
+        None,
+        None,
+        20000,
+        50279,
+    ),
+    "seed 50267 (defect 5: a read in flight at the first duplicate)": (
+        "defect 5: a read sent before the link showed its first duplicate (so it kept no"
+        " frame) took a copy of its SID's last reply that came after the link showed one",
+        None,
+        None,
+        20000,
+        50267,
+    ),
+    "seed 53003 (a late original reply, the world of its family until 5126471)": (
+        "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
+        " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"
+        " at 1.58 s; a read of D45 (SID 96) sent at 1.86 s was given up on at 1.96 s, and"
+        " a younger read's answer at 2.04 s ended its quarantine at 2.54 s: the link had"
+        " shown round trips of 0.34 s at most, so twice that after its send was sooner."
+        " Its command reached the PLC at 2.25 s and its reply came at 2.57 s (a round trip"
+        " of 0.71 s, the link's first that long), to a read of D23 that had taken SID 96"
+        " at 2.54 s: the exposed case of the evidence rule (docs/session.md). Late replies"
+        " that came meanwhile showed longer round trips; extending the quarantines the"
+        " evidence had ended, as extend_lingers does for lingers, would close it",
+        replace(
+            BASE,
+            fixed=frozenset({1}),
+            timeout=0.1,
+            retries=0,
+            max_sid_spaces=4,
+            connect_sessions=2,
+            connect_tasks=32,
+            pool_tasks=1,
+            think=0.001,
+            mean_gap=0.01,
+            storm=True,
+        ),
+        episodes(
+            "0.012546165651021037+0.1857046853482769:u1:silence:1.0,"
+            "0.10772656395190822+0.20102551130827567:u1:loss:0.05,"
+            "0.2092151298191521+0.2232185046945856:u1:silence:1.0,"
+            "0.32127880322197+0.12808467215375371:u1:delay:0.1,"
+            "0.3919841487279117+0.266842228708881:u1:loss:0.05,"
+            "0.5367836185472752+0.3918453623218305:u1:dup:0.3,"
+            "0.7368938123814637+0.317143479108178:u1:loss:0.7,"
+            "0.8977365801501672+0.07316158401029119:u1:dup:1.0,"
+            "0.9474014854051016+0.1837970486207367:u1:dup:0.7,"
+            "1.0499223756070177+0.36934906954076874:u1:loss:1.0,"
+            "1.2482030909988109+0.23005985373585003:u1:dup:0.3,"
+            "1.3643012654525746+0.15860329951413982:u1:silence:1.0,"
+            "1.4466746057586894+0.23175967643009876:u1:silence:1.0,"
+            "1.5818302990175304+0.3876628076387149:u1:delay:0.4,"
+            "1.7790193579791318+0.3705177641778211:u1:relay:0.3,"
+            "1.9709113748148657+0.4219624812888785:u1:relay:0.3,"
+            "2.1822689177822827+0.42736821131313046:u1:delay:0.4,"
+            "2.397441915033426+0.2776599585448193:u1:loss:0.05"
+        ),
+        6000,
+        53003,
+    ),
 }
 
 
@@ -367,5 +428,8 @@ def run_regression(name: str) -> Result:
     """The run of the pinned world ``name`` of :data:`REGRESSIONS`."""
     _, config, schedule, steps, seed = REGRESSIONS[name]
     world = World(seed, steps, schedule=schedule, config=config)
-    world.command = f"python -m tests.simulation --regressions  # {name}"
+    if config is None and schedule is None:  # the seed's own world
+        world.command = f"python -m tests.simulation --seed {seed} --steps {steps}"
+    else:
+        world.command = f"python -m tests.simulation --regressions  # {name}"
     return world.run()
