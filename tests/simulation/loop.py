@@ -17,6 +17,8 @@ same under both backends (anyio), and the trio backend keeps its own tests on Mo
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import selectors
 from typing import Any
 
@@ -64,6 +66,27 @@ class _VirtualSelector(selectors.DefaultSelector):
         return []
 
 
+class _Timer(asyncio.TimerHandle):
+    """A timer ordered by time and then by the order timers were made: asyncio's own compare
+    only their times, so timers due at one instant run in an order that depends on the
+    heap's shape, that is on every other timer made so far (a replayed schedule, which
+    plans its faults at the start rather than one after another, ran them otherwise)."""
+
+    __slots__ = ("_order",)
+
+    def __init__(
+        self, when: float, order: int, callback: Any, args: Any, loop: Any, context: Any
+    ) -> None:
+        super().__init__(when, callback, args, loop, context)
+        self._order = order
+
+    def __lt__(self, other: object) -> bool:
+        if isinstance(other, _Timer):
+            mine, theirs = self._when, other._when  # type: ignore[attr-defined]
+            return mine < theirs or (mine == theirs and self._order < other._order)
+        return NotImplemented
+
+
 class VirtualClock:
     """The virtual time, in seconds from 0."""
 
@@ -82,13 +105,25 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def time(self) -> float:
         return self.clock.now
 
+    def call_at(  # type: ignore[override]
+        self, when: float, callback: Any, *args: Any, context: Any = None
+    ) -> asyncio.TimerHandle:
+        # BaseEventLoop.call_at with the timer above (its heap, ``_scheduled``, is asyncio's)
+        self._check_closed()  # type: ignore[attr-defined]
+        timer = _Timer(when, next(self._made), callback, args, self, context)
+        heapq.heappush(self._scheduled, timer)  # type: ignore[attr-defined]
+        timer._scheduled = True  # type: ignore[attr-defined]
+        return timer
+
     def default_exception_handler(self, context: dict[str, Any]) -> None:
         # An exception nobody retrieved is a finding, not noise: keep it for the checker.
         self.unhandled.append(context)
 
     unhandled: list[dict[str, Any]]
+    _made: itertools.count[int]
 
     def __new__(cls, *args: Any, **kwargs: Any) -> VirtualTimeLoop:
         self = super().__new__(cls)
         self.unhandled = []
+        self._made = itertools.count()
         return self

@@ -116,7 +116,9 @@ class Episode:
     p: float
 
     def __str__(self) -> str:
-        return f"{self.start:.3f}+{self.duration:.3f}:u{self.unit}:{self.kind}:{self.p:.2f}"
+        # repr: the shortest text that parses back to the same float, so that
+        # ``--schedule`` replays the printed schedule exactly
+        return f"{self.start!r}+{self.duration!r}:u{self.unit}:{self.kind}:{self.p!r}"
 
     @classmethod
     def parse(cls, text: str) -> Episode:
