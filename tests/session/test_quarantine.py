@@ -192,3 +192,98 @@ async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_ans
                 assert (stats.completed, stats.timeouts) == (257 - late, 1 + late)
                 assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
             tg.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize("shown", ["answered", "late"])
+@on_virtual_time
+async def test_a_longer_round_trip_shown_after_the_evidence_keeps_the_sids_it_freed(
+    shown: str,
+) -> None:
+    """A delay episode longer than any round trip shown before (the soak's seed 53003). A
+    read answered after 0.3 s is the slowest the link has shown. At 2.0 s a read of D5 x 2
+    is sent, its round trip 0.55 s; at 2.05 s a read of D10 x 2, given up on after 0.05 s,
+    its round trip 0.8 s; at 2.1 s a younger read, of D20 x 2, is answered at once. That
+    evidence ended D10's quarantine at ``max(2.1 + 0.5, 2.05 + 2 x 0.3)`` = 2.65 s; at
+    2.7 s reads whose replies take 0.2 s took every free SID, D10's among them, and its
+    late reply at 2.85 s answered one of them with D10's words (two words, like its own).
+
+    D5's reply, in time (``answered``: its caller waits 1 s) or late (``late``: given up on
+    after 0.05 s, its reply within 0.5 s of the evidence), shows a round trip of 0.55 s at
+    2.55 s, before D10's quarantine ended: a longer round trip than the link had shown
+    extends the quarantines the evidence ended to twice it after their requests were sent
+    (2.05 + 1.1 s). The reads leave D10's SID alone and each gets its own words; D10's
+    reply is counted as late."""
+    plc = VirtualPLC()
+    plc.write("D0", [1000 + w for w in range(600)])
+    commands = {1: 0.15, 5: 0.3, 10: 0.5}  # word read -> how long its command takes to the PLC
+    replies = {1: 0.15, 5: 0.25, 10: 0.3}  # first word read -> how long its reply takes back
+    replies.update((w, 0.2) for w in range(100, 356))
+    received: list[bytes] = []
+
+    def fate(packet: Packet) -> Sequence[float]:
+        data = packet.data
+        if packet.dest == PLC:
+            return [commands.get(int.from_bytes(data[13:15], "big"), 0.0)]
+        return [replies.get(int.from_bytes(data[14:16], "big") - 1000, 0.0)]
+
+    async with MemoryNetwork(fate=fate) as net:
+        sock = net.datagram_socket(*PLC)
+
+        async def serve() -> None:
+            while True:
+                data, source = await sock.receive()
+                received.append(data)
+                reply = plc.handle_frame(data)
+                if reply is not None:
+                    sock.sendto(reply, source)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(serve)
+            transport = UdpTransport(PLC[0], local_host="10.0.0.200", network=net)
+            async with Session(
+                transport,
+                source=FinsAddress(0, 200, 0),
+                dest=FinsAddress(0, 1, 0),
+                max_sid_spaces=1,
+                max_in_flight=255,
+                timeout=1.0,
+                retries=0,
+            ) as session:
+                r = await session.request(0x01, 0x01, read(1, 1))  # the slowest: 0.3 s
+                assert r.data == held(1, 1)
+                assert anyio.current_time() == pytest.approx(0.3, abs=1e-5)
+                await anyio.sleep(2.0 - anyio.current_time())
+                words: dict[int, bytes] = {}
+                timeouts: list[int] = []
+
+                async def reader(word: int, timeout: float | None = None) -> None:
+                    try:
+                        r = await session.request(0x01, 0x01, read(word, 2), timeout=timeout)
+                    except FinsTimeout:
+                        timeouts.append(word)
+                    else:
+                        words[word] = r.data
+
+                async with anyio.create_task_group() as episode:
+                    episode.start_soon(reader, 5, 1.0 if shown == "answered" else 0.05)
+                    await anyio.sleep(0.05)
+                    await reader(10, 0.05)
+                    await reader(20)
+                    assert anyio.current_time() == pytest.approx(2.1, abs=1e-5)
+                    await anyio.sleep(0.6)
+                    many = range(100, 355 if shown == "answered" else 354)
+                    for word in many:
+                        episode.start_soon(reader, word)
+                assert anyio.current_time() == pytest.approx(2.9, abs=1e-5)
+                late = int(shown == "late")
+                assert timeouts == [5, 10][1 - late :]
+                assert words == {w: held(w, 2) for w in [*[5][late:], 20, *many]}
+                # the SIDs as the PLC took them: 0 (D1), 3 (D20), 1 (D5) and 2 (D10)
+                # delayed, then 4..255, 0, 1 (D5 answered in time, else quarantined) and 3,
+                # never 2 (D10 quarantined again)
+                again = [1, 3] if shown == "answered" else [3]
+                assert [f[9] for f in received] == [0, 3, 1, 2, *range(4, 256), 0, *again]
+                stats = session.stats
+                assert (stats.completed, stats.timeouts) == (len(many) + 3 - late, 1 + late)
+                assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
+            tg.cancel_scope.cancel()

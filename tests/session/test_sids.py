@@ -207,3 +207,39 @@ def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -
         0x10001: pytest.approx(100.3),
         0x10002: pytest.approx(100.5),
     }
+
+
+def test_a_longer_round_trip_extends_the_quarantines_the_evidence_ended() -> None:
+    """The evidence ended three quarantines (the link had shown 0.3 s): 0.5 s after it, or
+    twice 0.3 s after the request's send. A late reply within 0.5 s of the evidence shows
+    a round trip of 0.4 s (soak seed 53003: a delay episode began before the evidence):
+    the quarantines last again until twice that after their requests' sends, but not the
+    SID reused meanwhile, nor past the full term. A late reply later than 0.5 s after the
+    evidence (in the term it left: a reply under a wrong SID, say) teaches nothing."""
+    now = [0.3]
+    space, stats = SidSpace(clock=lambda: now[0]), SessionStats({})
+    space.slowest = 0.3
+    now[0] = 2.05
+    given_up(space, 0x10001, 2.0, 2.05)
+    now[0] = 2.1
+    given_up(space, 0x10002, 2.05, 2.1)
+    given_up(space, 0x10003, 2.05, 2.1)
+    space.quarantine[0x10003] = 2.8  # (a full term of 0.7 s)
+    given_up(space, 0x10004, 2.0, 2.1)
+    space.answered_after(0x10005, 2.1, 2.1)
+    assert space.quarantine == pytest.approx(
+        {k: 2.65 for k in (0x10002, 0x10003)} | {0x10001: 2.6, 0x10004: 2.6}
+    )
+    now[0] = 2.4
+    assert space.is_free(0x10004, 2.7, frozenset())  # (checked at 2.7: reused)
+    space.pending[0x10004] = record(0x10004)
+    assert space.unmatched(stats, 0x10001, reply(0x10001)) == ("late", 0.0)
+    assert space.slowest == pytest.approx(0.4)
+    assert space.quarantine == pytest.approx(
+        {0x10001: 2.4 + LATE_REPLY_GRACE, 0x10002: 2.05 + 0.8, 0x10003: 2.8}
+    )
+    now[0] = 2.65
+    assert space.unmatched(stats, 0x10002, reply(0x10002)) == ("late", 0.0)
+    assert space.slowest == pytest.approx(0.4)  # 0.55 s after the evidence: nothing
+    assert 0x10004 not in space.ended and space.ended.keys() == {0x10003}
+    assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (2, 0, 0)

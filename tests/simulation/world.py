@@ -1064,9 +1064,9 @@ MISROUTED = "defect 2 (a reply for another space)"
 #: strict xfail, so that a fix is noticed (its world passes, the xfail fails): the fix
 #: removes the kind here and its world there.
 UNFIXED: frozenset[str] = frozenset({DUPLICATE})
-# (LATE_REPLY, the late original reply family, is the evidence rule's exposed case in
-# docs/session.md; its world, soak seed 53003's, no longer shows it since the duplicate
-# rule changed its trajectory (5126471): kept in REGRESSIONS until the soak pins another.)
+# (LATE_REPLY, the late original reply family: a longer round trip shown after the
+# evidence extends the quarantines it ended (soak seed 53003's world, in REGRESSIONS); what
+# stays exposed is stated in docs/session.md, the evidence rule's exposed case.)
 # (fixed: "no free SID after the faults", the relay family: issue #22. Defect 5 is narrowed
 # to copies that come before the session has seen any duplicate on its link, every earlier
 # one taken by a request in flight under its SID: soak seed 50040, scenarios.UNFIXED_WORLDS)

@@ -436,7 +436,7 @@ class Session:
         p.done, p.end_code = True, raw
         now = self.clock()
         if (latency := now - p.sent_at) > sids.slowest and p.rtt is not None:  # (slowest RTT)
-            sids.slowest = latency
+            sids.slower(latency, now)
         if sids.held or sids.given_up:
             self._answered_after_doubt(sids, key, frame, p.sent_at, now)
         sids.recent[key], sids.answers[key] = now, frame

@@ -97,6 +97,7 @@ class SidSpace:
         "asked",
         "clock",
         "copy_at",
+        "ended",
         "floor",
         "given_up",
         "heard",
@@ -144,6 +145,13 @@ class SidSpace:
     #: command, byte for byte one the SID carried before, may be that request's late reply,
     #: not a copy (:meth:`late_reply`).
     abandoned: dict[int, dict[int, float]]
+    #: SID key -> its request's send (its give-up, if it was sent again), its command,
+    #: whether sent once, until when a late reply to it teaches :attr:`slowest` (the
+    #: evidence + :data:`~.matching.LATE_REPLY_GRACE`) and when its quarantine's full term
+    #: ends: a SID whose quarantine the evidence ended early (:meth:`answered_after`),
+    #: while that term runs. A longer round trip shown later extends its quarantine again
+    #: (:meth:`slower`).
+    ended: dict[int, tuple[float, int, bool, float, float]]
 
     def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
         #: The session's clock (see :mod:`.clock`).
@@ -162,12 +170,15 @@ class SidSpace:
         #: comes on the relay's timer, may still come; a relay error under that SID number
         #: and command code is taken for that request's (see :meth:`relay_doubted`).
         self.relay_doubt: dict[int, float] = {}
+        self.ended = {}
         #: The slowest round trip (seconds) the link has shown, from a request's send to its
         #: reply, of requests sent once (Karn: which transmission a reply answers is
         #: unknown otherwise): answered, or given up on and answered late before any
-        #: evidence (see :meth:`unmatched`). A quarantine ends on the evidence that the
+        #: evidence or within :data:`~.matching.LATE_REPLY_GRACE` of it (see
+        #: :meth:`late_round_trip`). A quarantine ends on the evidence that the
         #: destination answers no sooner than :data:`LINGER_FACTOR` times this after its
-        #: request was sent (see :meth:`answered_after`).
+        #: request was sent (see :meth:`answered_after`), however much it grows later
+        #: (:meth:`slower`).
         self.slowest = 0.0
         self.abandoned = {}
         #: SID key -> when it may be used again (answered: a duplicate may follow).
@@ -315,6 +326,8 @@ class SidSpace:
         if self.held:
             self.held.pop(key, None)
         self.quarantine[key] = until
+        if self.ended:
+            self.ended.pop(key, None)
         mine = self.given_up.get(key & ~0xFF)
         if mine is None:
             mine = self.given_up[key & ~0xFF] = {}
@@ -348,14 +361,20 @@ class SidSpace:
         it on its own timer, not the destination's, and it may come after the quarantine
         ended so. Each SID whose quarantine ends early is put in doubt for a relay error
         under its number and command code until the quarantine's full term
-        (:attr:`relay_doubt`, :meth:`relay_doubted`)."""
+        (:attr:`relay_doubt`, :meth:`relay_doubted`).
+
+        Nor does it say that a delay episode is over: the link's round trips may be
+        growing beyond any it has shown (soak seed 53003: 0.71 s, after 0.34 s at most).
+        Each SID whose quarantine ends early is kept in :attr:`ended` until its full
+        term: a longer round trip shown before it is reused extends its quarantine again
+        (:meth:`slower`)."""
         dest = key & ~0xFF
         mine = self.given_up.get(dest)
         if mine is None:
             return
         end = now + LATE_REPLY_GRACE
         wait = LINGER_FACTOR * self.slowest
-        quarantine, doubt = self.quarantine, self.relay_doubt
+        quarantine, doubt, ended = self.quarantine, self.relay_doubt, self.ended
         for k, (at, command, sent, once) in list(mine.items()):
             if at > sent_at:
                 continue
@@ -367,6 +386,10 @@ class SidSpace:
             ends = max(end, (sent if once else at) + wait)
             if until > ends:
                 quarantine[k] = ends
+                if len(ended) >= 1024:  # (bounded: those whose term is over go first)
+                    for e in [e for e, v in ended.items() if v[4] <= now] or list(ended)[:1]:
+                        del ended[e]
+                ended[k] = (sent if once else at, command, once, end, until)
                 if len(doubt) >= 256:  # (bounded: the expired go first)
                     for d in [d for d, u in doubt.items() if u <= now] or list(doubt)[:1]:
                         del doubt[d]
@@ -417,6 +440,7 @@ class SidSpace:
         self.quarantine.clear()
         self.given_up.clear()
         self.relay_doubt.clear()
+        self.ended.clear()
         self.lingering.clear()
         self.held.clear()
         self.replies.clear()
@@ -485,19 +509,52 @@ class SidSpace:
 
     def late_round_trip(self, key: int, frame: bytes, now: float) -> None:
         """A late reply ``frame`` came ``now`` under ``key``, quarantined: the round trip
-        it shows (from its request's send) makes :attr:`slowest`, if longer. Only while
-        the request given up on under ``key`` has seen no evidence (:attr:`given_up`),
-        was sent once and asked the command ``frame`` answers: a reply the PLC sends
-        under a wrong SID is taken for the late reply of any quarantined SID, and one that
-        came in the term the evidence left a quarantine (twice :attr:`slowest`) taught a
-        round trip twice as long each time (a simulated PLC answering under wrong SIDs
-        after a delay of 0.4 s: 3 s)."""
+        it shows (from its request's send) makes :attr:`slowest`, if longer
+        (:meth:`slower`). Only if the request given up on under ``key`` was sent once and
+        asked the command ``frame`` answers, and while it has seen no evidence
+        (:attr:`given_up`) or within :data:`~.matching.LATE_REPLY_GRACE` of the evidence
+        that ended its quarantine (:attr:`ended`): a reply the PLC sends under a wrong SID
+        is taken for the late reply of any quarantined SID, and one that came in the term
+        the evidence left a quarantine (twice :attr:`slowest`) taught a round trip twice
+        as long each time (a simulated PLC answering under wrong SIDs after a delay of
+        0.4 s: 3 s). The grace after the evidence does not grow with :attr:`slowest`: a
+        wrong SID's reply within it shows no longer than the wait for the evidence
+        (an outage's length), plus the grace and the request's timeout."""
         mine = self.given_up.get(key & ~0xFF)
         given = mine.get(key) if mine else None
-        if given is None or not given[3] or given[1] != (frame[10] << 8 | frame[11]):
+        if given is not None:
+            command = frame[10] << 8 | frame[11] if given[3] else -1
+            if command == given[1] and now - given[2] > self.slowest:
+                self.slower(now - given[2], now)
             return
-        if now - given[2] > self.slowest:
-            self.slowest = now - given[2]
+        ended = self.ended.pop(key, None) if self.ended else None
+        if ended is None or not ended[2] or now > ended[3]:
+            return
+        if ended[1] != (frame[10] << 8 | frame[11]):
+            return
+        if now - ended[0] > self.slowest:
+            self.slower(now - ended[0], now)
+
+    def slower(self, round_trip: float, now: float) -> None:
+        """The link showed a round trip of ``round_trip`` seconds, longer than
+        :attr:`slowest`: it becomes :attr:`slowest`, and each quarantine the evidence
+        ended early (:attr:`ended`) lasts again until :data:`LINGER_FACTOR` times it after
+        its request was sent (within its full term), unless its SID was reused since.
+        The evidence says nothing of a delay episode that began before it: its first
+        late replies, or a reply in time, show round trips longer than the link had shown
+        (soak seed 53003: a read given up on, its quarantine ended on a younger read's
+        answer 0.68 s after its send, the link having shown 0.34 s at most, was answered
+        0.71 s after its send, under the SID reused by a read of as many words). Called
+        by the receive path only when the round trip is the longest yet."""
+        self.slowest = round_trip
+        if not self.ended:
+            return
+        wait, quarantine, pending = LINGER_FACTOR * round_trip, self.quarantine, self.pending
+        for k, (sent, _, _, _, until) in list(self.ended.items()):
+            if until <= now or k in pending:  # (over, or reused: see "Guarantees")
+                del self.ended[k]
+            elif (ends := min(until, sent + wait)) > now and quarantine.get(k, 0.0) < ends:
+                quarantine[k] = ends
 
     def late_reply(self, key: int, frame: bytes, since: float) -> bool:
         """Whether ``frame``, byte for byte a reply the SID of ``key`` carried at ``since``,
