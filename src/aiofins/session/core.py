@@ -434,7 +434,8 @@ class Session:
         elif linger and self._held(p, key, frame, sids):
             return  # (a copy of the SID's last reply, held back: see _hold_copy)
         p.done, p.end_code = True, raw
-        now = self.clock()
+        clock = self.clock  # (called from a local: a callable attribute's call is not cached)
+        now = clock()
         if (latency := now - p.sent_at) > sids.slowest and p.rtt is not None:  # (slowest RTT)
             sids.slower(latency, now)
         if sids.held or sids.given_up:
@@ -467,7 +468,7 @@ class Session:
         fifo = self._fifo  # the answered requests at the front of the deadlines dropped
         while fifo and fifo[0].done:
             fifo.popleft()
-        if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
+        if self._heap or (len(fifo) > 64 + 4 * len(pending) if fifo else self._watcher.disarms):
             self._deadlines_left(len(pending))
 
     def drop_answered(self) -> None:
@@ -480,7 +481,7 @@ class Session:
         while fifo and fifo[0].done:
             fifo.popleft()
         pending = self.sids.pending
-        if self._heap or len(fifo) > 64 + 4 * len(pending) or (not fifo and self._watcher.disarms):
+        if self._heap or (len(fifo) > 64 + 4 * len(pending) if fifo else self._watcher.disarms):
             self._deadlines_left(len(pending))
 
     def _malformed(self) -> None:
@@ -801,25 +802,15 @@ class Session:
         cap: float | None,
         space: ExtraSpace | None = None,
     ) -> bytes | None:
-        """Put ``p``, command ``mrc src params`` to ``state``'s destination, on the books:
-        take a free SID (``p.key``), build the frame, register ``p`` under its SID as sent
-        ``now`` with its first deadline (:meth:`_register`). Returns the frame for the
-        caller to send, or ``None`` (nothing registered) when all 256 SIDs of the
-        destination are in flight, quarantined or lingering. ``space``: an extra SID space
-        to take the SID from and send on (``None``: the session's own transport).
-
-        Every field of :class:`Pending` is set here (``p`` may come from ``__new__``
-        alone: the hot path spares itself an ``__init__`` call)."""
+        """``p``, command ``mrc src params`` to ``state``'s destination, on the books: a free
+        SID, the frame (returned, to send), every field of ``p``, its plan and first deadline
+        (docs/session.md), watcher, hooks, log; ``None`` if no SID is free (nothing done)."""
         if space is None:
-            sids = self.sids
-            mine = state
+            sids, mine = self.sids, state
         else:  # its own SIDs and header; the destination's slots and round-trip estimate
-            sids = space.sids
-            mine = space.dest_state(state)
+            sids, mine = space.sids, space.dest_state(state)
         pending = sids.pending
-        # SidSpace.take(), inlined (a call saved per request): a change to one is a change
-        # to both.
-        sid = mine.cursor
+        sid = mine.cursor  # SidSpace.take(), inlined: a change to one is a change to both
         key = mine.base | sid
         if (
             key in pending
@@ -827,72 +818,37 @@ class Session:
             or ((lingering := sids.lingering) and lingering.get(key, 0.0) > now)
             or (sids.routed and sids.sid_taken(key))
         ):
-            found = sids.allocate(mine)
-            if found is None:
+            if (found := sids.allocate(mine)) is None:
                 return None
-            key = found
-            sid = key & 0xFF
+            key, sid = found, found & 0xFF
         else:
             mine.cursor = sid + 1 if sid < 255 else 0
-        # Built before the request is registered: bad parameters (not bytes) raise here and
-        # leave nothing behind.
-        frame = pack_head(mine.prefix, sid, mrc, src) + params
-        p.key = key
-        p.mrc = mrc
-        p.src = src
-        p.rtt = state
-        p.space = space
-        self._register(p, frame, retries, now, end, cap, state.rto)
-        pending[key] = p
-        return frame
-
-    def _register(
-        self,
-        p: Pending,
-        frame: bytes,
-        retries: int,
-        now: float,
-        end: float,
-        cap: float | None,
-        rto: float,
-    ) -> None:
-        """``p``'s plan and first deadline, on the deadline structure (the watcher woken
-        earlier if it is the earliest); the hooks and the log told it is sent.
-
-        The first wait: the destination's RTO (``rto``) once measured (never over a reliable stream:
-        its RTO stays unset), else the share of the call's time (until ``end``) that lets
-        every attempt go out, the wait doubling each time; never more than the caller's
-        per-attempt ``cap``."""
+        frame = pack_head(mine.prefix, sid, mrc, src) + params  # (bad params raise here)
+        p.key, p.mrc, p.src = key, mrc, src  # (three at most: no tuple made)
+        p.rtt, p.space, p.frame = state, space, frame
         p.done = p.abandoned = False
-        p.reply = None
-        p.frame = frame
-        p.attempts = 1
-        p.end = end
+        p.reply, p.attempts, p.end = None, 1, end
         if retries:
-            wait = rto or (end - now) / ((2 << retries) - 1)
+            wait = state.rto or (end - now) / ((2 << retries) - 1)
             if cap is not None and wait > cap:
                 wait = cap
             p.plan = (frame, retries, end, cap, wait)
-            deadline = now + wait
-            if deadline > end:
+            if (deadline := now + wait) > end:
                 deadline = end
         else:
             p.plan = None
-            deadline = end
-            if cap is not None and now + cap < end:
-                deadline = now + cap
-        p.deadline = deadline
-        p.sent_at = now
-        fifo = self._fifo
-        if not fifo or deadline >= fifo[-1].deadline:
+            deadline = now + cap if cap is not None and now + cap < end else end
+        p.deadline, p.sent_at = deadline, now
+        if not (fifo := self._fifo) or deadline >= fifo[-1].deadline:
             fifo.append(p)
         else:
             self._deadlines.add(p)
-        watcher = self._watcher
-        if deadline < watcher.at:
-            watcher.arm(deadline, now)
+        if deadline < self._watcher.at:
+            self._watcher.arm(deadline, now)
         if self._log_frames or self._hooks is not None:
             self._sent_told(p, frame)
+        pending[key] = p
+        return frame
 
     def start_burst(
         self,
@@ -907,8 +863,8 @@ class Session:
         ``state``'s destination on the session's own transport, all sent ``now`` with the
         call's deadline ``end``, no per-attempt cap (a batch's burst): their frames, in
         order; fewer when one finds no free SID (it and those after it not registered).
-        The first goes through :meth:`start` and :meth:`_register`; the others share its
-        send time, deadline and plan, so what :meth:`_register` decided for it is copied,
+        The first goes through :meth:`start`; the others share its
+        send time, deadline and plan, so what :meth:`start` decided for it is copied,
         not decided again: each takes a SID (:meth:`SidSpace.take`), gets its frame and
         fields, and goes where the first went in the deadlines (the watcher is armed for
         that deadline already); the hooks and the log told as for the first."""
@@ -1048,11 +1004,9 @@ class Session:
         now: float | None = None,
         pending: Pending | None = None,
     ) -> Pending | None:
-        """Check, take a slot and a SID, register, send (``transport.fast_send``), read right
-        after: the :class:`Pending` (then ``await p``, :meth:`finish` or :meth:`failure`), or
-        ``None``, nothing done, if it must wait (link, breaker, slot, SID, an awaited send, a
-        fair turn: then :meth:`call`). Options as :meth:`request`'s (``cap``: attempt_timeout;
-        ``pending``: the caller's record, docs/session.md); bad ones raise CommandError."""
+        """Check, take a slot and a SID, register, send, read right after: the :class:`Pending`
+        (then ``await p``, :meth:`finish` or :meth:`failure`), or ``None`` (nothing done) to
+        wait in :meth:`call`. Options as :meth:`request`'s (``cap``, ``pending``: see docs)."""
         if dest is None:
             dest = self.dest
         if timeout is None and retries is None and cap is None:  # (checked when set)
@@ -1061,7 +1015,7 @@ class Session:
             cap = self.attempt_timeout
         else:
             timeout, retries, cap = self._call_options(timeout, idempotent, retries, cap)
-        if not (len(params) <= MAX_PARAMETER_SIZE and 0 <= mrc <= 0xFF and 0 <= src <= 0xFF):
+        if (mrc | src) >> 8 or len(params) > MAX_PARAMETER_SIZE:  # (a negative one too)
             check_call(mrc, src, params, timeout, retries, cap)  # raises what is wrong
         if self._turn_due or (self._breaker.state is not _CLOSED_BREAKER and not in_call):
             return None
@@ -1071,7 +1025,9 @@ class Session:
         if send is None or slots.in_flight >= slots.limit or slots.waiters:
             return None
         slots.in_flight += 1
-        now = self.clock() if now is None else now
+        if now is None:
+            clock = self.clock  # (as in frame_received)
+            now = clock()
         log = _ENABLED.get(_DEBUG)  # (log_frames_now(), inlined)
         self._log_frames = logger.isEnabledFor(_DEBUG) if log is None else log
         asyncio_made = pending is None and self._asyncio
@@ -1091,7 +1047,8 @@ class Session:
         if (poll := transport.poll_now) is not None and pending is None:
             self._read_after_send(poll, p)
         if asyncio_made and not p.done:  # not answered (nor failed) yet: a future to wait on
-            p.fut = self._new_future()  # (a test of p.fut here: None to mypyc, see above)
+            new_future = self._new_future  # (a callable attribute: see frame_received)
+            p.fut = new_future()  # (p.fut tested here: None to mypyc)
         return p
 
     def _unsent(
