@@ -4,15 +4,19 @@ time (trio's MockClock, asyncio on looptime): every count is exact."""
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
 import anyio
 import pytest
 
+from aiofins.memnet import Fate, MemoryNetwork, Packet
 from aiofins.protocol.errors import FinsTimeout
 from aiofins.protocol.header import FinsAddress
 from aiofins.session import Session
 from aiofins.session.sids import LINGER_FLOOR
 from aiofins.simulator import VirtualPLC
-from aiofins.transport import MemoryTransport
+from aiofins.transport import MemoryTransport, UdpTransport
 
 from ..virtual_time import on_virtual_time
 from .test_session_lifecycle import expected
@@ -25,6 +29,9 @@ from .test_session_udp import (
     udp_responder,
     word_data,
 )
+
+#: The peer's address on the in-memory network (see :func:`memnet_plc`).
+PEER = ("10.0.0.10", 9600)
 
 
 def read_d(word: int) -> bytes:
@@ -520,3 +527,99 @@ async def test_a_read_in_flight_when_the_link_first_shows_a_duplicate_is_held_ba
         assert (stats.completed, stats.duplicates, stats.unsolicited) == (257, 2, 0)
         assert (stats.retries, stats.timeouts) == (again, 0)
         assert session.sids.linger == pytest.approx(1.0)
+
+
+@asynccontextmanager
+async def memnet_plc(fate: Fate) -> AsyncIterator[tuple[Session, list[bytes]]]:
+    """A session (one SID space, no retries) to a peer on the in-memory network, which
+    answers a read of ``n`` words at D ``w`` with :func:`word_data` (zeros from D1000 on)
+    and a write with its end code; ``fate`` decides when each packet arrives. The session's
+    UDP transport sends synchronously here under trio as under asyncio. Yields the session
+    and the commands the peer received."""
+    received: list[bytes] = []
+    async with MemoryNetwork(fate=fate) as net:
+        sock = net.datagram_socket(*PEER)
+
+        async def serve() -> None:
+            while True:
+                cmd, source = await sock.receive()
+                received.append(cmd)
+                zeros = int.from_bytes(cmd[13:15], "big") >= 1000 or cmd[11] == 0x02
+                data = bytes(len(word_data(cmd))) if zeros else word_data(cmd)
+                sock.sendto(reply(cmd, 0, b"" if cmd[11] == 0x02 else data), source)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(serve)
+            async with Session(
+                UdpTransport(PEER[0], local_host="10.0.0.200", network=net),
+                source=FinsAddress(0, 200, 0),
+                dest=FinsAddress(0, 1, 0),
+                max_sid_spaces=1,
+                timeout=2.0,
+                retries=0,
+            ) as session:
+                yield session, received
+            tg.cancel_scope.cancel()
+
+
+@on_virtual_time
+async def test_the_link_s_first_copy_of_an_older_reply_never_answers_a_read_of_other_words() -> (
+    None
+):
+    """Issue #22, defect 5 (soak seed 50040: a SID storm on a link that duplicates every
+    reply): the link has shown no duplicate yet. Word 0's reply (SID 0) is copied 0.5 s
+    late, after SID 0 carried the reads of words 256 and 512; the read of word 512's own
+    reply takes 0.6 s, so the copy comes first. A reply to a read that is byte for byte a
+    reply its SID carried within the last second, to a request that asked other words, is
+    held back and the read sent again at once (same frame and SID): its own reply answers
+    it (before: word 0's data). Nothing is learnt from that first sign: no linger."""
+
+    def fate(packet: Packet) -> list[float]:
+        if packet.dest == PEER:
+            return [0.0]
+        word = int.from_bytes(packet.data[14:16], "big") ^ (1 << 12)
+        return {0: [0.0, 0.5], 512: [0.6]}.get(word, [0.0])
+
+    async with memnet_plc(fate) as (session, received):
+        for word in range(513):
+            r = await session.request(0x01, 0x01, read_params(word))
+            assert r.data == expected(word), word
+        assert anyio.current_time() == pytest.approx(0.6)
+        assert received[512][9] == received[256][9] == received[0][9] == 0  # SID 0
+        assert received[513:] == [received[512]]  # sent again once, same frame and SID
+        await anyio.sleep(1.0)  # the reply to that comes at 1.1 s
+        stats = session.stats
+        assert (stats.completed, stats.retries, stats.timeouts) == (513, 1, 0)
+        assert (stats.duplicates, stats.unsolicited, stats.mismatched) == (2, 0, 0)
+        assert session.sids.linger == 0.0
+
+
+@on_virtual_time
+async def test_a_read_of_zeros_like_its_sid_s_last_costs_one_round_trip_and_teaches_nothing() -> (
+    None
+):
+    """The other side of the rule above: reads of zeros of other words, the same bytes as
+    their SID's last reply, are held back once each and answered by the reply to their
+    second send (one round trip more: the read of D2000's commands take 0.01 s each). A
+    poll of the same words under the same SIDs is answered at once; a write's reply, the
+    same bytes as its SID's last write's, too (a write is never sent again). No linger,
+    no duplicate."""
+
+    def fate(packet: Packet) -> list[float]:
+        slow = packet.dest == PEER and packet.data[13:15] == (2000).to_bytes(2, "big")
+        return [0.01 if slow else 0.0]
+
+    async with memnet_plc(fate) as (session, received):
+        for _ in range(2):  # SIDs 0-255, then the same questions under the same SIDs
+            for word in range(1000, 1256):
+                assert (await session.request(0x01, 0x01, read_params(word))).data == b"\0\0"
+        start = anyio.current_time()
+        assert (await session.request(0x01, 0x01, read_params(2000))).data == b"\0\0"
+        assert anyio.current_time() - start == pytest.approx(0.02)  # two round trips
+        assert received[512][9] == 0 and received[513:] == [received[512]]
+        for word in range(3000, 3512):  # SIDs 1-255, 0 ... twice: replies the same bytes
+            await session.request(0x01, 0x02, read_params(word) + b"\x12\x34")
+        assert len(received) == 514 + 512
+        stats = session.stats
+        assert (stats.completed, stats.retries, stats.duplicates) == (513 + 512, 1, 0)
+        assert session.sids.linger == 0.0

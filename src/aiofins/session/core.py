@@ -52,6 +52,7 @@ from ..protocol.frames import (
     same_address,
     unpack_reply_head,
 )
+from ..protocol.guard import changes
 from ..protocol.header import DEFAULT_GCT, MAX_PARAMETER_SIZE, FinsAddress
 from ..transport.base import Transport, is_asyncio
 from .background import Background
@@ -73,7 +74,7 @@ from .response import (
     _set_frame,
     response_of,
 )
-from .sids import SidSpace, may_send_again
+from .sids import FIRST_SIGN, HEARD_REPLIES, HOLD_WINDOW, SidSpace, may_send_again
 from .slots import (
     AsyncioPending,
     DestState,
@@ -99,6 +100,7 @@ _SAMPLE_MASK = 7
 _NORMAL = EndCode(0)
 _ICFS = RESPONSE_ICFS  # (short names for the receive path's one test)
 _RELAY = RELAY_ERROR_BIT
+_HEARD_BOUND = 2 * HEARD_REPLIES  # (SidSpace.heard's bound, see SidSpace.hear)
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
@@ -431,19 +433,19 @@ class Session:
             if p is None:
                 return
             key = p.key
-        elif linger and self._held(p, key, frame, sids):
-            return  # (a copy of the SID's last reply, held back: see _hold_copy)
-        p.done, p.end_code = True, raw
+        elif (linger or ((h := sids.heard.get(frame)) and h[1] != p.frame)) and self._held(
+            p, key, frame, sids
+        ):
+            return  # (a copy of a reply of the SID, held back: see _hold_copy, _first_sign)
         clock = self.clock  # (called from a local: a callable attribute's call is not cached)
-        now = clock()
+        p.done, p.end_code, now = True, raw, clock()
         if (latency := now - p.sent_at) > sids.slowest and p.rtt is not None:  # (slowest RTT)
             sids.slower(latency, now)
         if sids.held or sids.given_up:
             self._answered_after_doubt(sids, key, frame, p.sent_at, now)
         sids.recent[key], sids.answers[key] = now, frame
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
-        n = stats._lat_count
-        stats._lat_count = n + 1
+        stats._lat_count = (n := stats._lat_count) + 1
         stats._lat_sum += latency
         stats._lat_ring[n & RING_MASK] = latency
         if (r := p.rtt) is not None and not n & _SAMPLE_MASK:  # every 8th: once per RTT
@@ -451,7 +453,9 @@ class Session:
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
         else:  # (what a copy may be of when the link shows its first duplicate)
-            sids.heard.append((key, frame, now, p.frame))
+            (heard := sids.heard)[frame] = (now, p.frame)  # (SidSpace.hear, inlined)
+            if len(heard) > _HEARD_BOUND:
+                sids.forget_heard()
         if (fut := p.fut) is not None:
             try:  # noqa: SIM105 (no context manager: once per reply)
                 fut.set_result(frame)
@@ -557,7 +561,7 @@ class Session:
                 self.stats.late_replies += 1
                 return None, linger
             return p, max(linger, RELAY_LINGER)
-        if linger and self._held(p, key, frame, sids):
+        if (linger or frame in sids.heard) and self._held(p, key, frame, sids):
             return None, linger
         return p, linger
 
@@ -586,7 +590,11 @@ class Session:
         """On a link with a linger, a reply to ``p`` that is a byte-for-byte copy of its
         SID's last reply, or of one of its recent replies (:attr:`SidSpace.replies
         <aiofins.session.sids.SidSpace.replies>`): whether it is held back (see
-        :meth:`_hold_copy`; ``p`` put back in the pending table)."""
+        :meth:`_hold_copy`; ``p`` put back in the pending table). Without a linger, one of
+        a reply the space heard (:attr:`SidSpace.heard
+        <aiofins.session.sids.SidSpace.heard>`) to another question: see :meth:`_first_sign`."""
+        if not sids.linger:
+            return self._first_sign(p, key, sids, frame)
         if sids.answers.get(key) == frame:
             held = self._hold_copy(p, key, sids, sids.asked.get(key))
         elif sids.replies and (older := sids.copied(key, frame)) is not None:
@@ -643,15 +651,46 @@ class Session:
             return False
         self.stats.duplicates += 1
         transport = self.transport if p.space is None else p.space.transport
-        fast_send = transport.fast_send
-        if fast_send is not None:
-            p.rtt = None  # Karn: the reply can no longer be timed
-            p.attempts += 1
-            self.stats.retries += 1
-            try:  # noqa: SIM105 (as in frame_received: no context manager)
-                fast_send(sent)
-            except Exception:  # (its retransmissions or its deadline follow)
-                pass
+        if transport.fast_send is not None:
+            self._send_again(p, transport.fast_send)
+        return True
+
+    def _send_again(self, p: Pending, fast_send: Callable[[bytes], None]) -> None:
+        """Send ``p`` once more now, same frame and SID (see :meth:`_hold_copy`)."""
+        p.rtt = None  # Karn: the reply can no longer be timed
+        p.attempts += 1
+        self.stats.retries += 1
+        try:  # noqa: SIM105 (as in frame_received: no context manager)
+            fast_send(p.frame)
+        except Exception:  # (its retransmissions or its deadline follow)
+            pass
+
+    def _first_sign(self, p: Pending, key: int, sids: SidSpace, frame: bytes) -> bool:
+        """The first-sign rule (docs/session.md): on a link that has shown no duplicate (no
+        linger), a reply ``frame`` to ``p`` that is, byte for byte, a reply its SID carried
+        (:attr:`SidSpace.heard <aiofins.session.sids.SidSpace.heard>`: the frame holds
+        its SID key): whether it is held back as a possible copy of that reply (``p`` put
+        back in the pending table and sent again at once, same frame and SID). Held when
+        ``p`` is a read (:func:`~aiofins.protocol.guard.changes`: it changes nothing, so
+        sending it again is harmless) that asked something else than the request that
+        reply answered, within :data:`~.sids.HOLD_WINDOW` (1 s) of it, no reply was held
+        for ``p`` yet, and the transport sends synchronously. ``p`` takes its next reply
+        whatever it holds, and nothing is learnt from this sign (:meth:`_copy_resolved`):
+        a false one (two reads of zeros) costs one round trip, never a linger, a wait or
+        a loop (issue #22, defect 5: soak seed 50040, a SID storm whose link's first
+        copies came to SIDs reused by reads, one a read of other words)."""
+        sent = p.frame
+        found = sids.heard.get(frame)
+        if found is None or sent == found[1] or key in sids.held:
+            return False  # the same question (a poll), or held once for p: it answers
+        fast_send = (self.transport if p.space is None else p.space.transport).fast_send
+        if fast_send is None or changes(p.mrc, p.src, sent[12:]) is not None:
+            return False  # (a write: never sent again without retries; see "What stays exposed")
+        if self.clock() - found[0] >= HOLD_WINDOW:
+            return False
+        sids.held[key] = FIRST_SIGN
+        sids.pending[key] = p
+        self._send_again(p, fast_send)
         return True
 
     def _keep_frame(self, p: Pending, frame: bytes, cap: float | None, now: float) -> None:
@@ -667,6 +706,10 @@ class Session:
         last reply was held back (see :meth:`_hold_copy`): if ``frame`` differs, that copy
         was a late duplicate of the old reply, and teaches the linger."""
         lateness = sids.held.pop(key, None)
+        if lateness == FIRST_SIGN:  # (see _first_sign: nothing learnt)
+            if frame not in sids.heard:  # not the bytes held back: those were a copy
+                self.stats.duplicates += 1
+            return
         if lateness is not None and frame != sids.answers.get(key):
             grew = sids.learn(lateness, self.clock())
             self._linger_logged = log_duplicate(

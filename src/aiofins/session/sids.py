@@ -24,9 +24,9 @@ or connections would own one per socket.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
 from collections.abc import Set as AbstractSet
+from itertools import islice
 from time import monotonic
 
 from ..protocol.guard import changes
@@ -44,14 +44,19 @@ MAX_LINGER = 5.0
 #: next request (which asked something else) within this many seconds of that reply, or
 #: LINGER_FACTOR times the linger, is held back (see :meth:`SidSpace.hold`).
 HOLD_WINDOW = 1.0
+#: What :attr:`SidSpace.held` notes for a reply held back on a link that has shown no
+#: duplicate (the session's ``_first_sign``): nothing is learnt from it.
+FIRST_SIGN = -1.0
 #: On a link that has shown duplicates, the replies each SID was answered with within the
 #: hold window are kept (at most this many per SID key, the newest; see
 #: :meth:`SidSpace.remember`): a late copy of any of them is held back, not only of the last.
 KEPT_REPLIES = 8
-#: On a link that has shown no duplicate yet, the last this many replies of a SID space are
-#: kept (:attr:`SidSpace.heard`): a copy of any of them within the hold window is the link's
-#: first duplicate, told apart from a stray reply, and at that first duplicate they start
-#: each SID's :attr:`SidSpace.replies` (see :meth:`SidSpace.extend_lingers`).
+#: On a link that has shown no duplicate yet, at least this many (at most twice as many)
+#: distinct recent replies of a SID space are kept (:attr:`SidSpace.heard`): a copy of any
+#: of them within the hold window is the link's first duplicate, told apart from a stray
+#: reply, and at that first duplicate they start each SID's :attr:`SidSpace.replies` (see
+#: :meth:`SidSpace.extend_lingers`); before it, a read's reply that is one of them, to
+#: another question, is held back once (the first-sign rule: the session's ``_first_sign``).
 HEARD_REPLIES = KEPT_REPLIES * 256
 #: The linger of a link that has shown duplicates once none has come for a quiet span
 #: (:meth:`SidSpace.calm`), unless ``min_linger`` is longer: above 0, so that what the link
@@ -73,6 +78,11 @@ SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
 #: at a high rate SIDs come free and run short many times a second within one shortage.
 SHORTAGE_EPISODE = 60.0
+
+
+def _when(heard: tuple[bytes, tuple[float, bytes]]) -> float:
+    """When a reply of :attr:`SidSpace.heard` came (its sort key)."""
+    return heard[1][0]
 
 
 def may_send_again(idempotent: bool, mrc: int, src: int, params: bytes) -> bool:
@@ -126,10 +136,12 @@ class SidSpace:
     #: request sent), on a link that has shown duplicates (see :meth:`remember`; at most
     #: :data:`KEPT_REPLIES` per key).
     replies: dict[int, list[tuple[bytes, float, bytes]]]
-    #: The space's last :data:`HEARD_REPLIES` replies while the link has shown no duplicate,
-    #: oldest first, as (SID key, the reply, when it came, what its request sent); frames
-    #: kept by reference, not copied.
-    heard: deque[tuple[int, bytes, float, bytes]]
+    #: The space's recent replies while the link has shown no duplicate: each reply frame
+    #: (its bytes hold its SID key) -> when it last came and what its request sent (its
+    #: frame), in the order first heard; frames kept by reference, not copied. Between
+    #: :data:`HEARD_REPLIES` and twice that many frames (see :meth:`hear`): a copy of any is
+    #: found without a scan, on every reply (the session's ``_first_sign``).
+    heard: dict[bytes, tuple[float, bytes]]
     #: The linger after a completion the link has shown necessary (late duplicates); back
     #: to :attr:`floor` once it has shown none for a while (:meth:`calm`).
     linger: float
@@ -192,7 +204,7 @@ class SidSpace:
         self.asked = {}
         self.held = {}
         self.replies = {}
-        self.heard = deque(maxlen=HEARD_REPLIES)
+        self.heard = {}
         self.linger = min_linger
         self.linger_resent = 0.0
         self.floor = max(min_linger, LINGER_FLOOR)
@@ -578,12 +590,8 @@ class SidSpace:
         found = self.copied(key, frame)
         if found is not None:
             return found[0]
-        for k, reply, at, _ in reversed(self.heard):
-            if now - at >= HOLD_WINDOW:
-                return None
-            if k == key and reply == frame:
-                return at
-        return None
+        heard = self.heard.get(frame)  # (the frame holds its key: SNA SA1 SA2 SID)
+        return heard[0] if heard is not None and now - heard[0] < HOLD_WINDOW else None
 
     def mismatched(self, stats: SessionStats, key: int, frame: bytes) -> float | None:
         """A reply ``frame`` under ``key`` whose command code (or ICF) is not that of the
@@ -646,7 +654,7 @@ class SidSpace:
         of one of its replies may still come."""
         self.asked[key] = asked
         if not self.linger:
-            self.heard.append((key, frame, now, asked))
+            self.hear(frame, now, asked)
             return
         replies = self.replies.get(key)
         if replies is None:
@@ -656,6 +664,19 @@ class SidSpace:
         while replies and (len(replies) >= KEPT_REPLIES or now - replies[0][1] >= window):
             del replies[0]
         replies.append((frame, now, asked))
+
+    def hear(self, frame: bytes, now: float, asked: bytes) -> None:
+        """A reply ``frame`` came ``now`` to a request whose frame was ``asked``, while the
+        link has shown no duplicate: kept in :attr:`heard` (the session inlines this for
+        its usual reply: keep the two alike)."""
+        (heard := self.heard)[frame] = (now, asked)
+        if len(heard) > 2 * HEARD_REPLIES:
+            self.forget_heard()
+
+    def forget_heard(self) -> None:
+        """:attr:`heard` holds twice :data:`HEARD_REPLIES` frames: the first half heard go
+        (a frame heard again keeps its first place: what it asked last is kept)."""
+        self.heard = dict(islice(self.heard.items(), HEARD_REPLIES, None))
 
     def copied(self, key: int, frame: bytes) -> tuple[float, bytes] | None:
         """When the recent reply of :attr:`replies` under ``key`` that ``frame`` is a copy
@@ -693,9 +714,10 @@ class SidSpace:
         each SID's :attr:`replies` (and :attr:`asked` its last question); :attr:`heard`
         is emptied (from now on :meth:`remember` keeps each SID's replies)."""
         replies, asked = self.replies, self.asked
-        for key, frame, at, sent in self.heard:
+        for frame, (at, sent) in sorted(self.heard.items(), key=_when):
             if now - at >= window:
                 continue
+            key = int.from_bytes(frame[6:10], "big")  # (SNA SA1 SA2 SID)
             kept = replies.get(key)
             if kept is None:
                 replies[key] = [(frame, at, sent)]
