@@ -1063,13 +1063,15 @@ MISROUTED = "defect 2 (a reply for another space)"
 #: and each has a world in ``scenarios.UNFIXED_WORLDS`` that test_defects.py runs as a
 #: strict xfail, so that a fix is noticed (its world passes, the xfail fails): the fix
 #: removes the kind here and its world there.
-UNFIXED: frozenset[str] = frozenset({DUPLICATE})
-# (LATE_REPLY, the late original reply family: a longer round trip shown after the
-# evidence extends the quarantines it ended (soak seed 53003's world, in REGRESSIONS); what
-# stays exposed is stated in docs/session.md, the evidence rule's exposed case.)
-# (fixed: "no free SID after the faults", the relay family: issue #22. Defect 5 is narrowed
-# to copies that come before the session has seen any duplicate on its link, every earlier
-# one taken by a request in flight under its SID: soak seed 50040, scenarios.UNFIXED_WORLDS)
+UNFIXED: frozenset[str] = frozenset()
+# (Empty: every family the soak found is fixed. Defect 5's last, copies that came before
+# the session had seen any duplicate on its link, each taken by a read in flight under its
+# SID (soak seed 50040), is fixed by the first-sign rule (docs/session.md) and its world
+# pinned in scenarios.REGRESSIONS. LATE_REPLY, the late original reply family: a longer
+# round trip shown after the evidence extends the quarantines it ended (soak seed 53003's
+# world, in REGRESSIONS); what stays exposed is stated in docs/session.md, the evidence
+# rule's exposed case. Fixed too: "no free SID after the faults", the relay family:
+# issue #22.)
 
 #: Kinds of violation no client can avoid, each decided from the network's ground truth and
 #: stated as exposed in docs/session.md: the slice and the state machine allow them, the
