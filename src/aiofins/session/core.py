@@ -74,7 +74,7 @@ from .response import (
     _set_frame,
     response_of,
 )
-from .sids import FIRST_SIGN, HEARD_REPLIES, HOLD_WINDOW, SidSpace, may_send_again
+from .sids import FIRST_SIGN, HOLD_WINDOW, SidSpace, may_send_again
 from .slots import (
     AsyncioPending,
     DestState,
@@ -100,7 +100,6 @@ _SAMPLE_MASK = 7
 _NORMAL = EndCode(0)
 _ICFS = RESPONSE_ICFS  # (short names for the receive path's one test)
 _RELAY = RELAY_ERROR_BIT
-_HEARD_BOUND = 2 * HEARD_REPLIES  # (SidSpace.heard's bound, see SidSpace.hear)
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
@@ -427,7 +426,7 @@ class Session:
         if to & ADDRESS_MASK != sids.ours and self._misdirected(frame, to, sids):
             return
         p = (pending := sids.pending).pop(key, None)
-        linger = sids.linger
+        linger, h = sids.linger, None  # (h: a reply the space heard with these bytes)
         if p is None or mrc != p.mrc or src != p.src or icf not in _ICFS or raw >= _RELAY:
             p, linger = self._matched(frame, p, key, icf, mrc, src, raw, sids, linger)
             if p is None:
@@ -452,10 +451,10 @@ class Session:
             r.sample(latency, self.rto_bounds if self.adaptive else None)  # (RFC 6298)
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
-        else:  # (what a copy may be of when the link shows its first duplicate)
-            (heard := sids.heard)[frame] = (now, p.frame)  # (SidSpace.hear, inlined)
-            if len(heard) > _HEARD_BOUND:
-                sids.forget_heard()
+        elif h:  # (what a copy may be of, kept: SidSpace.heard; these bytes heard before)
+            h[0], h[1] = now, p.frame
+        else:
+            sids.hear(frame, now, p.frame)
         if (fut := p.fut) is not None:
             try:  # noqa: SIM105 (no context manager: once per reply)
                 fut.set_result(frame)
@@ -469,8 +468,7 @@ class Session:
                 return  # its batch drops the answered from the deadlines per burst (drop_answered)
         if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
-        fifo = self._fifo  # the answered requests at the front of the deadlines dropped
-        while fifo and fifo[0].done:
+        while (fifo := self._fifo) and fifo[0].done:  # the answered at the deadlines' front
             fifo.popleft()
         if self._heap or (len(fifo) > 64 + 4 * len(pending) if fifo else self._watcher.disarms):
             self._deadlines_left(len(pending))

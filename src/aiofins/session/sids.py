@@ -28,6 +28,7 @@ from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from itertools import islice
 from time import monotonic
+from typing import Any
 
 from ..protocol.guard import changes
 from .clock import Clock
@@ -80,9 +81,9 @@ SID_WAIT = 0.01
 SHORTAGE_EPISODE = 60.0
 
 
-def _when(heard: tuple[bytes, tuple[float, bytes]]) -> float:
+def _when(heard: tuple[bytes, list[Any]]) -> float:
     """When a reply of :attr:`SidSpace.heard` came (its sort key)."""
-    return heard[1][0]
+    return float(heard[1][0])
 
 
 def may_send_again(idempotent: bool, mrc: int, src: int, params: bytes) -> bool:
@@ -137,11 +138,12 @@ class SidSpace:
     #: :data:`KEPT_REPLIES` per key).
     replies: dict[int, list[tuple[bytes, float, bytes]]]
     #: The space's recent replies while the link has shown no duplicate: each reply frame
-    #: (its bytes hold its SID key) -> when it last came and what its request sent (its
-    #: frame), in the order first heard; frames kept by reference, not copied. Between
+    #: (its bytes hold its SID key) -> ``[when it last came, what its request sent (its
+    #: frame)]`` (a list: the session updates it in place when the same bytes come again),
+    #: in the order first heard; frames kept by reference, not copied. Between
     #: :data:`HEARD_REPLIES` and twice that many frames (see :meth:`hear`): a copy of any is
     #: found without a scan, on every reply (the session's ``_first_sign``).
-    heard: dict[bytes, tuple[float, bytes]]
+    heard: dict[bytes, list[Any]]
     #: The linger after a completion the link has shown necessary (late duplicates); back
     #: to :attr:`floor` once it has shown none for a while (:meth:`calm`).
     linger: float
@@ -591,7 +593,7 @@ class SidSpace:
         if found is not None:
             return found[0]
         heard = self.heard.get(frame)  # (the frame holds its key: SNA SA1 SA2 SID)
-        return heard[0] if heard is not None and now - heard[0] < HOLD_WINDOW else None
+        return float(heard[0]) if heard is not None and now - heard[0] < HOLD_WINDOW else None
 
     def mismatched(self, stats: SessionStats, key: int, frame: bytes) -> float | None:
         """A reply ``frame`` under ``key`` whose command code (or ICF) is not that of the
@@ -667,9 +669,9 @@ class SidSpace:
 
     def hear(self, frame: bytes, now: float, asked: bytes) -> None:
         """A reply ``frame`` came ``now`` to a request whose frame was ``asked``, while the
-        link has shown no duplicate: kept in :attr:`heard` (the session inlines this for
-        its usual reply: keep the two alike)."""
-        (heard := self.heard)[frame] = (now, asked)
+        link has shown no duplicate: kept in :attr:`heard` (the session updates the entry
+        of bytes heard before in place: keep the two alike)."""
+        (heard := self.heard)[frame] = [now, asked]
         if len(heard) > 2 * HEARD_REPLIES:
             self.forget_heard()
 
