@@ -451,8 +451,8 @@ class Session:
             r.sample(latency, self.rto_bounds if self.adaptive else None)  # (RFC 6298)
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
-        elif h:  # (what a copy may be of, kept: SidSpace.heard; these bytes heard before)
-            h[0], h[1] = now, p.frame
+        elif h:  # (what a copy may be of, kept: SidSpace.heard; bytes heard before, what
+            h[0] = now  # they answered set by _first_sign if not the same: kept in place)
         else:
             sids.hear(frame, now, p.frame)
         if (fut := p.fut) is not None:
@@ -679,12 +679,16 @@ class Session:
         copies came to SIDs reused by reads, one a read of other words)."""
         sent = p.frame
         found = sids.heard.get(frame)
-        if found is None or sent == found[1] or key in sids.held:
-            return False  # the same question (a poll), or held once for p: it answers
+        if found is None or sent == found[1]:
+            return False  # the same question (a poll): it answers
         fast_send = (self.transport if p.space is None else p.space.transport).fast_send
-        if fast_send is None or changes(p.mrc, p.src, sent[12:]) is not None:
-            return False  # (a write: never sent again without retries; see "What stays exposed")
-        if self.clock() - found[0] >= HOLD_WINDOW:
+        if (
+            key in sids.held  # (held once for p: it answers)
+            or fast_send is None
+            or changes(p.mrc, p.src, sent[12:]) is not None  # (a write: see "What stays exposed")
+            or self.clock() - found[0] >= HOLD_WINDOW
+        ):
+            found[1] = sent  # (it answers p: what these bytes answered, for the next)
             return False
         sids.held[key] = FIRST_SIGN
         sids.pending[key] = p
