@@ -1153,7 +1153,8 @@ class Session:
         logged, the breaker told: the data is ``frame[14:]``); False when the PLC was too
         busy to execute it (2604/2605) and a retry fits before the call's deadline:
         :meth:`call` with ``after=p`` sends it again after :meth:`busy_wait`. Any other
-        end code raises its error (the PLC answered: the breaker closes)."""
+        end code raises its error (the PLC answered: the breaker closes). (Its common case
+        is inlined in :meth:`request`: a change to one is a change to both.)"""
         slots = p.slots  # (_slot_back() and completed(), inlined: once per request)
         if slots is not None:
             p.slots = None
@@ -1368,17 +1369,26 @@ class Session:
         :class:`ConnectionLost` when the link failed or the session closed,
         :class:`CircuitOpen` while the destination's breaker is open.
 
-        The request path (see :meth:`begin`): ``begin``, one ``await``, ``finish``.
+        The request path (see :meth:`begin`): ``begin``, one ``await``, ``finish`` (its
+        common case inlined: a normal completion with no flags, no waiter for the slot and
+        no breaker to tell; a Python call less per request).
         """
         p = self.begin(
             mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call
         )
+        done = False
         if p is not None:
             try:
                 frame = p.reply or await (p.fut or p.wait())  # (answered at once: no wait)
             except BaseException as exc:
                 await self.failed(p, exc, timeout, _in_call)
-        if p is None or not self.finish(p, frame):  # a wait first, or busy: a pause first
+            slots = p.slots  # (finish(), inlined for its common case: a change to one is a
+            if slots is not None and not (slots.waiters or p.end_code or self._breaker.failures):
+                p.slots = None  # change to both)
+                slots.in_flight -= 1
+                self.stats.completed += 1
+                done = True
+        if p is None or not (done or self.finish(p, frame)):  # a wait first, or busy: a pause
             frame = await self.call(
                 mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call, p
             )
