@@ -100,6 +100,7 @@ _SAMPLE_MASK = 7
 _NORMAL = EndCode(0)
 _ICFS = RESPONSE_ICFS  # (short names for the receive path's one test)
 _RELAY = RELAY_ERROR_BIT
+_Space = ExtraSpace | None  # (frame_received's signature on one line: its def is at 60)
 #: Requests completed in a row without an event-loop pass before one is made to wait.
 _POLL_STREAK = 32
 #: At most this many requests skip the read-after-send after it found nothing.
@@ -412,9 +413,7 @@ class Session:
 
     # ----------------------------------------------------------------- transport sink
 
-    def frame_received(
-        self, frame: bytes, _addr: object = None, space: ExtraSpace | None = None
-    ) -> None:
+    def frame_received(self, frame: bytes, _addr: object = None, space: _Space = None) -> None:
         """A whole frame received (``space``: an extra space's, ``_addr`` unused); never raises."""
         if self._log_frames:
             log_frame(self.transport.description, "received", frame)
@@ -438,10 +437,8 @@ class Session:
             return  # (a copy of a reply of the SID, held back: see _hold_copy, _first_sign)
         clock = self.clock  # (called from a local: a callable attribute's call is not cached)
         p.done, p.end_code, now = True, raw, clock()
-        if (latency := now - p.sent_at) > sids.slowest and p.rtt is not None:  # (slowest RTT)
-            sids.slower(latency, now)
-        if sids.held or sids.given_up:
-            self._answered_after_doubt(sids, key, frame, p.sent_at, now)
+        if ((latency := now - p.sent_at) > sids.slowest and p.rtt is not None) or sids.unsure:
+            self._unsure(sids, p, key, frame, latency, now)  # (a slowest round trip, or doubt)
         sids.recent[key], sids.answers[key] = now, frame
         stats = self.stats  # latency bookkeeping inlined: this runs once per reply
         stats._lat_count = (n := stats._lat_count) + 1
@@ -468,9 +465,13 @@ class Session:
                 return  # its batch drops the answered from the deadlines per burst (drop_answered)
         if (hooks := self._hooks) is not None and hooks.response_received:
             self.emit(hooks.response_received, ResponseReceived, p, raw, latency, p.attempts)
-        while (fifo := self._fifo) and fifo[0].done:  # the answered at the deadlines' front
+        if (fifo := self._fifo) and fifo[0].done:  # the answered at the deadlines' front
             fifo.popleft()
-        if self._heap or (len(fifo) > 64 + 4 * len(pending) if fifo else self._watcher.disarms):
+            while fifo and fifo[0].done:
+                fifo.popleft()
+            if self._heap or (not fifo and self._watcher.disarms):  # (a pile-up: an unanswered
+                self._deadlines_left(len(pending))  # front's reply: see _deadlines_left)
+        elif self._heap or (len(fifo) > 64 + 4 * len(pending) if fifo else self._watcher.disarms):
             self._deadlines_left(len(pending))
 
     def drop_answered(self) -> None:
@@ -603,16 +604,20 @@ class Session:
             sids.pending[key] = p
         return held
 
-    def _answered_after_doubt(
-        self, sids: SidSpace, key: int, frame: bytes, sent_at: float, now: float
+    def _unsure(
+        self, sids: SidSpace, p: Pending, key: int, frame: bytes, latency: float, now: float
     ) -> None:
-        """A reply answers the request under ``key`` (first sent at ``sent_at``) while a
-        copy of a reply was held back (:meth:`_copy_resolved`) or SIDs given up on wait
-        for evidence that the destination answers (:meth:`SidSpace.answered_after`)."""
+        """``frame`` answers ``p``, under ``key``, ``now``, ``latency`` after its send: the
+        slowest round trip yet (if ``p`` was sent once: :meth:`SidSpace.slower`), or a
+        reply while a copy of a reply was held back (:meth:`_copy_resolved`) or SIDs given
+        up on wait for evidence that the destination answers
+        (:meth:`SidSpace.answered_after`): :attr:`SidSpace.unsure`."""
+        if latency > sids.slowest and p.rtt is not None:
+            sids.slower(latency, now)
         if sids.held:
             self._copy_resolved(sids, key, frame)
         if sids.given_up:  # an outage's quarantines end now that the destination answers
-            sids.answered_after(key, sent_at, now)
+            sids.answered_after(key, p.sent_at, now)
 
     def _hold_copy(
         self,
@@ -690,7 +695,7 @@ class Session:
         ):
             found[1] = sent  # (it answers p: what these bytes answered, for the next)
             return False
-        sids.held[key] = FIRST_SIGN
+        sids.hold_first(key)
         sids.pending[key] = p
         self._send_again(p, fast_send)
         return True
@@ -707,7 +712,7 @@ class Session:
         """The request under ``key`` is answered with ``frame`` after a copy of its SID's
         last reply was held back (see :meth:`_hold_copy`): if ``frame`` differs, that copy
         was a late duplicate of the old reply, and teaches the linger."""
-        lateness = sids.held.pop(key, None)
+        lateness = sids.unhold(key)
         if lateness == FIRST_SIGN:  # (see _first_sign: nothing learnt)
             if frame not in sids.heard:  # not the bytes held back: those were a copy
                 self.stats.duplicates += 1

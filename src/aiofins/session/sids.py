@@ -125,6 +125,7 @@ class SidSpace:
         "routed",
         "short_at",
         "slowest",
+        "unsure",
     )
 
     # What the link's duplicates taught (documented here, set in __init__):
@@ -133,6 +134,12 @@ class SidSpace:
     #: SID key -> how late after the SID's previous reply a copy of that reply came to its
     #: new request, held back (see :meth:`hold`).
     held: dict[int, float]
+    #: Whether a copy of a reply is held back (:attr:`held`) or SIDs given up on wait for
+    #: evidence that their destination answers (:attr:`given_up`): the receive path's one
+    #: test for both (the session's ``_unsure``). Set where either changes (:meth:`abandon`,
+    #: :meth:`answered_after`, :meth:`hold`, :meth:`hold_first`, :meth:`unhold`,
+    #: :meth:`forget`), nowhere else, so never stale; held and given up on change only there.
+    unsure: bool
     #: SID key -> its recent replies, oldest first, as (the reply, when it came, what its
     #: request sent), on a link that has shown duplicates (see :meth:`remember`; at most
     #: :data:`KEPT_REPLIES` per key).
@@ -205,6 +212,7 @@ class SidSpace:
         self.answers: dict[int, bytes] = {}
         self.asked = {}
         self.held = {}
+        self.unsure = False
         self.replies = {}
         self.heard = {}
         self.linger = min_linger
@@ -340,6 +348,7 @@ class SidSpace:
         if self.held:
             self.held.pop(key, None)
         self.quarantine[key] = until
+        self.unsure = True  # (given up on: see given_up)
         if self.ended:
             self.ended.pop(key, None)
         mine = self.given_up.get(key & ~0xFF)
@@ -412,6 +421,7 @@ class SidSpace:
                     doubt[d] = until
         if not mine:
             del self.given_up[dest]
+            self.unsure = bool(self.held or self.given_up)
 
     def relay_doubted(self, sid: int, command: int, now: float) -> bool:
         """Whether a relay error under ``sid`` for ``command`` (``MRC << 8 | SRC``) is taken
@@ -457,6 +467,7 @@ class SidSpace:
         self.ended.clear()
         self.lingering.clear()
         self.held.clear()
+        self.unsure = False
         self.replies.clear()
         self.heard.clear()
         self.abandoned.clear()
@@ -709,7 +720,24 @@ class SidSpace:
         if lateness >= HOLD_WINDOW and lateness >= LINGER_FACTOR * self.linger:
             return False
         self.held[key] = lateness
+        self.unsure = True
         return True
+
+    def hold_first(self, key: int) -> None:
+        """A reply under ``key`` held back on a link that has shown no duplicate (the
+        first-sign rule: the session's ``_first_sign``): noted in :attr:`held` as
+        :data:`FIRST_SIGN`, nothing learnt from it."""
+        self.held[key] = FIRST_SIGN
+        self.unsure = True
+
+    def unhold(self, key: int) -> float | None:
+        """The request under ``key`` is answered: what :attr:`held` noted for it (how
+        late the copy held back came, or :data:`FIRST_SIGN`), no longer noted; ``None``
+        if nothing was held for it."""
+        lateness = self.held.pop(key, None)
+        if lateness is not None and not self.held:
+            self.unsure = bool(self.given_up)
+        return lateness
 
     def start_replies(self, now: float, window: float) -> None:
         """The link's first duplicate: the replies :attr:`heard` within ``window`` start
