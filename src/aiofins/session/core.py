@@ -1381,7 +1381,6 @@ class Session:
         p = self.begin(
             mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call
         )
-        done = False
         if p is not None:
             try:
                 frame = p.reply or await (p.fut or p.wait())  # (answered at once: no wait)
@@ -1392,17 +1391,16 @@ class Session:
                 p.slots = None  # change to both)
                 slots.in_flight -= 1
                 self.stats.completed += 1
-                done = True
-        if p is None or not (done or self.finish(p, frame)):  # a wait first, or busy: a pause
+                response: Response = _new(Response)  # (response_of(), inlined: end code 0000)
+                _set_end_code(response, _NORMAL)
+                _set_data(response, frame[14:])
+                _set_frame(response, frame)
+                return response
+        if p is None or not self.finish(p, frame):  # a wait first, or busy: a pause
             frame = await self.call(
                 mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call, p
             )
-        raw = (frame[12] << 8) | frame[13]
-        response: Response = _new(Response)  # (response_of(), inlined: once per request)
-        _set_end_code(response, EndCode(raw) if raw else _NORMAL)
-        _set_data(response, frame[14:])
-        _set_frame(response, frame)
-        return response
+        return response_of(frame)
 
     def _read_after_send(self, poll: Callable[[], None], p: Pending) -> None:
         """Read the transport right after sending ``p`` if it is alone in flight (``poll``:
