@@ -5,6 +5,8 @@ from __future__ import annotations
 from time import monotonic
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from aiofins.protocol.header import FinsAddress
 from aiofins.session.matching import LATE_REPLY_GRACE
@@ -243,3 +245,92 @@ def test_a_longer_round_trip_extends_the_quarantines_the_evidence_ended() -> Non
     assert space.slowest == pytest.approx(0.4)  # 0.55 s after the evidence: nothing
     assert 0x10004 not in space.ended and space.ended.keys() == {0x10003}
     assert (stats.late_replies, stats.duplicates, stats.unsolicited) == (2, 0, 0)
+
+
+_KEYS = st.sampled_from([0x10000, 0x10001, 0x10002, 0x20000])
+_OPERATIONS = st.lists(
+    st.one_of(
+        st.tuples(st.just("abandon"), _KEYS, st.booleans()),
+        st.tuples(st.just("answered_after"), _KEYS, st.floats(0.0, 30.0)),
+        st.tuples(st.just("hold"), _KEYS, st.booleans()),
+        st.tuples(st.just("hold_first"), _KEYS),
+        st.tuples(st.just("unhold"), _KEYS),
+        st.tuples(
+            st.just("forget"),
+        ),
+        st.tuples(st.just("tick"), st.floats(0.0, 5.0)),
+    ),
+    max_size=40,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_OPERATIONS)
+def test_unsure_is_whether_anything_is_held_or_given_up_after_every_operation(
+    operations: list[tuple[object, ...]],
+) -> None:
+    """SidSpace.unsure, the receive path's one test for a copy held back or SIDs given up
+    on, equals that slow condition after every operation that changes either."""
+    now = [10.0]
+    space = SidSpace(clock=lambda: now[0])
+    for op, *args in operations:
+        key = args[0] if args else 0
+        assert isinstance(key, (int, float))
+        if op == "abandon":
+            p = in_flight(space, int(key))
+            p.sent_at = now[0] - 0.1
+            p.rtt = dest() if args[1] else None
+            space.abandon(p, now[0] + 15)
+        elif op == "answered_after":
+            space.answered_after(int(key), now[0] - float(args[1]), now[0])  # type: ignore[arg-type]
+        elif op == "hold":
+            space.recent[int(key)] = now[0] - 0.5
+            space.hold(int(key), now[0], now[0] - 2.0 if args[1] else None)
+        elif op == "hold_first":
+            space.hold_first(int(key))
+        elif op == "unhold":
+            space.unhold(int(key))
+        elif op == "forget":
+            space.forget()
+        else:
+            now[0] += float(key)
+        assert space.unsure == bool(space.held or space.given_up), op
+
+
+def test_only_sid_spaces_change_what_is_held_or_given_up() -> None:
+    """:attr:`SidSpace.held` and :attr:`SidSpace.given_up` change only in ``sids.py``
+    (where :attr:`SidSpace.unsure` is kept with them): anywhere else in the package
+    they are only read."""
+    import ast
+    from pathlib import Path
+
+    import aiofins.session
+
+    def of_a_space(node: ast.AST) -> bool:  # (a batch's held is its count of slots)
+        return (
+            isinstance(node, ast.Attribute)
+            and node.attr in ("held", "given_up")
+            and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "batch"))
+        )
+
+    changing = {"pop", "clear", "update", "setdefault", "popitem", "__setitem__", "__delitem__"}
+    found = []
+    for path in sorted(Path(aiofins.session.__file__).parent.glob("*.py")):
+        if path.name == "sids.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign, ast.Delete)):
+                targets = (
+                    node.targets if isinstance(node, (ast.Assign, ast.Delete)) else [node.target]
+                )
+                for t in targets:
+                    if of_a_space(t.value if isinstance(t, ast.Subscript) else t):
+                        found.append(f"{path.name}:{node.lineno}")
+            elif (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr in changing
+                and of_a_space(node.func.value)
+            ):
+                found.append(f"{path.name}:{node.lineno}")
+    assert found == []
