@@ -35,7 +35,7 @@ from ..protocol.frames import check_command, check_commands, end_code_error
 from ..protocol.header import FinsAddress
 from .messages import no_free_sid, no_response
 from .options import shown
-from .response import Response, response_of
+from .response import Response, _new, _set_data, _set_end_code, _set_frame
 from .sids import may_send_again
 from .slots import DestState, Pending
 from .spaces import ExtraSpace, SidUser
@@ -162,8 +162,12 @@ class BatchPending(Pending):
         try:
             if (on_frame := batch.on_frame) is not None:  # the caller decodes the frame
                 on_frame(self.index, frame)
-            else:
-                response = batch.results[self.index] = response_of(frame)
+            else:  # (response_of(), inlined, its end code read once: this runs per reply)
+                response: Response = _new(Response)
+                _set_end_code(response, EndCode(end_code) if end_code else _NORMAL)
+                _set_data(response, frame[14:])
+                _set_frame(response, frame)
+                batch.results[self.index] = response
                 if batch.on_response is not None:
                     batch.on_response(self.index, response)
         except BaseException as exc:  # the caller's: raised to it, not to the transport
