@@ -530,10 +530,13 @@ async def test_a_read_in_flight_when_the_link_first_shows_a_duplicate_is_held_ba
 
 
 @asynccontextmanager
-async def memnet_plc(fate: Fate) -> AsyncIterator[tuple[Session, list[bytes]]]:
+async def memnet_plc(
+    fate: Fate, plc: VirtualPLC | None = None
+) -> AsyncIterator[tuple[Session, list[bytes]]]:
     """A session (one SID space, no retries) to a peer on the in-memory network, which
     answers a read of ``n`` words at D ``w`` with :func:`word_data` (zeros from D1000 on)
-    and a write with its end code; ``fate`` decides when each packet arrives. The session's
+    and a write with its end code, or as ``plc`` does (its memory's words); ``fate``
+    decides when each packet arrives. The session's
     UDP transport sends synchronously here under trio as under asyncio. Yields the session
     and the commands the peer received."""
     received: list[bytes] = []
@@ -544,6 +547,10 @@ async def memnet_plc(fate: Fate) -> AsyncIterator[tuple[Session, list[bytes]]]:
             while True:
                 cmd, source = await sock.receive()
                 received.append(cmd)
+                if plc is not None:
+                    if (answer := plc.handle_frame(cmd)) is not None:
+                        sock.sendto(answer, source)
+                    continue
                 zeros = int.from_bytes(cmd[13:15], "big") >= 1000 or cmd[11] == 0x02
                 data = bytes(len(word_data(cmd))) if zeros else word_data(cmd)
                 sock.sendto(reply(cmd, 0, b"" if cmd[11] == 0x02 else data), source)
@@ -623,3 +630,98 @@ async def test_a_read_of_zeros_like_its_sid_s_last_costs_one_round_trip_and_teac
         stats = session.stats
         assert (stats.completed, stats.retries, stats.duplicates) == (513 + 512, 1, 0)
         assert session.sids.linger == 0.0
+
+
+def late_copies(delays: list[list[float]]) -> Fate:
+    """A network that delivers each command at once, and each reply as the first entry of
+    ``delays`` says when the test put one there (its copies' delays: ``[0.0, 0.3]`` is a
+    reply at once and a copy 0.3 s later), else at once."""
+
+    def fate(packet: Packet) -> list[float]:
+        return delays.pop(0) if packet.dest != PEER and delays else [0.0]
+
+    return fate
+
+
+async def calm_link(session: Session, delays: list[list[float]]) -> None:
+    """The link shows one duplicate 0.3 s late (the linger: 0.6 s), then none for 1.5 s:
+    257 reads later the linger has calmed to its floor (1 ms; ``SidSpace.calm``)."""
+    delays.append([0.0, 0.3])
+    await session.request(0x01, 0x01, read_d(100))
+    await anyio.sleep(1.5)
+    assert session.sids.linger == pytest.approx(0.6)
+    for word in range(101, 358):
+        await session.request(0x01, 0x01, read_d(word))
+    assert session.sids.linger == LINGER_FLOOR
+
+
+async def around(session: Session, word: int, count: int = 255) -> None:
+    """``count`` reads of other words (D ``word`` on): the SIDs come round once."""
+    for w in range(word, word + count):
+        await session.request(0x01, 0x01, read_d(w))
+
+
+@on_virtual_time
+async def test_a_copy_of_an_older_reply_to_the_same_question_never_answers_a_poll() -> None:
+    """Issue #22, defect 5 (soak seed 60234): on a link that has shown a duplicate (its
+    linger calmed to the floor), the read of D3 gets SID s ([1744]; the network copies
+    the reply 0.16 s late); SID s carries a read of D4 x 7 next, then the read of D3 again
+    (D3 is now 1745; its own reply takes 0.3 s): the copy of SID s's older reply comes
+    first. Byte for byte the reply to the same question, but not the SID's last (another
+    question came between): held back, the read sent again at once (same frame and SID),
+    and the reply to that answers it: [1745] (before: [1744], the same-question
+    exemption took the copy). The read's first reply, late, is a duplicate."""
+    plc = VirtualPLC()
+    plc.write("D0", range(1000, 2000))
+    plc.write("D3", [1744])
+    delays: list[list[float]] = []
+    async with memnet_plc(late_copies(delays), plc) as (session, received):
+        await calm_link(session, delays)
+        delays.append([0.0, 0.16])
+        assert (await session.request(0x01, 0x01, read_d(3))).data == (1744).to_bytes(2, "big")
+        first = len(received) - 1
+        await around(session, 400)
+        d4 = await session.request(0x01, 0x01, bytes((0x82, 0, 4, 0, 0, 7)))
+        assert d4.data == b"".join((1004 + w).to_bytes(2, "big") for w in range(7))
+        await around(session, 700)
+        plc.write("D3", [1745])
+        delays.append([0.3])
+        assert (await session.request(0x01, 0x01, read_d(3))).data == (1745).to_bytes(2, "big")
+        third = first + 512
+        sid = received[first][9]
+        assert received[first + 256][9] == received[third][9] == sid  # SID s, three uses
+        assert received[third + 1 :] == [received[third]]  # sent again once, same frame
+        await anyio.sleep(0.5)  # the read's first reply comes at 0.3 s
+        stats = session.stats
+        assert (stats.completed, stats.retries, stats.timeouts) == (771, 1, 0)
+        assert (stats.duplicates, stats.unsolicited, stats.mismatched) == (3, 0, 0)
+        assert session.sids.linger == pytest.approx(0.32)
+
+
+@on_virtual_time
+async def test_a_poll_of_an_unchanged_value_under_its_sid_s_last_reply_is_not_sent_again() -> None:
+    """The other side of the rule above: a read of D3 asked again under its SID when the
+    SID's last reply answered that very question (a poll, the value unchanged) is answered
+    at once by the same bytes, on a link that has shown a duplicate. What the rule costs:
+    the same poll after SID s carried another question (D4 x 7) between, within the hold
+    window, is held back and sent again once: one round trip more, no linger learnt."""
+    plc = VirtualPLC()
+    plc.write("D0", range(1000, 2000))
+    delays: list[list[float]] = []
+    async with memnet_plc(late_copies(delays), plc) as (session, received):
+        await calm_link(session, delays)
+        first = len(received)
+        for _ in range(2):  # D3 twice under SID s: the second's SID's last reply was D3's
+            assert (await session.request(0x01, 0x01, read_d(3))).data == (1003).to_bytes(2, "big")
+            await around(session, 400)
+        assert received[first + 256] == received[first]  # the same frame
+        assert len(received) == first + 512  # not sent again
+        assert session.stats.retries == 0
+        await session.request(0x01, 0x01, bytes((0x82, 0, 4, 0, 0, 7)))  # SID s
+        await around(session, 700)
+        assert (await session.request(0x01, 0x01, read_d(3))).data == (1003).to_bytes(2, "big")
+        assert received[first + 768 :] == [received[first]] * 2  # sent again once
+        stats = session.stats
+        assert (stats.completed, stats.retries, stats.timeouts) == (258 + 769, 1, 0)
+        assert (stats.duplicates, stats.unsolicited) == (2, 0)
+        assert session.sids.linger == LINGER_FLOOR

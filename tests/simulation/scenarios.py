@@ -380,6 +380,20 @@ REGRESSIONS: dict[str, tuple[str, Config | None, list[Episode] | None, int, int]
         20000,
         50267,
     ),
+    "seed 60234 (defect 5: a copy of an older reply to the same question)": (
+        "defect 5 on a link that had shown duplicates, its linger calmed to the floor"
+        " (1 ms): SID 0xfd carried a read of D3 x 1 at 4.7234 s (its reply copied 0.16 s"
+        " late), then a read of D4 x 7, then the read of D3 x 1 again at 4.8166 s, whose"
+        " own reply was late: the copy of the first reply came at 4.8855 s and answered it"
+        " ([1744], a stale value) at step 11,611, exempt as the same question. Now only a"
+        " copy of the SID's last reply is exempt: a copy of an older one to the same"
+        " question is held back and the read sent again (docs/session.md, the duplicate"
+        " rule)",
+        None,
+        None,
+        12000,
+        60234,
+    ),
     "seed 53003 (a late original reply, the world of its family until 5126471)": (
         "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
         " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"

@@ -615,7 +615,7 @@ class Session:
         if latency > sids.slowest and p.rtt is not None:
             sids.slower(latency, now)
         if sids.held:
-            self._copy_resolved(sids, key, frame)
+            self._copy_resolved(sids, key, frame, p.frame)
         if sids.given_up:  # an outage's quarantines end now that the destination answers
             sids.answered_after(key, p.sent_at, now)
 
@@ -634,8 +634,10 @@ class Session:
         rule of docs/session.md ("SIDs: quarantine and linger").
 
         It is that reply's late duplicate, or ``p``'s own reply holding the same bytes;
-        nothing in it tells which (a one-byte SID). A request asking the same thing again
-        (a poll of values that did not change) takes it. Else, on a link that has shown
+        nothing in it tells which (a one-byte SID). A request asking the same thing as the
+        SID's last reply answered (a poll of values that did not change) takes it; a copy
+        of an older reply is held whatever that reply's request asked (the SID carried
+        another since: soak seed 60234, a stale value). Else, on a link that has shown
         duplicates (a linger), within :data:`~.sids.HOLD_WINDOW` (1 s) or twice the linger
         of that reply (:meth:`SidSpace.hold
         <aiofins.session.sids.SidSpace.hold>`), it is held, and ``p`` is sent again at once
@@ -648,8 +650,8 @@ class Session:
         sent = p.frame
         if p.plan is None and not may_send_again(False, p.mrc, p.src, sent[12:]):
             return False  # (a write without retries: see "What stays exposed")
-        if sent == old:
-            return False  # the same question: the same answer is no surprise
+        if sent == old and done_at is None:
+            return False  # the same question as the SID's last: the same answer is no surprise
         if not sids.hold(key, self.clock(), done_at):
             return False
         self.stats.duplicates += 1
@@ -708,14 +710,19 @@ class Session:
         :meth:`_hold_copy`): a read is answered by its own reply, not another read's."""
         p.plan = (frame, 0, p.end, cap, p.end - now)
 
-    def _copy_resolved(self, sids: SidSpace, key: int, frame: bytes) -> None:
-        """The request under ``key`` is answered with ``frame`` after a copy of its SID's
-        last reply was held back (see :meth:`_hold_copy`): if ``frame`` differs, that copy
-        was a late duplicate of the old reply, and teaches the linger."""
+    def _copy_resolved(self, sids: SidSpace, key: int, frame: bytes, sent: bytes) -> None:
+        """The request under ``key`` (which sent ``sent``) is answered with ``frame`` after
+        a copy of one of its SID's replies was held back (see :meth:`_hold_copy`): if
+        ``frame`` differs from the SID's last reply, that copy was a late duplicate of the
+        old reply, and teaches the linger; unless ``frame`` is, byte for byte, an older
+        reply of the SID to the same question as ``sent`` (a poll whose value did not
+        change: the copy held back may have been its own reply; nothing learnt)."""
         lateness = sids.unhold(key)
         if lateness == FIRST_SIGN:  # (see _first_sign: nothing learnt)
             if frame not in sids.heard:  # not the bytes held back: those were a copy
                 self.stats.duplicates += 1
+            return
+        if sids.replies and (older := sids.copied(key, frame)) is not None and older[1] == sent:
             return
         if lateness is not None and frame != sids.answers.get(key):
             grew = sids.learn(lateness, self.clock())

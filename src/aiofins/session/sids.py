@@ -705,7 +705,8 @@ class SidSpace:
     def hold(self, key: int, now: float, done_at: float | None = None) -> bool:
         """A reply under ``key`` that is a copy, byte for byte, of a reply the SID was
         answered with (the last, or ``done_at``: an earlier one of :attr:`replies`) came
-        to the SID's new request, which asked something else: whether it is held back
+        to the SID's new request, which asked something else than the last (than an
+        earlier one: anything): whether it is held back
         rather than answer it (noted in :attr:`held`; see the session's ``_hold_copy``).
         Held when it is the first such copy for that request and came within
         :data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR` times the linger, of that reply
