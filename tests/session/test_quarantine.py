@@ -5,7 +5,8 @@ exact."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
 
 import anyio
 import pytest
@@ -105,31 +106,16 @@ def held(word: int, count: int) -> bytes:
     return b"".join((1000 + w).to_bytes(2, "big") for w in range(word, word + count))
 
 
-@pytest.mark.parametrize("shown", ["answered", "late"])
-@on_virtual_time
-async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_answer(
-    shown: str,
-) -> None:
-    """The quarantine's evidence rule (the soak's seed 50239, one UDP socket). A read of
-    D10 x 2 is given up on after 0.05 s; its command is 0.4 s on its way to the PLC and
-    its reply 0.25 s on the way back, so the PLC takes it after a younger read and its
-    words come 0.65 s after it was sent. The younger read, of D20 x 2, sent when the
-    first was given up on, is answered at once: the evidence that the PLC answers ended
-    the first read's quarantine 0.5 s later, at 2.55 s. At 2.6 s 255 reads, whose replies
-    take 0.2 s, took every SID but the younger read's, the quarantined one included: the
-    late reply answered the read under it with D10's words (two words, like its own).
-
-    The link had shown a round trip that long before: a read answered after 0.65 s
-    (``answered``), or one given up on whose reply came 0.65 s after it was sent
-    (``late``). A quarantine now ends on that evidence no sooner than twice the slowest
-    round trip the link has shown after its request was sent (2.0 + 1.3 s): the 255 reads
-    leave the quarantined SID alone, take the younger read's, and each gets its own words;
-    the late reply is counted as late."""
+@asynccontextmanager
+async def delayed_link(
+    commands: dict[int, float], replies: dict[int, float]
+) -> AsyncIterator[tuple[Session, list[bytes]]]:
+    """A session (one SID space, 255 in flight, timeout 1 s, no retries) with a VirtualPLC
+    holding ``1000 + w`` in D``w`` over UDP on memnet; a command reading from word ``w``
+    takes ``commands[w]`` to the PLC, a reply whose first word is D``w``'s ``replies[w]``
+    back (else no time). Yields the session and the commands as the PLC received them."""
     plc = VirtualPLC()
     plc.write("D0", [1000 + w for w in range(600)])
-    commands = {1: 0.3, 10: 0.4}  # word read -> how long its command takes to the PLC
-    replies = {1: 0.35, 10: 0.25}  # first word read -> how long its reply takes back
-    replies.update((w, 0.2) for w in range(100, 355))
     received: list[bytes] = []
 
     def fate(packet: Packet) -> Sequence[float]:
@@ -161,37 +147,64 @@ async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_ans
                 timeout=1.0,
                 retries=0,
             ) as session:
-                if shown == "answered":  # a round trip of 0.65 s, in time
-                    r = await session.request(0x01, 0x01, read(1, 1))
-                    assert r.data == held(1, 1)
-                    assert anyio.current_time() == pytest.approx(0.65, abs=1e-5)
-                else:  # given up on at 0.1 s; its reply comes 0.65 s after its send
-                    with pytest.raises(FinsTimeout):
-                        await session.request(0x01, 0x01, read(1, 1), timeout=0.1)
-                await anyio.sleep(2.0 - anyio.current_time())
-                with pytest.raises(FinsTimeout):
-                    await session.request(0x01, 0x01, read(10, 2), timeout=0.05)
-                r = await session.request(0x01, 0x01, read(20, 2))
-                assert r.data == held(20, 2)
-                assert anyio.current_time() == pytest.approx(2.05, abs=1e-5)
-                await anyio.sleep(0.55)
-                words: dict[int, bytes] = {}
-
-                async def reader(word: int) -> None:
-                    words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
-
-                async with anyio.create_task_group() as readers:
-                    for word in range(100, 355):
-                        readers.start_soon(reader, word)
-                assert anyio.current_time() == pytest.approx(2.8, abs=1e-5)
-                assert words == {word: held(word, 2) for word in range(100, 355)}
-                # the SIDs as the PLC took them: 0 (D1), 2 (D20) before 1 (D10, delayed),
-                # then 3..255, 0 and 2 again (1 still quarantined)
-                assert [f[9] for f in received] == [0, 2, 1, *range(3, 256), 0, 2]
-                stats, late = session.stats, int(shown == "late")
-                assert (stats.completed, stats.timeouts) == (257 - late, 1 + late)
-                assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
+                yield session, received
             tg.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize("shown", ["answered", "late"])
+@on_virtual_time
+async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_answer(
+    shown: str,
+) -> None:
+    """The quarantine's evidence rule (the soak's seed 50239, one UDP socket). A read of
+    D10 x 2 is given up on after 0.05 s; its command is 0.4 s on its way to the PLC and
+    its reply 0.25 s on the way back, so the PLC takes it after a younger read and its
+    words come 0.65 s after it was sent. The younger read, of D20 x 2, sent when the
+    first was given up on, is answered at once: the evidence that the PLC answers ended
+    the first read's quarantine 0.5 s later, at 2.55 s. At 2.6 s 255 reads, whose replies
+    take 0.2 s, took every SID but the younger read's, the quarantined one included: the
+    late reply answered the read under it with D10's words (two words, like its own).
+
+    The link had shown a round trip that long before: a read answered after 0.65 s
+    (``answered``), or one given up on whose reply came 0.65 s after it was sent
+    (``late``). A quarantine now ends on that evidence no sooner than twice the slowest
+    round trip the link has shown after its request was sent (2.0 + 1.3 s): the 255 reads
+    leave the quarantined SID alone, take the younger read's, and each gets its own words;
+    the late reply is counted as late."""
+    commands = {1: 0.3, 10: 0.4}  # word read -> how long its command takes to the PLC
+    replies = {1: 0.35, 10: 0.25}  # first word read -> how long its reply takes back
+    replies.update((w, 0.2) for w in range(100, 355))
+    async with delayed_link(commands, replies) as (session, received):
+        if shown == "answered":  # a round trip of 0.65 s, in time
+            r = await session.request(0x01, 0x01, read(1, 1))
+            assert r.data == held(1, 1)
+            assert anyio.current_time() == pytest.approx(0.65, abs=1e-5)
+        else:  # given up on at 0.1 s; its reply comes 0.65 s after its send
+            with pytest.raises(FinsTimeout):
+                await session.request(0x01, 0x01, read(1, 1), timeout=0.1)
+        await anyio.sleep(2.0 - anyio.current_time())
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read(10, 2), timeout=0.05)
+        r = await session.request(0x01, 0x01, read(20, 2))
+        assert r.data == held(20, 2)
+        assert anyio.current_time() == pytest.approx(2.05, abs=1e-5)
+        await anyio.sleep(0.55)
+        words: dict[int, bytes] = {}
+
+        async def reader(word: int) -> None:
+            words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
+
+        async with anyio.create_task_group() as readers:
+            for word in range(100, 355):
+                readers.start_soon(reader, word)
+        assert anyio.current_time() == pytest.approx(2.8, abs=1e-5)
+        assert words == {word: held(word, 2) for word in range(100, 355)}
+        # the SIDs as the PLC took them: 0 (D1), 2 (D20) before 1 (D10, delayed),
+        # then 3..255, 0 and 2 again (1 still quarantined)
+        assert [f[9] for f in received] == [0, 2, 1, *range(3, 256), 0, 2]
+        stats, late = session.stats, int(shown == "late")
+        assert (stats.completed, stats.timeouts) == (257 - late, 1 + late)
+        assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
 
 
 @pytest.mark.parametrize("shown", ["answered", "late"])
@@ -213,77 +226,44 @@ async def test_a_longer_round_trip_shown_after_the_evidence_keeps_the_sids_it_fr
     extends the quarantines the evidence ended to twice it after their requests were sent
     (2.05 + 1.1 s). The reads leave D10's SID alone and each gets its own words; D10's
     reply is counted as late."""
-    plc = VirtualPLC()
-    plc.write("D0", [1000 + w for w in range(600)])
     commands = {1: 0.15, 5: 0.3, 10: 0.5}  # word read -> how long its command takes to the PLC
     replies = {1: 0.15, 5: 0.25, 10: 0.3}  # first word read -> how long its reply takes back
     replies.update((w, 0.2) for w in range(100, 356))
-    received: list[bytes] = []
+    async with delayed_link(commands, replies) as (session, received):
+        r = await session.request(0x01, 0x01, read(1, 1))  # the slowest: 0.3 s
+        assert r.data == held(1, 1)
+        assert anyio.current_time() == pytest.approx(0.3, abs=1e-5)
+        await anyio.sleep(2.0 - anyio.current_time())
+        words: dict[int, bytes] = {}
+        timeouts: list[int] = []
 
-    def fate(packet: Packet) -> Sequence[float]:
-        data = packet.data
-        if packet.dest == PLC:
-            return [commands.get(int.from_bytes(data[13:15], "big"), 0.0)]
-        return [replies.get(int.from_bytes(data[14:16], "big") - 1000, 0.0)]
+        async def reader(word: int, timeout: float | None = None) -> None:
+            try:
+                r = await session.request(0x01, 0x01, read(word, 2), timeout=timeout)
+            except FinsTimeout:
+                timeouts.append(word)
+            else:
+                words[word] = r.data
 
-    async with MemoryNetwork(fate=fate) as net:
-        sock = net.datagram_socket(*PLC)
-
-        async def serve() -> None:
-            while True:
-                data, source = await sock.receive()
-                received.append(data)
-                reply = plc.handle_frame(data)
-                if reply is not None:
-                    sock.sendto(reply, source)
-
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(serve)
-            transport = UdpTransport(PLC[0], local_host="10.0.0.200", network=net)
-            async with Session(
-                transport,
-                source=FinsAddress(0, 200, 0),
-                dest=FinsAddress(0, 1, 0),
-                max_sid_spaces=1,
-                max_in_flight=255,
-                timeout=1.0,
-                retries=0,
-            ) as session:
-                r = await session.request(0x01, 0x01, read(1, 1))  # the slowest: 0.3 s
-                assert r.data == held(1, 1)
-                assert anyio.current_time() == pytest.approx(0.3, abs=1e-5)
-                await anyio.sleep(2.0 - anyio.current_time())
-                words: dict[int, bytes] = {}
-                timeouts: list[int] = []
-
-                async def reader(word: int, timeout: float | None = None) -> None:
-                    try:
-                        r = await session.request(0x01, 0x01, read(word, 2), timeout=timeout)
-                    except FinsTimeout:
-                        timeouts.append(word)
-                    else:
-                        words[word] = r.data
-
-                async with anyio.create_task_group() as episode:
-                    episode.start_soon(reader, 5, 1.0 if shown == "answered" else 0.05)
-                    await anyio.sleep(0.05)
-                    await reader(10, 0.05)
-                    await reader(20)
-                    assert anyio.current_time() == pytest.approx(2.1, abs=1e-5)
-                    await anyio.sleep(0.6)
-                    many = range(100, 355 if shown == "answered" else 354)
-                    for word in many:
-                        episode.start_soon(reader, word)
-                assert anyio.current_time() == pytest.approx(2.9, abs=1e-5)
-                late = int(shown == "late")
-                assert timeouts == [5, 10][1 - late :]
-                assert words == {w: held(w, 2) for w in [*[5][late:], 20, *many]}
-                # the SIDs as the PLC took them: 0 (D1), 3 (D20), 1 (D5) and 2 (D10)
-                # delayed, then 4..255, 0, 1 (D5 answered in time, else quarantined) and 3,
-                # never 2 (D10 quarantined again)
-                again = [1, 3] if shown == "answered" else [3]
-                assert [f[9] for f in received] == [0, 3, 1, 2, *range(4, 256), 0, *again]
-                stats = session.stats
-                assert (stats.completed, stats.timeouts) == (len(many) + 3 - late, 1 + late)
-                assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
-            tg.cancel_scope.cancel()
+        async with anyio.create_task_group() as episode:
+            episode.start_soon(reader, 5, 1.0 if shown == "answered" else 0.05)
+            await anyio.sleep(0.05)
+            await reader(10, 0.05)
+            await reader(20)
+            assert anyio.current_time() == pytest.approx(2.1, abs=1e-5)
+            await anyio.sleep(0.6)
+            many = range(100, 355 if shown == "answered" else 354)
+            for word in many:
+                episode.start_soon(reader, word)
+        assert anyio.current_time() == pytest.approx(2.9, abs=1e-5)
+        late = int(shown == "late")
+        assert timeouts == [5, 10][1 - late :]
+        assert words == {w: held(w, 2) for w in [*[5][late:], 20, *many]}
+        # the SIDs as the PLC took them: 0 (D1), 3 (D20), 1 (D5) and 2 (D10)
+        # delayed, then 4..255, 0, 1 (D5 answered in time, else quarantined) and 3,
+        # never 2 (D10 quarantined again)
+        again = [1, 3] if shown == "answered" else [3]
+        assert [f[9] for f in received] == [0, 3, 1, 2, *range(4, 256), 0, *again]
+        stats = session.stats
+        assert (stats.completed, stats.timeouts) == (len(many) + 3 - late, 1 + late)
+        assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
