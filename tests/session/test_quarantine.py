@@ -5,8 +5,9 @@ exact."""
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from contextlib import asynccontextmanager
+from typing import Any
 
 import anyio
 import pytest
@@ -108,12 +109,13 @@ def held(word: int, count: int) -> bytes:
 
 @asynccontextmanager
 async def delayed_link(
-    commands: dict[int, float], replies: dict[int, float]
+    commands: Mapping[int, float | list[float]], replies: dict[int, float], **options: Any
 ) -> AsyncIterator[tuple[Session, list[bytes]]]:
-    """A session (one SID space, 255 in flight, timeout 1 s, no retries) with a VirtualPLC
-    holding ``1000 + w`` in D``w`` over UDP on memnet; a command reading from word ``w``
-    takes ``commands[w]`` to the PLC, a reply whose first word is D``w``'s ``replies[w]``
-    back (else no time). Yields the session and the commands as the PLC received them."""
+    """A session (one SID space, 255 in flight, timeout 1 s, no retries; ``options``
+    change these) with a VirtualPLC holding ``1000 + w`` in D``w`` over UDP on memnet; a
+    command reading from word ``w`` takes ``commands[w]`` to the PLC (a list: one delay
+    per transmission, in order), a reply whose first word is D``w``'s ``replies[w]`` back
+    (else no time). Yields the session and the commands as the PLC received them."""
     plc = VirtualPLC()
     plc.write("D0", [1000 + w for w in range(600)])
     received: list[bytes] = []
@@ -121,7 +123,8 @@ async def delayed_link(
     def fate(packet: Packet) -> Sequence[float]:
         data = packet.data
         if packet.dest == PLC:
-            return [commands.get(int.from_bytes(data[13:15], "big"), 0.0)]
+            delay = commands.get(int.from_bytes(data[13:15], "big"), 0.0)
+            return [delay.pop(0) if isinstance(delay, list) else delay]
         return [replies.get(int.from_bytes(data[14:16], "big") - 1000, 0.0)]
 
     async with MemoryNetwork(fate=fate) as net:
@@ -142,10 +145,13 @@ async def delayed_link(
                 transport,
                 source=FinsAddress(0, 200, 0),
                 dest=FinsAddress(0, 1, 0),
-                max_sid_spaces=1,
-                max_in_flight=255,
-                timeout=1.0,
-                retries=0,
+                **{
+                    "max_sid_spaces": 1,
+                    "max_in_flight": 255,
+                    "timeout": 1.0,
+                    "retries": 0,
+                    **options,
+                },
             ) as session:
                 yield session, received
             tg.cancel_scope.cancel()
@@ -267,3 +273,46 @@ async def test_a_longer_round_trip_shown_after_the_evidence_keeps_the_sids_it_fr
         stats = session.stats
         assert (stats.completed, stats.timeouts) == (len(many) + 3 - late, 1 + late)
         assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (1 + late, 0, 0)
+
+
+@on_virtual_time
+async def test_the_reply_to_another_transmission_never_reaches_a_sid_freed_by_the_first() -> None:
+    """A late reply to a request sent twice (the soak's seed 60380). A read of D1 takes SID
+    0; a read of D10 x 2, SID 1, is sent at 0 s and again at 0.033 s (one retry: a third
+    of its timeout, no round trip measured yet) and given up on at 0.1 s; a read of
+    D20 x 2, SID 2, is answered at once (the evidence: the quarantine would end at 0.6 s).
+    The first transmission's reply comes at 0.4 s (0.2 s each way); the second's command
+    is 0.8 s on its way and its reply comes at 1.033 s. The first late reply ended the
+    quarantine 0.5 s later, at 0.9 s; at 0.95 s 255 reads, whose replies take 0.2 s, took
+    every SID but D20's, the quarantined one included, and the second late reply
+    answered the read under it with D10's words (two words, like its own).
+
+    A late reply to a request sent more than once keeps its SID as long as a SID answered
+    after a retransmission lingers: twice the time since its first send (0.4 + 0.8 s). The
+    255 reads leave SID 1 alone, take D20's, and each gets its own words; both replies to
+    D10 are counted as late."""
+    commands: dict[int, float | list[float]] = {10: [0.2, 0.8]}
+    replies = {10: 0.2}
+    replies.update((w, 0.2) for w in range(100, 355))
+    async with delayed_link(commands, replies, retries=1) as (session, received):
+        assert (await session.request(0x01, 0x01, read(1, 1))).data == held(1, 1)
+        with pytest.raises(FinsTimeout):
+            await session.request(0x01, 0x01, read(10, 2), timeout=0.1, idempotent=True)
+        assert (await session.request(0x01, 0x01, read(20, 2))).data == held(20, 2)
+        await anyio.sleep(0.95 - anyio.current_time())
+        words: dict[int, bytes] = {}
+
+        async def reader(word: int) -> None:
+            words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
+
+        async with anyio.create_task_group() as readers:
+            for word in range(100, 355):
+                readers.start_soon(reader, word)
+        assert anyio.current_time() == pytest.approx(1.15, abs=1e-5)
+        assert words == {word: held(word, 2) for word in range(100, 355)}
+        # the SIDs as the PLC took them: 0 (D1), 2 (D20), 1 twice (D10's transmissions,
+        # at 0.2 and 0.833 s), then 3..255, 0 and 2, never 1 (quarantined until 1.2 s)
+        assert [f[9] for f in received] == [0, 2, 1, 1, *range(3, 256), 0, 2]
+        stats = session.stats
+        assert (stats.completed, stats.timeouts, stats.retries) == (257, 1, 1)
+        assert (stats.late_replies, stats.unsolicited, stats.duplicates) == (2, 0, 0)

@@ -169,10 +169,10 @@ class SidSpace:
     #: SID key -> its request's send (its give-up, if it was sent again), its command,
     #: whether sent once, until when a late reply to it teaches :attr:`slowest` (the
     #: evidence + :data:`~.matching.LATE_REPLY_GRACE`) and when its quarantine's full term
-    #: ends: a SID whose quarantine the evidence ended early (:meth:`answered_after`),
-    #: while that term runs. A longer round trip shown later extends its quarantine again
-    #: (:meth:`slower`).
-    ended: dict[int, tuple[float, int, bool, float, float]]
+    #: ends, and when it was first sent: a SID whose quarantine the evidence ended early
+    #: (:meth:`answered_after`), while that term runs. A longer round trip shown later
+    #: extends its quarantine again (:meth:`slower`).
+    ended: dict[int, tuple[float, int, bool, float, float, float]]
 
     def __init__(self, min_linger: float = 0.0, clock: Clock = monotonic) -> None:
         #: The session's clock (see :mod:`.clock`).
@@ -412,7 +412,7 @@ class SidSpace:
                 if len(ended) >= 1024:  # (bounded: those whose term is over go first)
                     for e in [e for e, v in ended.items() if v[4] <= now] or list(ended)[:1]:
                         del ended[e]
-                ended[k] = (sent if once else at, command, once, end, until)
+                ended[k] = (sent if once else at, command, once, end, until, sent)
                 if len(doubt) >= 256:  # (bounded: the expired go first)
                     for d in [d for d, u in doubt.items() if u <= now] or list(doubt)[:1]:
                         del doubt[d]
@@ -533,32 +533,61 @@ class SidSpace:
         return kind, 0.0
 
     def late_round_trip(self, key: int, frame: bytes, now: float) -> None:
-        """A late reply ``frame`` came ``now`` under ``key``, quarantined: the round trip
-        it shows (from its request's send) makes :attr:`slowest`, if longer
-        (:meth:`slower`). Only if the request given up on under ``key`` was sent once and
+        """A late reply ``frame`` came ``now`` under ``key``, quarantined: the round trip it shows
+        (from its request's send) makes :attr:`slowest`, if longer (:meth:`slower`). If that
+        request was sent more than once, the reply to another transmission may follow: its
+        SID waits for it (:meth:`resent_late`) and nothing is learnt (which transmission it
+        answers is unknown). Only if the request given up on under ``key`` was sent once and
         asked the command ``frame`` answers, and while it has seen no evidence
         (:attr:`given_up`) or within :data:`~.matching.LATE_REPLY_GRACE` of the evidence
         that ended its quarantine (:attr:`ended`): a reply the PLC sends under a wrong SID
         is taken for the late reply of any quarantined SID, and one that came in the term
-        the evidence left a quarantine (twice :attr:`slowest`) taught a round trip twice
-        as long each time (a simulated PLC answering under wrong SIDs after a delay of
-        0.4 s: 3 s). The grace after the evidence does not grow with :attr:`slowest`: a
-        wrong SID's reply within it shows no longer than the wait for the evidence
-        (an outage's length), plus the grace and the request's timeout."""
+        the evidence left a quarantine (twice :attr:`slowest`) taught a round trip twice as
+        long each time (a simulated PLC answering under wrong SIDs after a delay of 0.4 s:
+        3 s). The grace after the evidence does not grow with :attr:`slowest`: a wrong SID's
+        reply within it shows no longer than the wait for the evidence (an outage's length),
+        plus the grace and the request's timeout."""
         mine = self.given_up.get(key & ~0xFF)
-        given = mine.get(key) if mine else None
-        if given is not None:
-            command = frame[10] << 8 | frame[11] if given[3] else -1
+        if mine is not None and (given := mine.get(key)) is not None:
+            if not given[3]:  # (out of given_up: the evidence must not end what it waits)
+                del mine[key]
+                if not mine:
+                    del self.given_up[key & ~0xFF]
+                    self.unsure = bool(self.held or self.given_up)
+                self.resent_late(key, given[2], now)
+                return
+            command = frame[10] << 8 | frame[11]
             if command == given[1] and now - given[2] > self.slowest:
                 self.slower(now - given[2], now)
             return
         ended = self.ended.pop(key, None) if self.ended else None
-        if ended is None or not ended[2] or now > ended[3]:
+        if ended is None:
+            return
+        if not ended[2]:
+            self.resent_late(key, ended[5], now)
+            return
+        if now > ended[3]:
             return
         if ended[1] != (frame[10] << 8 | frame[11]):
             return
         if now - ended[0] > self.slowest:
             self.slower(now - ended[0], now)
+
+    def resent_late(self, key: int, first_sent: float, now: float) -> None:
+        """A late reply came ``now`` under ``key``, quarantined, whose request was sent
+        more than once, first at ``first_sent``: the reply to another transmission may
+        still come, so the SID waits as long as one answered after a retransmission
+        lingers (:meth:`resent_linger`, without the retransmission timeout): twice the
+        time since the first send, or the linger replies to other transmissions have
+        shown (:attr:`linger_resent`), if longer than the grace the late reply gave
+        (at most :data:`MAX_LINGER`). Soak seed 60380: a read sent at 1.230 s and again
+        at 1.250 s, given up on; the reply to one came at 1.512 s, the quarantine ended
+        0.5 s later, and the other's, 0.77 s on its way in a delay episode, answered a
+        read that had taken the SID at 2.017 s."""
+        wait = min(MAX_LINGER, max(self.linger_resent, LINGER_FACTOR * (now - first_sent)))
+        quarantine = self.quarantine
+        if quarantine.get(key, now) < now + wait:
+            quarantine[key] = now + wait
 
     def slower(self, round_trip: float, now: float) -> None:
         """The link showed a round trip of ``round_trip`` seconds, longer than
@@ -575,7 +604,7 @@ class SidSpace:
         if not self.ended:
             return
         wait, quarantine, pending = LINGER_FACTOR * round_trip, self.quarantine, self.pending
-        for k, (sent, _, _, _, until) in list(self.ended.items()):
+        for k, (sent, _, _, _, until, _) in list(self.ended.items()):
             if until <= now or k in pending:  # (over, or reused: see "Guarantees")
                 del self.ended[k]
             elif (ends := min(until, sent + wait)) > now and quarantine.get(k, 0.0) < ends:
