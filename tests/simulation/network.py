@@ -77,6 +77,13 @@ class Network:
         #: Ground truth of the original replies over UDP: each as (when it was sent, when
         #: it arrives, the socket it goes to, the socket its command came from, its bytes).
         self.originals: list[tuple[float, float, Address, object, bytes]] = []
+        #: Ground truth of the UDP commands that reached a unit: by (the socket it came
+        #: from, the unit, its SID), each as (when it was sent, when it arrived).
+        self.commands: dict[tuple[object, Address, int], list[tuple[float, float]]] = {}
+        #: Of each original reply (same order as :attr:`originals`), the unit that sent it
+        #: and its round trip: from the send of the command it answers (the latest under
+        #: its SID that had reached the unit) to its arrival (0.0: no command found).
+        self.round_trips: list[tuple[Address, float]] = []
         #: Where the command of the UDP reply being sent came from (set by :meth:`_send`).
         self._answering: object = None
 
@@ -130,6 +137,10 @@ class Network:
             self.lost += 1
             return []
         delay = self._delay(faults)
+        if to_unit is not None and len(packet.data) > 9:
+            now = self.loop.time()
+            key = (packet.source, packet.dest, packet.data[9])
+            self.commands.setdefault(key, []).append((now, now + delay))
         if to_unit is None and faults and "dup" in faults and rng.random() < faults["dup"]:
             lag = delay + rng.random() * DUPLICATE_LAG
             self.copies.append((self.loop.time() + lag, packet.dest, packet.data))
@@ -142,6 +153,21 @@ class Network:
     def _original(self, packet: Packet, delay: float) -> None:
         now = self.loop.time()
         self.originals.append((now, now + delay, packet.dest, self._answering, packet.data))
+        asked = (
+            self._asked(self._answering, packet.source, packet.data[9], now)
+            if len(packet.data) > 9
+            else None
+        )
+        rtt = now + delay - asked if asked is not None else 0.0
+        self.round_trips.append((packet.source, rtt))
+
+    def _asked(self, source: object, unit: Address, sid: int, before: float) -> float | None:
+        """When the latest command from ``source`` to ``unit`` under ``sid`` that had
+        reached the unit by ``before`` was sent (``None``: none)."""
+        for sent, arrived in reversed(self.commands.get((source, unit, sid), ())):
+            if arrived <= before + 1e-12:
+                return sent
+        return None
 
     def copy_answered(self, data: bytes, start: float, end: float, head: bytes = b"") -> str:
         """Ground truth for a wrong answer returned between ``start`` and ``end``: whether a
@@ -166,7 +192,7 @@ class Network:
         #22's defect 2), ``"late"`` if it went back to its command's socket but was sent
         before the call began (the reply to an earlier request, given up on: its SID was
         reused while it was on its way), ``""`` if neither."""
-        for sent, at, dest, sender, frame in self.originals:
+        for i, (sent, at, dest, sender, frame) in enumerate(self.originals):
             if not start - 1e-9 <= at <= end + 1e-9:
                 continue
             if frame[14:] != data or not frame[10:].startswith(head):
@@ -174,8 +200,31 @@ class Network:
             if sender != dest:
                 return "misrouted"
             if sent < start:
-                return "late"
+                return "slow" if self._first_slow(i, start, at) else "late"
         return ""
+
+    def _first_slow(self, i: int, start: float, at: float) -> bool:
+        """Whether the late original reply ``originals[i]`` took a round trip longer than
+        twice any the link (its unit and socket) had shown when its SID was reused: by
+        the send of the command under that SID that began at or after ``start`` (the call
+        it answered). No quarantine bounded by the round trips shown could have held its
+        SID (docs/session.md, "What stays exposed": the episode's first slow reply)."""
+        _, _, dest, _, frame = self.originals[i]
+        unit, round_trip = self.round_trips[i]
+        sends = [s for s, _ in self.commands.get((dest, unit, frame[9]), ()) if start <= s <= at]
+        if not sends or not round_trip:
+            return False
+        reused = sends[0]
+        replies = zip(self.originals, self.round_trips, strict=True)
+        shown = max(
+            (
+                rtt
+                for (_, a, d, sender, _), (u, rtt) in replies
+                if a < reused and d == dest and sender == dest and u == unit
+            ),
+            default=0.0,
+        )
+        return round_trip > 2 * shown
 
     def _delay(self, faults: dict[str, float]) -> float:
         d = BASE_DELAY + self.rng.random() * JITTER
