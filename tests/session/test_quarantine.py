@@ -107,6 +107,19 @@ def held(word: int, count: int) -> bytes:
     return b"".join((1000 + w).to_bytes(2, "big") for w in range(word, word + count))
 
 
+async def read_each(session: Session, words: range) -> dict[int, bytes]:
+    """Two words from each of ``words`` at once, one task each: what each read returned."""
+    got: dict[int, bytes] = {}
+
+    async def reader(word: int) -> None:
+        got[word] = (await session.request(0x01, 0x01, read(word, 2))).data
+
+    async with anyio.create_task_group() as readers:
+        for word in words:
+            readers.start_soon(reader, word)
+    return got
+
+
 @asynccontextmanager
 async def delayed_link(
     commands: Mapping[int, float | list[float]], replies: dict[int, float], **options: Any
@@ -195,16 +208,10 @@ async def test_a_late_reply_never_reaches_a_sid_freed_by_a_younger_request_s_ans
         assert r.data == held(20, 2)
         assert anyio.current_time() == pytest.approx(2.05, abs=1e-5)
         await anyio.sleep(0.55)
-        words: dict[int, bytes] = {}
-
-        async def reader(word: int) -> None:
-            words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
-
-        async with anyio.create_task_group() as readers:
-            for word in range(100, 355):
-                readers.start_soon(reader, word)
+        assert await read_each(session, range(100, 355)) == {
+            word: held(word, 2) for word in range(100, 355)
+        }
         assert anyio.current_time() == pytest.approx(2.8, abs=1e-5)
-        assert words == {word: held(word, 2) for word in range(100, 355)}
         # the SIDs as the PLC took them: 0 (D1), 2 (D20) before 1 (D10, delayed),
         # then 3..255, 0 and 2 again (1 still quarantined)
         assert [f[9] for f in received] == [0, 2, 1, *range(3, 256), 0, 2]
@@ -300,16 +307,10 @@ async def test_the_reply_to_another_transmission_never_reaches_a_sid_freed_by_th
             await session.request(0x01, 0x01, read(10, 2), timeout=0.1, idempotent=True)
         assert (await session.request(0x01, 0x01, read(20, 2))).data == held(20, 2)
         await anyio.sleep(0.95 - anyio.current_time())
-        words: dict[int, bytes] = {}
-
-        async def reader(word: int) -> None:
-            words[word] = (await session.request(0x01, 0x01, read(word, 2))).data
-
-        async with anyio.create_task_group() as readers:
-            for word in range(100, 355):
-                readers.start_soon(reader, word)
+        assert await read_each(session, range(100, 355)) == {
+            word: held(word, 2) for word in range(100, 355)
+        }
         assert anyio.current_time() == pytest.approx(1.15, abs=1e-5)
-        assert words == {word: held(word, 2) for word in range(100, 355)}
         # the SIDs as the PLC took them: 0 (D1), 2 (D20), 1 twice (D10's transmissions,
         # at 0.2 and 0.833 s), then 3..255, 0 and 2, never 1 (quarantined until 1.2 s)
         assert [f[9] for f in received] == [0, 2, 1, 1, *range(3, 256), 0, 2]
