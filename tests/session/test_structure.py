@@ -19,6 +19,10 @@ import aiofins.session
 PACKAGE = Path(aiofins.session.__file__).parent
 #: The longest def allowed, in lines.
 MAX_DEF_LINES = 60
+#: Defs allowed more lines, each for a stated reason. ``Session.request`` writes out the
+#: common case of ``begin()`` and of ``finish()`` (two Python calls less per request:
+#: issue #22's bound on instructions per request); every other case goes through them.
+LONGER = {"core.py request": 95}
 #: The module that composes the others (and the package's ``__init__``, which exports it).
 WHOLE = {"core", "__init__"}
 
@@ -54,17 +58,27 @@ def test_the_modules_are_found() -> None:
     assert {"core", "batch", "spaces", "watcher", "sids", "slots", "breaker"} <= set(modules)
 
 
+def _lengths() -> dict[str, int]:
+    """Each def's length in lines, by ``"module.py name"`` (the longest of a name)."""
+    lengths: dict[str, int] = {}
+    for name, tree in sorted(_modules().items()):
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                assert node.end_lineno is not None
+                first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+                where = f"{name}.py {node.name}"
+                lengths[where] = max(lengths.get(where, 0), node.end_lineno - first + 1)
+    return lengths
+
+
 def test_no_def_is_longer_than_60_lines() -> None:
-    long = {
-        f"{name}.py {node.name}"
-        for name, tree in sorted(_modules().items())
-        for node in ast.walk(tree)
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-        and node.end_lineno is not None
-        and node.end_lineno - min([node.lineno, *(d.lineno for d in node.decorator_list)]) + 1
-        > MAX_DEF_LINES
-    }
+    lengths = _lengths()
+    long = {where for where, n in lengths.items() if n > LONGER.get(where, MAX_DEF_LINES)}
     assert long == set()
+    # Each allowance is in use: the def is there and needs it.
+    assert {where: lengths.get(where, 0) > MAX_DEF_LINES for where in LONGER} == {
+        where: True for where in LONGER
+    }
 
 
 def test_no_part_imports_the_session() -> None:

@@ -430,11 +430,11 @@ class Session:
             p, linger = self._matched(frame, p, key, icf, mrc, src, raw, sids, linger)
             if p is None:
                 return
-            key = p.key
-        elif (linger or ((h := sids.heard.get(frame)) and h[1] != p.frame)) and self._held(
-            p, key, frame, sids
+        elif (linger or ((h := sids.heard.get(frame)) is not None and h[1] != p.frame)) and (
+            self._held(p, key, frame, sids)
         ):
             return  # (a copy of a reply of the SID, held back: see _hold_copy, _first_sign)
+        key = p.key  # (its own: one DestState.keys object, not the int read from the frame)
         clock = self.clock  # (called from a local: a callable attribute's call is not cached)
         p.done, p.end_code, now = True, raw, clock()
         if ((latency := now - p.sent_at) > sids.slowest and p.rtt is not None) or sids.unsure:
@@ -448,8 +448,8 @@ class Session:
             r.sample(latency, self.rto_bounds if self.adaptive else None)  # (RFC 6298)
         if r is None or linger:  # before the wake-up: a batch sends its next command inside it
             self._lingers(sids, p, key, frame, now, linger)
-        elif h:  # (what a copy may be of, kept: SidSpace.heard; bytes heard before, what
-            h[0] = now  # they answered set by _first_sign if not the same: kept in place)
+        elif h is not None:  # (bytes heard before: SidSpace.heard, what they answered set
+            h[0] = now  # by _first_sign if not the same; what a copy may be of, kept in place)
         else:
             sids.hear(frame, now, p.frame)
         if (fut := p.fut) is not None:
@@ -868,7 +868,7 @@ class Session:
             sids, mine = space.sids, space.dest_state(state)
         pending = sids.pending
         sid = mine.cursor  # SidSpace.take(), inlined: a change to one is a change to both
-        key = mine.base | sid
+        key = mine.keys[sid]  # (the same int object for the SID every time: DestState.keys)
         if (
             key in pending
             or key in sids.quarantine
@@ -1356,6 +1356,16 @@ class Session:
             self._read_after_send(poll, p)
         return p
 
+    # Session.request is begin(), one await and finish(), with the common case of each
+    # written out: a call with the session's destination and options, the breaker closed,
+    # a slot free and a synchronous send; a normal completion with no flags, no waiter for
+    # the slot and no breaker to tell. That is two Python calls less per request (issue
+    # #22's bound on instructions per request: benchmarks/README.md) on the path nearly
+    # every request of a sequential caller or of tasks sharing a session takes. Any other
+    # call goes through begin(), finish() and call(). A change to begin() or finish() is a
+    # change to the lines written out here (tests/session/test_structure.py allows this
+    # def its length for that reason).
+
     async def request(
         self,
         mrc: int,
@@ -1372,30 +1382,69 @@ class Session:
         """Send one command and return its normal-completion response.
 
         ``timeout`` bounds the whole call (link, slot, SID, every transmission, reply);
-        ``attempt_timeout`` caps each transmission's wait. (``_in_call``, internal: this
-        request is one command of a call that passed the circuit breaker itself and tells
-        it how it ended, :meth:`request_many`'s portable path; the breaker is not asked,
-        so the call's own probe cannot turn its commands away.) Raises the
-        :class:`EndCodeError` subclass for the end code (:class:`RelayError` for bit 15),
-        :class:`FinsTimeout` when no reply came in time (saying after how many attempts),
-        :class:`ConnectionLost` when the link failed or the session closed,
-        :class:`CircuitOpen` while the destination's breaker is open.
-
-        The request path (see :meth:`begin`): ``begin``, one ``await``, ``finish`` (its
-        common case inlined: a normal completion with no flags, no waiter for the slot and
-        no breaker to tell; a Python call less per request).
+        ``attempt_timeout`` caps each transmission's wait. Raises the :class:`EndCodeError`
+        subclass for the end code (:class:`RelayError` for bit 15), :class:`FinsTimeout`
+        when no reply came in time (saying after how many attempts), :class:`ConnectionLost`
+        when the link failed or the session closed, :class:`CircuitOpen` while the
+        destination's breaker is open. (``_in_call``, internal: a command of a call that
+        passed the circuit breaker itself, :meth:`request_many`'s portable path.)
         """
-        p = self.begin(
-            mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call
-        )
+        state, p = self._last_state, None  # (begin()'s common case, written out: see above)
+        if (
+            (dest is None and timeout is None and retries is None and attempt_timeout is None)
+            and not (self._turn_due or len(params) > MAX_PARAMETER_SIZE)
+            and (self._breaker.state is _CLOSED_BREAKER or _in_call)
+            and self.dest is self._last_dest
+            and (send := (transport := self.transport).fast_send) is not None
+            and (slots := state.slots).in_flight < slots.limit
+            and not slots.waiters
+        ):
+            slots.in_flight += 1
+            clock, log = self.clock, _ENABLED.get(_DEBUG)  # (clock: as in frame_received)
+            self._log_frames = logger.isEnabledFor(_DEBUG) if log is None else log
+            now, cap, asyncio_made = clock(), self.attempt_timeout, self._asyncio
+            p = AsyncioPending() if asyncio_made else self._other_pending()
+            p.slots, p.fut, retries = slots, None, self.retries if idempotent else 0
+            try:  # (begin's command check, made by the frame's packing: no cost when good)
+                sent = self.start(
+                    p, state, mrc, src, params, retries, now, now + self.timeout, cap, None
+                )
+            except StructError:  # a command code not an int in 0..255: said which
+                self._slot_back(p)
+                check_call(mrc, src, params, self.timeout, retries, cap)
+                raise
+            if sent is None:  # no SID free at once: call() waits for one
+                self._slot_back(p)
+                p = None
+            else:
+                if (
+                    not retries
+                    and self.sids.linger
+                    and may_send_again(idempotent, mrc, src, params)
+                ):
+                    p.plan = (sent, 0, p.end, cap, p.end - now)  # (see _keep_frame)
+                try:
+                    send(sent)
+                except Exception as exc:
+                    p = self._unsent(p, exc, self.timeout, None)
+                else:
+                    if (poll := transport.poll_now) is not None:
+                        self._read_after_send(poll, p)
+                    if asyncio_made and not p.done:  # (a future to wait on: see begin)
+                        new_future = self._new_future
+                        p.fut = new_future()
+        else:
+            p = self.begin(
+                mrc, src, params, dest, timeout, idempotent, retries, attempt_timeout, _in_call
+            )
         if p is not None:
             try:
                 frame = p.reply or await (p.fut or p.wait())  # (answered at once: no wait)
             except BaseException as exc:
                 await self.failed(p, exc, timeout, _in_call)
-            slots = p.slots  # (finish(), inlined for its common case: a change to one is a
+            slots = p.slots  # (finish()'s common case, written out: see above)
             if slots is not None and not (slots.waiters or p.end_code or self._breaker.failures):
-                p.slots = None  # change to both)
+                p.slots = None
                 slots.in_flight -= 1
                 self.stats.completed += 1
                 response: Response = _new(Response)  # (response_of(), inlined: end code 0000)

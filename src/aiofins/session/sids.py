@@ -239,7 +239,7 @@ class SidSpace:
         one is free, as it nearly always is. ``Session.start()`` inlines it: keep the two
         alike."""
         sid = state.cursor
-        key = state.base | sid
+        key = state.keys[sid]  # (see Session.start)
         if (
             key in self.pending
             or key in self.quarantine

@@ -368,6 +368,7 @@ class DestState:
         "address",
         "base",
         "cursor",
+        "keys",
         "prefix",
         "rto",
         "rttvar",
@@ -379,6 +380,10 @@ class DestState:
     def __init__(self, address: FinsAddress, prefix: bytes, slots: SlotQueue) -> None:
         self.address = address
         self.base = (address.network << 24) | (address.node << 16) | (address.unit << 8)
+        #: The 256 keys of the destination's SIDs (``base + sid``), made once: the request
+        #: path takes its key from here, so the in-flight table and the tables of replies
+        #: meet the same int object for a SID and compare it by identity, not by value.
+        self.keys = tuple(range(self.base, self.base + 256))
         self.cursor = 0
         self.prefix = prefix
         self.slots = slots
