@@ -448,9 +448,9 @@ async def test_parameters_that_are_not_bytes_leave_nothing_behind() -> None:
 
 
 @pytest.mark.anyio
-@pytest.mark.parametrize("options", [{}, {"timeout": 0.5}])
+@pytest.mark.parametrize("timeout", [None, 0.5])
 async def test_command_codes_that_do_not_fit_raise_before_anything_is_sent(
-    options: dict[str, float],
+    timeout: float | None,
 ) -> None:
     """A command code out of 0..255, or not an int, raises the error that says so with
     nothing sent and the slot given back, whether the call takes ``request``'s own common
@@ -458,7 +458,7 @@ async def test_command_codes_that_do_not_fit_raise_before_anything_is_sent(
     given: its check finds it)."""
     async with udp_responder(answer) as responder, session_for(responder, max_in_flight=1) as s:
         for _ in range(2):  # the second time the slot others gave back (max_in_flight=1)
-            reply = await s.request(0x01, 0x01, read_params(5), **options)
+            reply = await s.request(0x01, 0x01, read_params(5), timeout=timeout)
             assert reply.data == ((PLC.node << 12) ^ 5).to_bytes(2, "big")
             for mrc, src, error, message in (
                 (0x100, 0x01, CommandError, "command code 0x100/0x1 out of range 0..255"),
@@ -466,7 +466,7 @@ async def test_command_codes_that_do_not_fit_raise_before_anything_is_sent(
                 (1.0, 0x01, TypeError, "float"),  # (begin's check: an unsupported operand)
             ):
                 with pytest.raises(error, match=re.escape(message)):
-                    await s.request(mrc, src, read_params(0), **options)  # type: ignore[arg-type]
+                    await s.request(mrc, src, read_params(0), timeout=timeout)  # type: ignore[arg-type]
                 assert s.stats.in_flight == 0
         assert len(responder.received) == 2
 
