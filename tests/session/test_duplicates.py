@@ -253,6 +253,59 @@ async def test_a_copy_of_a_reply_the_sid_carried_two_uses_earlier_is_held_back()
         assert session.sids.linger == pytest.approx(1.4)
 
 
+def copies_of_the_sid_s_last_two_replies_first() -> Handler:
+    """A peer whose reply to word 1 the network copies 0.15 s later (the link duplicates
+    replies) and whose reply to the read of word 512 (SID 0's third use) comes 0.6 s
+    after it, after copies of SID 0's two earlier replies (word 0's, then word 256's:
+    0.01 and 0.02 s after the read's command); that read sent again is never answered
+    (lost). Every other read is answered at once."""
+    replies: dict[int, bytes] = {}
+    seen: set[bytes] = set()
+
+    def handler(cmd: bytes) -> list[Reply]:
+        word = int.from_bytes(cmd[13:15], "big")
+        good = reply(cmd, 0, word_data(cmd))
+        replies[word] = good
+        if word == 1:
+            return [(0.0, good), (0.15, good)]
+        if word == 512:
+            if cmd in seen:
+                return []
+            seen.add(cmd)
+            return [(0.01, replies[0]), (0.02, replies[256]), (0.6, good)]
+        return [(0.0, good)]
+
+    return handler
+
+
+@on_virtual_time
+async def test_copies_of_the_sid_s_last_two_replies_before_its_own_are_both_held_back() -> None:
+    """Issue #22, defect 5 (the soak's seed 220447): SID 0's third request (word 512)
+    gets a copy of the SID's first reply (word 0's), then one of its last (word 256's),
+    both before its own reply: each is held back (the second is another reply's copy,
+    not the bytes held before), and the read's own reply answers it; the latest copy
+    teaches the linger. Before, the second copy answered it: word 256's words."""
+    async with (
+        udp_responder(copies_of_the_sid_s_last_two_replies_first()) as peer,
+        session_for(peer, max_sid_spaces=1, timeout=2.0, retries=0) as session,
+    ):
+        for word in range(513):
+            if word == 2:
+                await anyio.sleep(0.2)  # the duplicate of word 1's reply comes
+                assert session.sids.linger == pytest.approx(0.3)
+            r = await session.request(0x01, 0x01, read_params(word), idempotent=True)
+            assert r.data == expected(word), word
+        assert peer.received[512][9] == peer.received[256][9] == peer.received[0][9] == 0
+        again = int(session.transport.fast_send is not None)
+        resent = [c for c in peer.received if c[13:15] == b"\x02\x00"]
+        assert resent == [peer.received[512]] * (1 + 2 * again)  # each hold: sent again
+        stats = session.stats
+        assert (stats.completed, stats.duplicates, stats.unsolicited) == (513, 3, 0)
+        assert (stats.retries, stats.timeouts) == (2 * again, 0)
+        # (word 0's reply came at 0 s, its copy at 0.51 s: the latest of the two, taught)
+        assert session.sids.linger == pytest.approx(1.02)
+
+
 def a_copy_of_an_older_reply(late: float, taught_by: int = -1) -> Handler:
     """A peer whose first reply (word 0, SID 0) the network copies ``late`` s later; with
     ``taught_by``, that word's reply is copied 0.15 s later too (the link's first duplicate

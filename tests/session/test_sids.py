@@ -285,9 +285,9 @@ def test_unsure_is_whether_anything_is_held_or_given_up_after_every_operation(
             space.answered_after(int(key), now[0] - float(args[1]), now[0])  # type: ignore[arg-type]
         elif op == "hold":
             space.recent[int(key)] = now[0] - 0.5
-            space.hold(int(key), now[0], now[0] - 2.0 if args[1] else None)
+            space.hold(int(key), now[0], f"{now[0]}".encode(), now[0] - 2.0 if args[1] else None)
         elif op == "hold_first":
-            space.hold_first(int(key))
+            space.hold_first(int(key), f"{now[0]}".encode())  # (bytes held: one per instant)
         elif op == "unhold":
             space.unhold(int(key))
         elif op == "forget":

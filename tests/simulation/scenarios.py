@@ -395,6 +395,18 @@ REGRESSIONS: dict[str, tuple[str, Config | None, list[Episode] | None, int, int]
         12000,
         60234,
     ),
+    "seed 220447 (defect 5: copies of the SID's last two replies, before its own)": (
+        "defect 5 behind a fixed reply port, on a link that had shown duplicates: SID 0x6c"
+        " carried a read of D38 x 5 (answered at 0.3575 s), then one of D25 x 7 (0.3694 s),"
+        " then a read of D0 x 7; a copy of the first reply came at 0.4436 s, held back, the"
+        " read sent again (lost: 70 % loss), and a copy of the second at 0.4591 s answered"
+        " it with D25's words (step 3,164). Now a copy of another of the SID's replies than"
+        " the one held is held back too (SidSpace.hold; 22,354 steps ok)",
+        None,
+        None,
+        20000,
+        220447,
+    ),
     "seed 53003 (a late original reply, the world of its family until 5126471)": (
         "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
         " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"

@@ -595,9 +595,9 @@ class Session:
         if not sids.linger:
             return self._first_sign(p, key, sids, frame)
         if sids.answers.get(key) == frame:
-            held = self._hold_copy(p, key, sids, sids.asked.get(key))
+            held = self._hold_copy(p, key, sids, frame, sids.asked.get(key))
         elif sids.replies and (older := sids.copied(key, frame)) is not None:
-            held = self._hold_copy(p, key, sids, older[1], older[0])
+            held = self._hold_copy(p, key, sids, frame, older[1], older[0])
         else:
             return False
         if held:
@@ -624,6 +624,7 @@ class Session:
         p: Pending,
         key: int,
         sids: SidSpace,
+        frame: bytes,
         old: bytes | None,
         done_at: float | None = None,
     ) -> bool:
@@ -642,7 +643,9 @@ class Session:
         of that reply (:meth:`SidSpace.hold
         <aiofins.session.sids.SidSpace.hold>`), it is held, and ``p`` is sent again at once
         (same frame and SID, where the transport sends synchronously; else at its next
-        retransmission): its next reply answers it, whatever it holds. Only a request that
+        retransmission): its next reply answers it, unless that is a copy of another of
+        the SID's replies, held back too (soak seed 220447: copies of the SID's last two
+        replies came before its own; the same bytes as one held answer). Only a request that
         may be sent again: one with a plan (retries, or its frame kept on a duplicating
         link: :meth:`_keep_frame`), or a read sent before the link showed a duplicate
         (:func:`~.sids.may_send_again`; soak seed 50267: a read in flight when the link's
@@ -652,7 +655,7 @@ class Session:
             return False  # (a write without retries: see "What stays exposed")
         if sent == old and done_at is None:
             return False  # the same question as the SID's last: the same answer is no surprise
-        if not sids.hold(key, self.clock(), done_at):
+        if not sids.hold(key, self.clock(), frame, done_at):
             return False
         self.stats.duplicates += 1
         transport = self.transport if p.space is None else p.space.transport
@@ -678,11 +681,13 @@ class Session:
         back in the pending table and sent again at once, same frame and SID). Held when
         ``p`` is a read (:func:`~aiofins.protocol.guard.changes`: it changes nothing, so
         sending it again is harmless) that asked something else than the request that
-        reply answered, within :data:`~.sids.HOLD_WINDOW` (1 s) of it, no reply was held
-        for ``p`` yet, and the transport sends synchronously. ``p`` takes its next reply
-        whatever it holds, and nothing is learnt from this sign (:meth:`_copy_resolved`):
-        a false one (two reads of zeros) costs one round trip, never a linger, a wait or
-        a loop (issue #22, defect 5: soak seed 50040, a SID storm whose link's first
+        reply answered, within :data:`~.sids.HOLD_WINDOW` (1 s) of it, no reply with these
+        bytes was held for ``p`` yet, and the transport sends synchronously. ``p`` takes
+        its next reply unless that is another such possible copy (held too, each once:
+        :meth:`SidSpace.was_held <aiofins.session.sids.SidSpace.was_held>`), and nothing is
+        learnt from this sign (:meth:`_copy_resolved`): a false one (two reads of zeros)
+        costs one round trip, never a linger, a wait or a loop (the same bytes again
+        answer; issue #22, defect 5: soak seed 50040, a SID storm whose link's first
         copies came to SIDs reused by reads, one a read of other words)."""
         sent = p.frame
         found = sids.heard.get(frame)
@@ -690,14 +695,14 @@ class Session:
             return False  # the same question (a poll): it answers
         fast_send = (self.transport if p.space is None else p.space.transport).fast_send
         if (
-            key in sids.held  # (held once for p: it answers)
+            sids.was_held(key, frame)  # (held once for p: the same bytes again answer)
             or fast_send is None
             or changes(p.mrc, p.src, sent[12:]) is not None  # (a write: see "What stays exposed")
             or self.clock() - found[0] >= HOLD_WINDOW
         ):
             found[1] = sent  # (it answers p: what these bytes answered, for the next)
             return False
-        sids.hold_first(key)
+        sids.hold_first(key, frame)
         sids.pending[key] = p
         self._send_again(p, fast_send)
         return True

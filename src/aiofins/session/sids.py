@@ -132,8 +132,9 @@ class SidSpace:
     #: SID key -> the frame (what it asked) of the request its last reply answered.
     asked: dict[int, bytes]
     #: SID key -> how late after the SID's previous reply a copy of that reply came to its
-    #: new request, held back (see :meth:`hold`).
-    held: dict[int, float]
+    #: new request, held back (the latest, if more than one came), and the replies held
+    #: back for that request (see :meth:`hold`; each once: the same bytes again answer it).
+    held: dict[int, tuple[float, tuple[bytes, ...]]]
     #: Whether a copy of a reply is held back (:attr:`held`) or SIDs given up on wait for
     #: evidence that their destination answers (:attr:`given_up`): the receive path's one
     #: test for both (the session's ``_unsure``). Set where either changes (:meth:`abandon`,
@@ -731,17 +732,21 @@ class SidSpace:
                     return at, asked
         return None
 
-    def hold(self, key: int, now: float, done_at: float | None = None) -> bool:
-        """A reply under ``key`` that is a copy, byte for byte, of a reply the SID was
-        answered with (the last, or ``done_at``: an earlier one of :attr:`replies`) came
-        to the SID's new request, which asked something else than the last (than an
-        earlier one: anything): whether it is held back
-        rather than answer it (noted in :attr:`held`; see the session's ``_hold_copy``).
-        Held when it is the first such copy for that request and came within
+    def hold(self, key: int, now: float, frame: bytes, done_at: float | None = None) -> bool:
+        """A reply ``frame`` under ``key`` that is a copy, byte for byte, of a reply the
+        SID was answered with (the last, or ``done_at``: an earlier one of
+        :attr:`replies`) came to the SID's new request, which asked something else than
+        the last (than an earlier one: anything): whether it is held back rather than
+        answer it (noted in :attr:`held`; see the session's ``_hold_copy``). Held when no
+        reply with these bytes was held for that request yet and it came within
         :data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR` times the linger, of that reply
-        (later than the linger, a duplicate may find the SID reused)."""
-        if key in self.held:
-            return False  # the second: it answers
+        (later than the linger, a duplicate may find the SID reused). A second copy, of
+        another of the SID's replies, is held too (soak seed 220447: copies of the SID's
+        last two replies, both before the request's own, the second took for its answer);
+        the same bytes again answer (a new reply that holds them: never a loop)."""
+        noted = self.held.get(key)
+        if noted is not None and frame in noted[1]:
+            return False  # held once: the same bytes again answer
         if done_at is None:
             done_at = self.recent.get(key)
             if done_at is None:
@@ -749,25 +754,40 @@ class SidSpace:
         lateness = now - abs(done_at)
         if lateness >= HOLD_WINDOW and lateness >= LINGER_FACTOR * self.linger:
             return False
-        self.held[key] = lateness
+        if noted is None:
+            self.held[key] = (lateness, (frame,))
+        else:
+            self.held[key] = (max(lateness, noted[0]), (*noted[1], frame))
         self.unsure = True
         return True
 
-    def hold_first(self, key: int) -> None:
-        """A reply under ``key`` held back on a link that has shown no duplicate (the
-        first-sign rule: the session's ``_first_sign``): noted in :attr:`held` as
-        :data:`FIRST_SIGN`, nothing learnt from it."""
-        self.held[key] = FIRST_SIGN
+    def hold_first(self, key: int, frame: bytes) -> None:
+        """A reply ``frame`` under ``key`` held back on a link that has shown no duplicate
+        (the first-sign rule: the session's ``_first_sign``): noted in :attr:`held` as
+        :data:`FIRST_SIGN` (or as late as a copy held before), nothing learnt from it."""
+        noted = self.held.get(key)
+        if noted is None:
+            self.held[key] = (FIRST_SIGN, (frame,))
+        else:
+            self.held[key] = (noted[0], (*noted[1], frame))
         self.unsure = True
+
+    def was_held(self, key: int, frame: bytes) -> bool:
+        """Whether a reply with the bytes of ``frame`` was held back for the request
+        under ``key`` (:attr:`held`): the same bytes again answer it."""
+        noted = self.held.get(key)
+        return noted is not None and frame in noted[1]
 
     def unhold(self, key: int) -> float | None:
         """The request under ``key`` is answered: what :attr:`held` noted for it (how
-        late the copy held back came, or :data:`FIRST_SIGN`), no longer noted; ``None``
-        if nothing was held for it."""
-        lateness = self.held.pop(key, None)
-        if lateness is not None and not self.held:
+        late the latest copy held back came, or :data:`FIRST_SIGN`), no longer noted;
+        ``None`` if nothing was held for it."""
+        noted = self.held.pop(key, None)
+        if noted is None:
+            return None
+        if not self.held:
             self.unsure = bool(self.given_up)
-        return lateness
+        return noted[0]
 
     def start_replies(self, now: float, window: float) -> None:
         """The link's first duplicate: the replies :attr:`heard` within ``window`` start
