@@ -4,6 +4,7 @@ under a low descriptor limit, and two gateways started as the same shard."""
 from __future__ import annotations
 
 import resource
+import subprocess
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -107,6 +108,49 @@ async def test_an_http_connection_flood_under_a_low_descriptor_limit_is_survived
             assert values["aiofins_gateway_http_timeouts_total"] >= 200
             lines = await d.stop()
     assert sum("HTTP accept failed" in line for line in lines) <= 1 + len(lines) // 100
+
+
+async def test_a_gateway_out_of_descriptors_from_its_start_survives_and_recovers(
+    broker: Broker, tmp_path: Path
+) -> None:
+    """The flood test above failed once in a full run (connection refused): the gateway had
+    exited. Its first MQTT connection imported paho when it was made; with every
+    descriptor taken that import could not open paho's files, and the error ended the
+    daemon ("aiofins: [Errno 24] Too many open files: '.../paho/__init__.py'"). No
+    descriptor free from the first line on: each attempt fails and is retried; once the
+    limit is raised again, the broker connection and the PLC's scans come back."""
+    http_port = free_port()
+    async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as sim:
+        config = write_config(tmp_path, broker, sim.udp_port, http_port)
+        async with gateway_process(config) as d:
+            pid = d.process.pid
+            limits = resource.prlimit(pid, resource.RLIMIT_NOFILE)
+            used = len(list(Path(f"/proc/{pid}/fd").iterdir()))
+            resource.prlimit(pid, resource.RLIMIT_NOFILE, (used, limits[1]))  # (soft)
+            await d.until(lambda line: "Too many open files" in line)
+            await d.until(lambda line: "MQTT link CONNECTING -> BACKING_OFF" in line)
+            assert d.process.returncode is None
+            resource.prlimit(pid, resource.RLIMIT_NOFILE, limits)
+            await d.until(lambda line: "MQTT link CONNECTING -> CONNECTED" in line)
+            async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{http_port}") as http:
+                ready = await http.get("/readyz")
+            assert ready.status_code == 200 and ready.json()["mqtt"] == "connected"
+            await d.stop()  # (exit code 0)
+
+
+def test_the_gateway_imports_paho_as_it_loads_not_when_it_connects() -> None:
+    """What the test above needs of the code (there, the order of the first connection
+    and the limit is the scheduler's): loading the daemon imports every paho module the
+    MQTT connection uses, so that no later import needs a descriptor."""
+    code = (
+        "import sys, aiofins.gateway.daemon\n"
+        "print(' '.join(sorted(m for m in sys.modules if m.startswith('paho.mqtt.'))))"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
+    used = ["client", "enums", "packettypes", "properties", "reasoncodes", "subscribeoptions"]
+    assert {f"paho.mqtt.{name}" for name in used} <= set(loaded)
 
 
 async def test_two_gateways_on_one_shard_stop_one_naming_the_shard(

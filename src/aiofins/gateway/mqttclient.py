@@ -28,13 +28,19 @@ import ssl
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import anyio
 
-if TYPE_CHECKING:
-    import paho.mqtt.client as paho_mqtt
-    from paho.mqtt.reasoncodes import ReasonCode
+# paho is imported with this module, not when a connection is made: a gateway that has
+# used up its descriptors (an HTTP flood under a low limit) could not open paho's files to
+# import them then, and the error ended the daemon (tests/gateway/test_bounds.py).
+import paho.mqtt.client as paho_mqtt
+from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 log = logging.getLogger("aiofins.gateway")
 T = TypeVar("T")
@@ -161,9 +167,6 @@ class MqttConnection:
         *,
         on_lost: Callable[[str], None] | None = None,
     ) -> None:
-        import paho.mqtt.client as paho_mqtt
-        from paho.mqtt.enums import CallbackAPIVersion
-
         self.settings = settings
         self.inbox = inbox
         self.on_lost = on_lost
@@ -222,9 +225,6 @@ class MqttConnection:
         self._connack = loop.create_future()
         properties = None
         if self.v5 and s.max_packet is not None:
-            from paho.mqtt.packettypes import PacketTypes
-            from paho.mqtt.properties import Properties
-
             properties = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
             properties.MaximumPacketSize = s.max_packet
         client = self.client
@@ -447,8 +447,6 @@ class MqttConnection:
         if self.lost is not None:
             raise ConnectionLost(self.lost)
         if self.v5:
-            from paho.mqtt.subscribeoptions import SubscribeOptions
-
             options = SubscribeOptions(qos=qos, retainAsPublished=retain_as_published)
             rc, mid = self.client.subscribe(topic, options=options)
         else:
@@ -498,6 +496,4 @@ class MqttConnection:
 
 
 def _error(rc: int) -> str:
-    import paho.mqtt.client as paho_mqtt
-
     return f"{paho_mqtt.error_string(rc)} (error {int(rc)})"
