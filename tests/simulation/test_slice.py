@@ -19,12 +19,16 @@ STEPS = 2000
 def test_200_seeds_of_2000_steps_hold_every_invariant(capsys: pytest.CaptureFixture[str]) -> None:
     found: dict[int, tuple[str, str]] = {}
     steps = 0
+    idle: list[int] = []  # a world none of whose clients ran checks nothing
     for seed in SEEDS:
         result = run(seed, STEPS)
         steps += result.steps
+        if result.steps == 0:
+            idle.append(result.seed)
         if result.violation is not None:
             found[seed] = (suspect(result), result.reproducer())
     assert steps >= len(SEEDS) * STEPS
+    assert not idle, f"seeds whose world ran no step: {idle}"
     with capsys.disabled():
         for seed, (kind, line) in sorted(found.items()):
             print(f"\nseed {seed}: {kind}: {line[:300]}")

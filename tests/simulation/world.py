@@ -855,9 +855,11 @@ class World:
             paths.append(lambda i=i: self._connect_path(i, ready))  # type: ignore[misc]
         if c.tcp_sessions:
             paths.append(lambda: self._tcp_path(ready))
+        # the pool's clients reach only units without a fixed reply port
+        pooled = (c.pool_tasks or c.poller_groups) and any(n not in c.fixed for n in self.units)
         if c.pool_tasks or c.poller_groups:
             paths.append(lambda: self._pool_path(ready))
-        if not paths:
+        if not (c.connect_sessions or c.tcp_sessions or pooled):  # a world with no client
             paths.append(lambda: self._connect_path(0, ready))
         async with (
             MemoryNetwork(fate=self.net.fate, default_host="10.9.0.254") as memnet,
