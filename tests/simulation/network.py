@@ -72,14 +72,16 @@ class Network:
         #: Bumped to drop every late reply not yet sent (the schedule's faults end).
         self.epoch = 0
         #: Ground truth of the duplicates: every reply copy the network made, as (when it
-        #: arrives, the socket it goes to, its bytes), in the order they were made.
-        self.copies: list[tuple[float, Address, bytes]] = []
+        #: arrives, the socket it goes to, its bytes, when its original was sent, the unit
+        #: that sent it, the socket its command came from), in the order they were made.
+        self.copies: list[tuple[float, Address, bytes, float, Address, object]] = []
         #: Ground truth of the original replies over UDP: each as (when it was sent, when
         #: it arrives, the socket it goes to, the socket its command came from, its bytes).
         self.originals: list[tuple[float, float, Address, object, bytes]] = []
         #: Ground truth of the UDP commands that reached a unit: by (the socket it came
-        #: from, the unit, its SID), each as (when it was sent, when it arrived).
-        self.commands: dict[tuple[object, Address, int], list[tuple[float, float]]] = {}
+        #: from, the unit, its SID), each as (when it was sent, when it arrived, what it
+        #: asked: its bytes from the command code on).
+        self.commands: dict[tuple[object, Address, int], list[tuple[float, float, bytes]]] = {}
         #: Of each original reply (same order as :attr:`originals`), the unit that sent it
         #: and its round trip: from the send of the command it answers (the latest under
         #: its SID that had reached the unit) to its arrival (0.0: no command found).
@@ -140,10 +142,13 @@ class Network:
         if to_unit is not None and len(packet.data) > 9:
             now = self.loop.time()
             key = (packet.source, packet.dest, packet.data[9])
-            self.commands.setdefault(key, []).append((now, now + delay))
+            self.commands.setdefault(key, []).append((now, now + delay, packet.data[10:]))
         if to_unit is None and faults and "dup" in faults and rng.random() < faults["dup"]:
             lag = delay + rng.random() * DUPLICATE_LAG
-            self.copies.append((self.loop.time() + lag, packet.dest, packet.data))
+            now = self.loop.time()
+            self.copies.append(
+                (now + lag, packet.dest, packet.data, now, packet.source, self._answering)
+            )
             self._original(packet, delay)
             return [delay, lag]
         if to_unit is None:
@@ -164,7 +169,7 @@ class Network:
     def _asked(self, source: object, unit: Address, sid: int, before: float) -> float | None:
         """When the latest command from ``source`` to ``unit`` under ``sid`` that had
         reached the unit by ``before`` was sent (``None``: none)."""
-        for sent, arrived in reversed(self.commands.get((source, unit, sid), ())):
+        for sent, arrived, _ in reversed(self.commands.get((source, unit, sid), ())):
             if arrived <= before + 1e-12:
                 return sent
         return None
@@ -174,15 +179,35 @@ class Network:
         copy the network made of a reply holding ``data`` (after the command code and end
         code; ``head``: what the reply's bytes from its command code on begin with, for a
         write's) arrived meanwhile: ``"first"`` if it was the first copy ever to reach its
-        socket (the link had shown no duplicate), ``"copy"`` if not, ``""`` if none came."""
-        for at, dest, frame in self.copies:
+        socket (the link had shown no duplicate), ``"poll"`` if not but it copied the reply
+        to the same question asked under its SID just before the call's (:meth:`_asked_again`),
+        ``"copy"`` if neither, ``""`` if none came."""
+        for at, dest, frame, sent, unit, asker in self.copies:
             if not start - 1e-9 <= at <= end + 1e-9:
                 continue
             if frame[14:] != data or not frame[10:].startswith(head):
                 continue
-            earlier = any(a < at and d == dest for a, d, _ in self.copies)
-            return "copy" if earlier else "first"
+            if not any(a < at and d == dest for a, d, *_ in self.copies):
+                return "first"
+            return "poll" if self._asked_again(start, at, (asker, unit, frame[9]), sent) else "copy"
         return ""
+
+    def _asked_again(
+        self, start: float, at: float, key: tuple[object, Address, int], sent: float
+    ) -> bool:
+        """Whether a copy arriving ``at`` of a reply sent at ``sent`` (to the command under
+        ``key``: its socket, unit and SID) copied the reply to the same question as the
+        call that began at ``start`` asked under that SID: the command it answered was sent
+        before ``start``, and every command under the SID since, the call's first among
+        them, asked the same (its bytes from the command code on). No client tells that
+        copy from the call's own reply (docs/session.md, "What stays exposed": a poll)."""
+        commands = self.commands.get(key, ())
+        answered = [c for c in commands if c[1] <= sent + 1e-12]
+        if not answered or answered[-1][0] >= start:
+            return False
+        since, _, question = answered[-1]
+        later = [c for c in commands if since < c[0] <= at]
+        return bool(later) and later[0][0] >= start and all(c[2] == question for c in later)
 
     def original_answered(self, data: bytes, start: float, end: float, head: bytes = b"") -> str:
         """Ground truth for a wrong answer returned between ``start`` and ``end`` that no
@@ -211,7 +236,7 @@ class Network:
         SID (docs/session.md, "What stays exposed": the episode's first slow reply)."""
         _, _, dest, _, frame = self.originals[i]
         unit, round_trip = self.round_trips[i]
-        sends = [s for s, _ in self.commands.get((dest, unit, frame[9]), ()) if start <= s <= at]
+        sends = [s for s, _, _ in self.commands.get((dest, unit, frame[9]), ()) if start <= s <= at]
         if not sends or not round_trip:
             return False
         reused = sends[0]

@@ -59,3 +59,43 @@ def test_a_late_reply_is_exposed_only_beyond_twice_the_round_trips_shown(
         assert net.copy_answered(WORDS, 1.66, 1.8) == ""
     finally:
         loop.close()
+
+
+@pytest.mark.parametrize(("again", "cause"), [("820000000002", "poll"), ("820010000002", "copy")])
+def test_a_copy_of_a_poll_s_reply_to_the_same_question_asked_again_is_named_so(
+    again: str, cause: str
+) -> None:
+    """A read of D0-D1 under SID 7 at 1.0 s is answered at 1.01 s, and the network copies
+    that reply (a copy of another reply reached the socket before: not the link's first).
+    The SID carries another read at 1.02 s, before the copy comes, and the copy answers it:
+    ``"poll"`` when that read asked D0-D1 again (no client can tell the copy from its own
+    reply: exposed), ``"copy"`` when it asked other words (a defect: the duplicate rule
+    holds such a copy back)."""
+    loop = VirtualTimeLoop()
+    try:
+        net = Network(loop, random.Random(1), lambda: None)
+        unit = Unit(1, {}, EthernetUnit("10.0.0.1"), random.Random(1), loop.time, net)
+        net.add_unit(unit)
+        unit.faults["dup"] = 1.0
+        number = iter(range(1, 100))
+        arrivals: list[float] = []
+
+        def send(at: float, sid: int, body: str) -> None:
+            loop.clock.now = at
+            to_unit = body.startswith("010182")
+            head = bytes((0x80 if to_unit else 0xC0, 0, 2, 0, 1, 0, 0, 8, 0, sid))
+            source, dest = (CLIENT, unit.address) if to_unit else (unit.address, CLIENT)
+            net._answering = CLIENT  # (what Network._send sets while a unit replies)
+            frame = head + bytes.fromhex(body)
+            delays = net.fate(Packet("datagram", source, dest, frame, next(number)))
+            arrivals.append(at + max(delays))  # (a reply's copy: the later)
+
+        send(0.0, 3, "0101820000000002")
+        send(0.01, 3, "01010000" + "0000" * 2)
+        send(1.0, 7, "0101820000000002")
+        send(1.01, 7, "01010000" + WORDS.hex())
+        send(1.02, 7, "0101" + again)
+        assert arrivals[3] > 1.02  # (the copy came after the SID was reused)
+        assert net.copy_answered(WORDS, 1.02, 2.0) == cause
+    finally:
+        loop.close()
