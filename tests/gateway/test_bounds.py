@@ -17,7 +17,7 @@ import pytest
 
 from aiofins.simulator import VirtualPLC, run_simulator
 
-from .conftest import Broker, free_port
+from .conftest import Broker, free_port, need_mosquitto
 from .test_logging import Daemon
 
 pytestmark = pytest.mark.anyio
@@ -111,7 +111,7 @@ async def test_an_http_connection_flood_under_a_low_descriptor_limit_is_survived
 
 
 async def test_a_gateway_out_of_descriptors_from_its_start_survives_and_recovers(
-    broker: Broker, tmp_path: Path
+    tmp_path: Path,
 ) -> None:
     """The flood test above failed once in a full run (connection refused): the gateway had
     exited. Its first MQTT connection imported paho when it was made; with every
@@ -120,13 +120,22 @@ async def test_a_gateway_out_of_descriptors_from_its_start_survives_and_recovers
     descriptor free before its first MQTT connection: each attempt fails and is retried;
     once the limit is raised again, the broker connection and the PLC's scans come back.
 
-    The broker is down until the limit is set, so that the gateway's connection cannot be
-    made first (loaded run 3 of 5 on 1f416eb: it connected before this test lowered the
+    The broker starts only once the limit is set, so that the gateway's connection cannot
+    be made first (loaded run 3 of 5 on 1f416eb: it connected before this test lowered the
     limit, and no attempt ever needed a descriptor); the soft limit is 3 (stdin, stdout
     and stderr hold 0-2), so that no descriptor number is free, whichever the gateway's
     refused attempts left open or closed as it was set."""
+    need_mosquitto()
     http_port = free_port()
-    broker.stop()
+    broker = Broker(tmp_path / "broker")
+    (tmp_path / "broker").mkdir()
+    try:
+        await _out_of_descriptors(broker, tmp_path, http_port)
+    finally:
+        broker.stop()
+
+
+async def _out_of_descriptors(broker: Broker, tmp_path: Path, http_port: int) -> None:
     async with run_simulator(VirtualPLC(), udp=("127.0.0.1", 0)) as sim:
         config = write_config(tmp_path, broker, sim.udp_port, http_port)
         async with gateway_process(config) as d:
