@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from aiofins.protocol.header import FinsAddress
 from aiofins.session.matching import LATE_REPLY_GRACE
 from aiofins.session.response import SessionStats
-from aiofins.session.sids import MAX_LINGER, SidSpace
+from aiofins.session.sids import HOLD_WINDOW, MAX_LINGER, SidSpace
 from aiofins.session.slots import DestState, Pending, SlotQueue
 
 PLC = FinsAddress(0, 1, 0)
@@ -188,6 +188,33 @@ def test_a_reply_under_an_answered_sid_is_a_duplicate_only_if_a_copy_of_its_repl
     assert space.unmatched(stats, 0x10001, b"D100 holds 1") == ("duplicate", 2.0)
     assert space.linger == 4.0  # twice its lateness
     assert (stats.duplicates, stats.unsolicited) == (1, 2)
+
+
+def test_a_copy_of_a_reply_its_sid_carried_many_uses_earlier_is_a_duplicate() -> None:
+    """Issue #22, defect 5 (soak seed 1400620): on a link that has shown duplicates, its
+    linger calmed to the floor, an outage left 54 SIDs free, and SID 123 carried 14 reads
+    in the 65 ms before a copy of its first reply came; the last 8 replies of each SID were
+    kept, so the copy was unknown and answered a read of other words. The space's recent
+    replies are kept whatever SID they came under: a copy of one within the hold window
+    is a duplicate however often its SID came round since (and teaches the linger)."""
+    now = [100.0]
+    space, stats = SidSpace(clock=lambda: now[0]), SessionStats({})
+    space.calm(now[0])  # (a link that has shown duplicates, calmed: the linger's floor)
+    key = 0x0001007B  # (0.1.0, SID 123: a reply's SNA SA1 SA2 SID)
+    head = bytes.fromhex("c0000200c8000001007b01010000")  # a 0101 reply under SID 123
+    replies = [head + (0x06FA + i).to_bytes(2, "big") for i in range(14)]
+    for i, reply in enumerate(replies):
+        now[0] = 100.0 + 0.0045 * i
+        space.remember(key, reply, now[0], b"read %d" % i)
+    now[0] = 100.065
+    kind, lateness = space.unmatched(stats, key, replies[0])
+    assert kind == "duplicate" and lateness == pytest.approx(0.065)
+    assert space.copied(replies[0], now[0]) == (100.0, b"read 0")
+    assert space.linger == pytest.approx(0.13)
+    now[0] = 100.0 + HOLD_WINDOW  # (the hold window has passed: the copy is unknown)
+    assert space.copied(replies[0], now[0]) is None
+    assert space.copied(head + b"\x00\x00", now[0]) is None  # (bytes never heard)
+    assert (stats.duplicates, stats.unsolicited) == (1, 0)
 
 
 def test_a_later_duplicate_extends_the_linger_of_the_sids_answered_before_it() -> None:

@@ -407,6 +407,19 @@ REGRESSIONS: dict[str, tuple[str, Config | None, list[Episode] | None, int, int]
         20000,
         220447,
     ),
+    "seed 1400620 (defect 5: a copy of a reply its SID carried 14 uses earlier)": (
+        "defect 5 on a link that had shown duplicates, its linger calmed to the floor"
+        " (1 ms), 64 readers on one space: after an outage (loss 0.7, breaker open until"
+        " 2.6032 s) 54 SIDs were free, and SID 0x7b carried a read of D3 x 2 (answered at"
+        " 2.6076 s, the reply copied 65 ms late: a dup 1.0 episode) and 13 reads after it;"
+        " the copy came at 2.6730 s and answered a read of D16 x 2 (step 12,432). The last"
+        " 8 replies of each SID were kept. Now the space's recent replies are kept,"
+        " whatever SID they came under (SidSpace.heard, 4,096 to 8,192; 23,007 steps ok)",
+        None,
+        None,
+        20000,
+        1400620,
+    ),
     "seed 53003 (a late original reply, the world of its family until 5126471)": (
         "soak seed 53003: a SID storm, 1 unit with a fixed reply port, 4 SID spaces, 1"
         " session x 32 tasks, timeout 0.1 s. A delay episode (up to 0.4 s each way) began"

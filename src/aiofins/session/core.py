@@ -587,8 +587,8 @@ class Session:
 
     def _held(self, p: Pending, key: int, frame: bytes, sids: SidSpace) -> bool:
         """On a link with a linger, a reply to ``p`` that is a byte-for-byte copy of its
-        SID's last reply, or of one of its recent replies (:attr:`SidSpace.replies
-        <aiofins.session.sids.SidSpace.replies>`): whether it is held back (see
+        SID's last reply, or of one of its recent replies (:meth:`SidSpace.copied
+        <aiofins.session.sids.SidSpace.copied>`): whether it is held back (see
         :meth:`_hold_copy`; ``p`` put back in the pending table). Without a linger, one of
         a reply the space heard (:attr:`SidSpace.heard
         <aiofins.session.sids.SidSpace.heard>`) to another question: see :meth:`_first_sign`."""
@@ -596,7 +596,7 @@ class Session:
             return self._first_sign(p, key, sids, frame)
         if sids.answers.get(key) == frame:
             held = self._hold_copy(p, key, sids, frame, sids.asked.get(key))
-        elif sids.replies and (older := sids.copied(key, frame)) is not None:
+        elif (older := sids.copied(frame, self.clock())) is not None:
             held = self._hold_copy(p, key, sids, frame, older[1], older[0])
         else:
             return False
@@ -727,7 +727,7 @@ class Session:
             if frame not in sids.heard:  # not the bytes held back: those were a copy
                 self.stats.duplicates += 1
             return
-        if sids.replies and (older := sids.copied(key, frame)) is not None and older[1] == sent:
+        if (older := sids.copied(frame, self.clock())) is not None and older[1] == sent:
             return
         if lateness is not None and frame != sids.answers.get(key):
             grew = sids.learn(lateness, self.clock())

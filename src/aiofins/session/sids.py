@@ -48,20 +48,20 @@ HOLD_WINDOW = 1.0
 #: What :attr:`SidSpace.held` notes for a reply held back on a link that has shown no
 #: duplicate (the session's ``_first_sign``): nothing is learnt from it.
 FIRST_SIGN = -1.0
-#: On a link that has shown duplicates, the replies each SID was answered with within the
-#: hold window are kept (at most this many per SID key, the newest; see
-#: :meth:`SidSpace.remember`): a late copy of any of them is held back, not only of the last.
-KEPT_REPLIES = 8
-#: On a link that has shown no duplicate yet, at least this many (at most twice as many)
-#: distinct recent replies of a SID space are kept (:attr:`SidSpace.heard`): a copy of any
-#: of them within the hold window is the link's first duplicate, told apart from a stray
-#: reply, and at that first duplicate they start each SID's :attr:`SidSpace.replies` (see
-#: :meth:`SidSpace.extend_lingers`); before it, a read's reply that is one of them, to
-#: another question, is held back once (the first-sign rule: the session's ``_first_sign``).
-HEARD_REPLIES = KEPT_REPLIES * 256
+#: At least this many (at most twice as many) distinct recent replies of a SID space are
+#: kept (:attr:`SidSpace.heard`), whatever the SIDs they came under: a copy of any of them
+#: within the hold window is a duplicate, told apart from a stray reply. Before the link's
+#: first duplicate, a read's reply that is one of them, to another question, is held back
+#: once (the first-sign rule: the session's ``_first_sign``); after it, a copy of one of
+#: them that came to its SID's new request is held back (the duplicate rule, see
+#: :meth:`SidSpace.hold`). A bound per space, not per SID: after an outage a few SIDs may
+#: carry every request, and each comes round many times while a copy of one of its replies
+#: is on its way (soak seed 1400620: 54 SIDs free, SID 123 reused 14 times in the 65 ms
+#: before a copy of its reply came, when 8 replies were kept per SID).
+HEARD_REPLIES = 4096
 #: The linger of a link that has shown duplicates once none has come for a quiet span
 #: (:meth:`SidSpace.calm`), unless ``min_linger`` is longer: above 0, so that what the link
-#: showed stays known (the duplicate rule stays on, each SID's replies kept), and short
+#: showed stays known (the duplicate rule stays on), and short
 #: enough that 256 SIDs never run short (256,000 requests a second per destination).
 LINGER_FLOOR = 0.001
 #: A link's linger lasts while it shows duplicates: once none has come for this many seconds
@@ -79,11 +79,6 @@ SID_WAIT = 0.01
 #: Seconds without a SID shortage after which the next one is a new episode (logged again):
 #: at a high rate SIDs come free and run short many times a second within one shortage.
 SHORTAGE_EPISODE = 60.0
-
-
-def _when(heard: tuple[bytes, list[Any]]) -> float:
-    """When a reply of :attr:`SidSpace.heard` came (its sort key)."""
-    return float(heard[1][0])
 
 
 def may_send_again(idempotent: bool, mrc: int, src: int, params: bytes) -> bool:
@@ -121,7 +116,6 @@ class SidSpace:
         "quarantine",
         "recent",
         "relay_doubt",
-        "replies",
         "routed",
         "short_at",
         "slowest",
@@ -141,16 +135,13 @@ class SidSpace:
     #: :meth:`answered_after`, :meth:`hold`, :meth:`hold_first`, :meth:`unhold`,
     #: :meth:`forget`), nowhere else, so never stale; held and given up on change only there.
     unsure: bool
-    #: SID key -> its recent replies, oldest first, as (the reply, when it came, what its
-    #: request sent), on a link that has shown duplicates (see :meth:`remember`; at most
-    #: :data:`KEPT_REPLIES` per key).
-    replies: dict[int, list[tuple[bytes, float, bytes]]]
-    #: The space's recent replies while the link has shown no duplicate: each reply frame
-    #: (its bytes hold its SID key) -> ``[when it last came, what its request sent (its
-    #: frame)]`` (a list: the session updates it in place when the same bytes come again),
-    #: in the order first heard; frames kept by reference, not copied. Between
-    #: :data:`HEARD_REPLIES` and twice that many frames (see :meth:`hear`): a copy of any is
-    #: found without a scan, on every reply (the session's ``_first_sign``).
+    #: The space's recent replies, each SID's and each destination's: each reply frame (its
+    #: bytes hold its SID key) -> ``[when it last came, what its request sent (its frame)]``
+    #: (a list: the session updates it in place when the same bytes come again), in the
+    #: order first heard; frames kept by reference, not copied. Between
+    #: :data:`HEARD_REPLIES` and twice that many frames (see :meth:`hear`): a copy of any
+    #: is found without a scan, on every reply (the session's ``_first_sign`` before the
+    #: link's first duplicate, ``_held`` after it).
     heard: dict[bytes, list[Any]]
     #: The linger after a completion the link has shown necessary (late duplicates); back
     #: to :attr:`floor` once it has shown none for a while (:meth:`calm`).
@@ -214,7 +205,6 @@ class SidSpace:
         self.asked = {}
         self.held = {}
         self.unsure = False
-        self.replies = {}
         self.heard = {}
         self.linger = min_linger
         self.linger_resent = 0.0
@@ -469,7 +459,6 @@ class SidSpace:
         self.lingering.clear()
         self.held.clear()
         self.unsure = False
-        self.replies.clear()
         self.heard.clear()
         self.abandoned.clear()
 
@@ -514,7 +503,7 @@ class SidSpace:
             if not relay_error:
                 self.late_round_trip(key, frame, now)
         elif kind == "unsolicited" and not relay_error:
-            at = self.copy_of_older(key, frame, now)
+            at = self.copy_of_older(frame, now)
             if at is not None and not self.late_reply(key, frame, at):  # a copy of an older
                 stats.unsolicited -= 1  # reply than the SID's last one
                 stats.duplicates += 1
@@ -623,18 +612,14 @@ class SidSpace:
         gave = self.abandoned.get(key)
         return gave is not None and gave.get((frame[10] << 8) | frame[11], since) > since
 
-    def copy_of_older(self, key: int, frame: bytes, now: float) -> float | None:
-        """When the reply under ``key`` came that ``frame``, which no request waits for, is
-        a copy of, byte for byte: one of the SID's recent replies (:attr:`replies`), or
-        while the link has shown no duplicate one the space heard (:attr:`heard`) within
-        the hold window. ``None``: none (unsolicited). A copy of an older reply than the
-        SID's last is the network's duplicate as surely as one of the last; at a high rate
-        the SID has most often carried newer requests by the time it comes."""
-        found = self.copied(key, frame)
-        if found is not None:
-            return found[0]
-        heard = self.heard.get(frame)  # (the frame holds its key: SNA SA1 SA2 SID)
-        return float(heard[0]) if heard is not None and now - heard[0] < HOLD_WINDOW else None
+    def copy_of_older(self, frame: bytes, now: float) -> float | None:
+        """When the reply came that ``frame``, which no request waits for, is
+        a copy of, byte for byte: one the space heard (:attr:`heard`) within the hold
+        window (:meth:`copied`). ``None``: none (unsolicited). A copy of an older reply than
+        the SID's last is the network's duplicate as surely as one of the last; at a high
+        rate the SID has most often carried newer requests by the time it comes."""
+        found = self.copied(frame, now)
+        return found[0] if found is not None else None
 
     def mismatched(self, stats: SessionStats, key: int, frame: bytes) -> float | None:
         """A reply ``frame`` under ``key`` whose command code (or ICF) is not that of the
@@ -654,7 +639,7 @@ class SidSpace:
                 stats.duplicates += 1
                 return 0.0
         else:
-            at = self.copy_of_older(key, frame, now)
+            at = self.copy_of_older(frame, now)
         if at is None or self.late_reply(key, frame, at):
             stats.mismatched += 1
             return None
@@ -690,28 +675,16 @@ class SidSpace:
 
     def remember(self, key: int, frame: bytes, now: float, asked: bytes) -> None:
         """``key``'s SID, which lingers, was answered ``now`` with ``frame`` to a request
-        whose frame was ``asked`` (kept in :attr:`asked`). On a link that has shown
-        duplicates, ``frame`` is kept among the SID's recent replies (:attr:`replies`):
-        those older than the hold window (see :meth:`hold`) go, and the oldest beyond
-        :data:`KEPT_REPLIES`. At a high rate a SID comes round several times while a copy
-        of one of its replies may still come."""
+        whose frame was ``asked``: kept in :attr:`asked` and :attr:`heard` (:meth:`hear`).
+        At a high rate a SID comes round several times while a copy of one of its replies
+        may still come."""
         self.asked[key] = asked
-        if not self.linger:
-            self.hear(frame, now, asked)
-            return
-        replies = self.replies.get(key)
-        if replies is None:
-            self.replies[key] = [(frame, now, asked)]
-            return
-        window = max(HOLD_WINDOW, LINGER_FACTOR * self.linger)
-        while replies and (len(replies) >= KEPT_REPLIES or now - replies[0][1] >= window):
-            del replies[0]
-        replies.append((frame, now, asked))
+        self.hear(frame, now, asked)
 
     def hear(self, frame: bytes, now: float, asked: bytes) -> None:
-        """A reply ``frame`` came ``now`` to a request whose frame was ``asked``, while the
-        link has shown no duplicate: kept in :attr:`heard` (the session updates the entry
-        of bytes heard before in place: keep the two alike)."""
+        """A reply ``frame`` came ``now`` to a request whose frame was ``asked``: kept in
+        :attr:`heard` (the session updates the entry of bytes heard before in place, on a
+        link that has shown no duplicate: keep the two alike)."""
         (heard := self.heard)[frame] = [now, asked]
         if len(heard) > 2 * HEARD_REPLIES:
             self.forget_heard()
@@ -721,21 +694,21 @@ class SidSpace:
         (a frame heard again keeps its first place: what it asked last is kept)."""
         self.heard = dict(islice(self.heard.items(), HEARD_REPLIES, None))
 
-    def copied(self, key: int, frame: bytes) -> tuple[float, bytes] | None:
-        """When the recent reply of :attr:`replies` under ``key`` that ``frame`` is a copy
-        of, byte for byte, came, and the frame of the request it answered (the newest if
-        several; ``None``: none)."""
-        replies = self.replies.get(key)
-        if replies:
-            for reply, at, asked in reversed(replies):
-                if reply == frame:
-                    return at, asked
-        return None
+    def copied(self, frame: bytes, now: float) -> tuple[float, bytes] | None:
+        """When the reply that ``frame`` is a copy of, byte for byte, came (under its SID),
+        and the frame of the request it answered: one the space heard (:attr:`heard`; the
+        frame holds its key, SNA SA1 SA2 SID, so it is the SID's), the last time those
+        bytes came, within the hold window (:data:`HOLD_WINDOW`, or :data:`LINGER_FACTOR`
+        times the linger). ``None``: none."""
+        heard = self.heard.get(frame)
+        if heard is None or now - heard[0] >= max(HOLD_WINDOW, LINGER_FACTOR * self.linger):
+            return None
+        return float(heard[0]), heard[1]
 
     def hold(self, key: int, now: float, frame: bytes, done_at: float | None = None) -> bool:
         """A reply ``frame`` under ``key`` that is a copy, byte for byte, of a reply the
         SID was answered with (the last, or ``done_at``: an earlier one of
-        :attr:`replies`) came to the SID's new request, which asked something else than
+        :attr:`heard`) came to the SID's new request, which asked something else than
         the last (than an earlier one: anything): whether it is held back rather than
         answer it (noted in :attr:`held`; see the session's ``_hold_copy``). Held when no
         reply with these bytes was held for that request yet and it came within
@@ -789,45 +762,17 @@ class SidSpace:
             self.unsure = bool(self.given_up)
         return noted[0]
 
-    def start_replies(self, now: float, window: float) -> None:
-        """The link's first duplicate: the replies :attr:`heard` within ``window`` start
-        each SID's :attr:`replies` (and :attr:`asked` its last question); :attr:`heard`
-        is emptied (from now on :meth:`remember` keeps each SID's replies)."""
-        replies, asked = self.replies, self.asked
-        for frame, (at, sent) in sorted(self.heard.items(), key=_when):
-            if now - at >= window:
-                continue
-            key = int.from_bytes(frame[6:10], "big")  # (SNA SA1 SA2 SID)
-            kept = replies.get(key)
-            if kept is None:
-                replies[key] = [(frame, at, sent)]
-            else:
-                kept.append((frame, at, sent))
-                if len(kept) > KEPT_REPLIES:
-                    del kept[0]
-            asked[key] = sent
-        self.heard.clear()
-
     def extend_lingers(self, now: float) -> None:
         """The linger grew (a duplicate came later than it): the SIDs answered within the
         new linger, free again or about to be under the old one, linger the new one too,
         from when they were answered. A duplicate of their replies may be as late as this
         one; without this, a SID answered just before the duplicate was seen could be
         reused under the old linger and take a later duplicate of its old reply for the
-        new request's (issue #22, defect 5: another read's words after a SID wrap).
-        At the link's first duplicate the replies the space heard within the hold window
-        (:attr:`heard`) start each SID's :attr:`replies` (its last :data:`KEPT_REPLIES`),
-        and the last replies of SIDs that have none kept yet (heard beyond its bound)."""
+        new request's (issue #22, defect 5: another read's words after a SID wrap)."""
         linger = self.linger
         lingering, pending = self.lingering, self.pending
-        window = max(HOLD_WINDOW, LINGER_FACTOR * self.linger)
-        replies, answers = self.replies, self.answers
-        if self.heard:
-            self.start_replies(now, window)
         for key, done_at in self.recent.items():
             if done_at > 0 and now - done_at < linger and key not in pending:
                 until = done_at + linger
                 if lingering.get(key, 0.0) < until:
                     lingering[key] = until
-            if key not in replies and now - abs(done_at) < window and key in answers:
-                replies[key] = [(answers[key], abs(done_at), self.asked.get(key, b""))]
